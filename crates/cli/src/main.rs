@@ -1,0 +1,48 @@
+//! `stereonav`: the navigation stack's command line (vehicle-interfaces.md section 5).
+//!
+//! Every failure ends with one line on stderr naming the problem and a non-zero exit status.
+
+use std::io::{self, Write};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod harris;
+
+/// Ceiling-lamp stereo navigation for autonomous forklifts.
+#[derive(Debug, Parser)]
+#[command(name = "stereonav", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the board's Harris detector on an 8-bit grayscale PGM or PNG image and print
+    /// `x_q4,y_q4,r`, one feature a line, in the board's order.
+    Harris(harris::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Harris(args) => harris::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            // A closed pipe (`stereonav harris img.png | head`) is not a failure.
+            if err
+                .downcast_ref::<io::Error>()
+                .is_some_and(|e| e.kind() == io::ErrorKind::BrokenPipe)
+            {
+                return ExitCode::SUCCESS;
+            }
+            let mut stderr = io::stderr().lock();
+            // One line: the chain of causes joined with ": ".
+            let _ = writeln!(stderr, "stereonav: error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
