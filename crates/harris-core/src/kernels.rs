@@ -7,6 +7,7 @@
 use multiversion::multiversion;
 
 use crate::response;
+use crate::stream::{CHUNK, ChunkSet};
 
 /// The pixel rows around one gradient row, each `n + 2` pixels wide.
 #[derive(Debug, Clone, Copy)]
@@ -22,75 +23,127 @@ pub(crate) struct ColumnSums<'a> {
     pub(crate) xx: &'a mut [i32],
     pub(crate) yy: &'a mut [i32],
     pub(crate) xy: &'a mut [i32],
+    /// `xx + yy`, for the window trace.
+    pub(crate) tt: &'a mut [i32],
+}
+
+/// The gradient row being computed, and the one leaving the window.
+#[derive(Debug)]
+pub(crate) struct Gradients<'a> {
+    pub(crate) gx: &'a mut [i16],
+    pub(crate) gy: &'a mut [i16],
+    pub(crate) old_gx: &'a [i16],
+    pub(crate) old_gy: &'a [i16],
+}
+
+/// Scratch rows of the separable Sobel: the vertical smoothing `p(y-1) + 2 p(y) + p(y+1)` and
+/// the vertical difference `p(y+1) - p(y-1)` of every column.
+#[derive(Debug)]
+pub(crate) struct SobelScratch<'a> {
+    pub(crate) smooth: &'a mut [i16],
+    pub(crate) diff: &'a mut [i16],
 }
 
 /// ICD step 1, and the vertical part of step 2: Sobel gradients of the `n` inner columns of a
-/// row into `gx`, `gy` (which hold the gradients of the row leaving the window), and the
-/// column sums updated by the difference of the products.
+/// row, and the column sums updated by the difference of the new and the old row's products.
+///
+/// The Sobel kernels are separable: `gx = S(x+1) - S(x-1)` with `S` the vertical smoothing,
+/// and `gy = D(x-1) + 2 D(x) + D(x+1)` with `D` the vertical difference; the sums are the
+/// ICD's, in another order, and exact.
 #[multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
 pub(crate) fn gradient_row(
     px: PixelRows<'_>,
-    gx: &mut [i16],
-    gy: &mut [i16],
+    scratch: SobelScratch<'_>,
+    grad: Gradients<'_>,
     sums: ColumnSums<'_>,
 ) {
-    let n = gx.len();
-    let (a_l, a_c, a_r) = (&px.above[..n], &px.above[1..=n], &px.above[2..n + 2]);
-    let (b_l, b_r) = (&px.here[..n], &px.here[2..n + 2]);
-    let (c_l, c_c, c_r) = (&px.below[..n], &px.below[1..=n], &px.below[2..n + 2]);
-    let gy = &mut gy[..n];
-    let (col_xx, col_yy, col_xy) = (&mut sums.xx[..n], &mut sums.yy[..n], &mut sums.xy[..n]);
+    let n = grad.gx.len();
+    let (above, here, below) = (&px.above[..n + 2], &px.here[..n + 2], &px.below[..n + 2]);
+    let (smooth, diff) = (&mut scratch.smooth[..n + 2], &mut scratch.diff[..n + 2]);
+    for i in 0..n + 2 {
+        let (a, b, c) = (i16::from(above[i]), i16::from(here[i]), i16::from(below[i]));
+        smooth[i] = a + 2 * b + c;
+        diff[i] = c - a;
+    }
+    let (s_l, s_r) = (&smooth[..n], &smooth[2..n + 2]);
+    let (d_l, d_c, d_r) = (&diff[..n], &diff[1..=n], &diff[2..n + 2]);
+    let (gx, gy) = (&mut grad.gx[..n], &mut grad.gy[..n]);
+    let (old_gx, old_gy) = (&grad.old_gx[..n], &grad.old_gy[..n]);
+    let (col_xx, col_yy) = (&mut sums.xx[..n], &mut sums.yy[..n]);
+    let (col_xy, col_tt) = (&mut sums.xy[..n], &mut sums.tt[..n]);
     for i in 0..n {
-        let (al, ac, ar) = (i16::from(a_l[i]), i16::from(a_c[i]), i16::from(a_r[i]));
-        let (bl, br) = (i16::from(b_l[i]), i16::from(b_r[i]));
-        let (cl, cc, cr) = (i16::from(c_l[i]), i16::from(c_c[i]), i16::from(c_r[i]));
         // |gx|, |gy| <= 1020: 11 signed bits.
-        let new_x = (ar + 2 * br + cr) - (al + 2 * bl + cl);
-        let new_y = (cl + 2 * cc + cr) - (al + 2 * ac + ar);
-        let (old_x, old_y) = (gx[i], gy[i]);
-        // Column sums of 5 products: |sum| <= 5 * 1020^2 < 2^23. The squares change by
+        let new_x = s_r[i] - s_l[i];
+        let new_y = d_l[i] + 2 * d_c[i] + d_r[i];
+        let (old_x, old_y) = (old_gx[i], old_gy[i]);
+        // Column sums of 5 products: |sum| <= 5 * 2 * 1020^2 < 2^24. The squares change by
         // `new^2 - old^2 = (new - old)(new + old)`, factors within 12 signed bits: one
         // 16x16->32 bit multiply each instead of two.
-        col_xx[i] += i32::from(new_x - old_x) * i32::from(new_x + old_x);
-        col_yy[i] += i32::from(new_y - old_y) * i32::from(new_y + old_y);
+        let dxx = i32::from(new_x - old_x) * i32::from(new_x + old_x);
+        let dyy = i32::from(new_y - old_y) * i32::from(new_y + old_y);
+        col_xx[i] += dxx;
+        col_yy[i] += dyy;
+        col_tt[i] += dxx + dyy;
         col_xy[i] += i32::from(new_x) * i32::from(new_y) - i32::from(old_x) * i32::from(old_y);
         gx[i] = new_x;
         gy[i] = new_y;
     }
 }
 
-/// Window sums of one response row.
-#[derive(Debug)]
-pub(crate) struct WindowSums<'a> {
-    pub(crate) xx: &'a mut [i32],
-    pub(crate) yy: &'a mut [i32],
-    pub(crate) xy: &'a mut [i32],
+/// ICD steps 2 and 3 decided cheaply: `flags[i] = 1` where the window trace (the 5-wide sum
+/// of `col_tt[i ..= i + 4]`) reaches `trace_min`, so that the response may exceed the
+/// threshold.
+#[multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+pub(crate) fn may_exceed(col_tt: &[i32], trace_min: i32, flags: &mut [u8]) {
+    let n = flags.len();
+    let (t0, t1, t2, t3, t4) = taps(col_tt, n);
+    for i in 0..n {
+        flags[i] = u8::from(t0[i] + t1[i] + t2[i] + t3[i] + t4[i] >= trace_min);
+    }
 }
 
-/// ICD step 2, horizontal part: the 5x5 window sums of `n = out.xx.len()` columns from the
-/// column sums starting two columns to their left, and `maybe[i] = 1` where the trace
-/// `Sxx + Syy >= trace_min`.
+/// The chunks of [`CHUNK`] flags holding a non-zero flag, without branches.
+pub(crate) fn chunks_with_flags(flags: &[u8]) -> ChunkSet {
+    let mut set = ChunkSet::EMPTY;
+    let mut chunks = flags.chunks_exact(CHUNK);
+    for (j, chunk) in chunks.by_ref().enumerate() {
+        let word = <[u8; CHUNK]>::try_from(chunk).map_or(1, u128::from_ne_bytes);
+        set.insert_if(j, word != 0);
+    }
+    let rest = chunks.remainder();
+    set.insert_if(flags.len() / CHUNK, rest.iter().any(|&f| f != 0));
+    set
+}
+
+/// Column sums starting two columns left of the first pixel of a run.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Columns<'a> {
+    pub(crate) xx: &'a [i32],
+    pub(crate) yy: &'a [i32],
+    pub(crate) xy: &'a [i32],
+}
+
+/// ICD steps 2 and 3 over a run of pixels: the 5x5 window sums from the column sums, and the
+/// exact response.
 #[multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
-pub(crate) fn window_row(
-    col_xx: &[i32],
-    col_yy: &[i32],
-    col_xy: &[i32],
-    out: WindowSums<'_>,
-    maybe: &mut [u8],
-    trace_min: i32,
-) {
-    let n = out.xx.len();
-    let (sxx, syy, sxy, maybe) = (&mut out.xx[..n], &mut out.yy[..n], &mut out.xy[..n], &mut maybe[..n]);
-    let (xx0, xx1, xx2, xx3, xx4) = taps(col_xx, n);
-    let (yy0, yy1, yy2, yy3, yy4) = taps(col_yy, n);
-    let (xy0, xy1, xy2, xy3, xy4) = taps(col_xy, n);
+pub(crate) fn response_run(cols: Columns<'_>, out: &mut [i32]) {
+    let n = out.len();
+    let (xx0, xx1, xx2, xx3, xx4) = taps(cols.xx, n);
+    let (yy0, yy1, yy2, yy3, yy4) = taps(cols.yy, n);
+    let (xy0, xy1, xy2, xy3, xy4) = taps(cols.xy, n);
     for i in 0..n {
-        let xx = xx0[i] + xx1[i] + xx2[i] + xx3[i] + xx4[i];
-        let yy = yy0[i] + yy1[i] + yy2[i] + yy3[i] + yy4[i];
-        sxx[i] = xx;
-        syy[i] = yy;
-        sxy[i] = xy0[i] + xy1[i] + xy2[i] + xy3[i] + xy4[i];
-        maybe[i] = u8::from(xx + yy >= trace_min);
+        let sxx = xx0[i] + xx1[i] + xx2[i] + xx3[i] + xx4[i];
+        let syy = yy0[i] + yy1[i] + yy2[i] + yy3[i] + yy4[i];
+        let sxy = xy0[i] + xy1[i] + xy2[i] + xy3[i] + xy4[i];
+        out[i] = response(sxx, syy, sxy);
+    }
+}
+
+/// `out[..] = value`, vectorised.
+#[multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+pub(crate) fn fill(out: &mut [i32], value: i32) {
+    for o in out.iter_mut() {
+        *o = value;
     }
 }
 
@@ -100,16 +153,6 @@ type Taps<'a> = (&'a [i32], &'a [i32], &'a [i32], &'a [i32], &'a [i32]);
 #[inline(always)]
 fn taps(col: &[i32], n: usize) -> Taps<'_> {
     (&col[..n], &col[1..=n], &col[2..n + 2], &col[3..n + 3], &col[4..n + 4])
-}
-
-/// ICD step 3 over a run of pixels.
-#[multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
-pub(crate) fn response_run(sxx: &[i32], syy: &[i32], sxy: &[i32], out: &mut [i32]) {
-    let n = out.len();
-    let (sxx, syy, sxy) = (&sxx[..n], &syy[..n], &sxy[..n]);
-    for i in 0..n {
-        out[i] = response(sxx[i], syy[i], sxy[i]);
-    }
 }
 
 /// The response rows around one row of candidates, as slices starting one column to the left

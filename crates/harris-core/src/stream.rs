@@ -6,16 +6,21 @@
 //! row `m` are therefore final, and returned, when pixel row `m + 4` is pushed. When the last
 //! row is pushed every feature of the image has been returned.
 
-use crate::kernels::{self, ColumnSums, PixelRows, ResponseRows, WindowSums};
+use crate::kernels::{
+    self, ColumnSums, Columns, Gradients, PixelRows, ResponseRows, SobelScratch,
+};
 use crate::{
     CANDIDATE_BORDER, Error, Feature, K_NUMERATOR, K_SHIFT, MAX_SIZE, RESPONSE_SHIFT, Registers,
-    WINDOW_RADIUS, q4_coordinate, subpixel_offset,
+    WINDOW_RADIUS, q4_coordinate, response, subpixel_offset,
 };
 
 /// Pixel rows held for the 3x3 Sobel (ICD step 1).
 const PIXEL_ROWS: usize = 3;
-/// Gradient rows held for the 5x5 window (ICD step 2).
-const GRADIENT_ROWS: usize = 2 * WINDOW_RADIUS + 1;
+/// Rows in the 5x5 window (ICD step 2).
+const WINDOW_ROWS: usize = 2 * WINDOW_RADIUS + 1;
+/// Gradient rows held: the window's five, and the one that just left it, from which the column
+/// sums of the previous response row are rebuilt (see `late_exact`).
+const GRADIENT_ROWS: usize = WINDOW_ROWS + 1;
 /// Response rows held for the 3x3 suppression and sub-pixel step (ICD steps 5, 6).
 const RESPONSE_ROWS: usize = 3;
 /// First column (and row) where the window sums, and so the response, are defined (ICD step 2).
@@ -55,15 +60,16 @@ pub struct HarrisStream<const MAX_WIDTH: usize> {
     pixels: [[u8; MAX_WIDTH]; PIXEL_ROWS],
     gx: [[i16; MAX_WIDTH]; GRADIENT_ROWS],
     gy: [[i16; MAX_WIDTH]; GRADIENT_ROWS],
-    /// Column sums over the last five gradient rows of gx^2, gy^2, gx*gy.
+    /// Scratch rows of the separable Sobel (see `kernels::gradient_row`).
+    smooth: [i16; MAX_WIDTH],
+    diff: [i16; MAX_WIDTH],
+    /// Column sums over the last five gradient rows of gx^2, gy^2, gx*gy and gx^2 + gy^2.
     col_xx: [i32; MAX_WIDTH],
     col_yy: [i32; MAX_WIDTH],
     col_xy: [i32; MAX_WIDTH],
-    /// Window sums `Sxx, Syy, Sxy` of the last two response rows (ring by row parity): the
-    /// current row's, and the previous row's for late exact responses (see `response_row`).
-    sums: [[[i32; MAX_WIDTH]; 3]; 2],
-    /// `1` where a pixel of the last response row may exceed the threshold (`T >= trace_min`).
-    maybe: [u8; MAX_WIDTH],
+    col_tt: [i32; MAX_WIDTH],
+    /// Scratch flags of one row: pixels that may exceed the threshold, then local maxima.
+    flags: [u8; MAX_WIDTH],
     /// Chunks of the last two response rows (ring by row parity) holding such a pixel.
     chunk_maybe: [ChunkSet; 2],
     /// Chunks of the last two response rows whose responses were computed exactly.
@@ -103,11 +109,13 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
             pixels: [[0; MAX_WIDTH]; PIXEL_ROWS],
             gx: [[0; MAX_WIDTH]; GRADIENT_ROWS],
             gy: [[0; MAX_WIDTH]; GRADIENT_ROWS],
+            smooth: [0; MAX_WIDTH],
+            diff: [0; MAX_WIDTH],
             col_xx: [0; MAX_WIDTH],
             col_yy: [0; MAX_WIDTH],
             col_xy: [0; MAX_WIDTH],
-            sums: [[[0; MAX_WIDTH]; 3]; 2],
-            maybe: [0; MAX_WIDTH],
+            col_tt: [0; MAX_WIDTH],
+            flags: [0; MAX_WIDTH],
             chunk_maybe: [ChunkSet::EMPTY; 2],
             chunk_exact: [ChunkSet::EMPTY; 2],
             trace_min: trace_min(regs.threshold),
@@ -162,6 +170,7 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
         self.col_xx.fill(0);
         self.col_yy.fill(0);
         self.col_xy.fill(0);
+        self.col_tt.fill(0);
         self.chunk_maybe = [ChunkSet::EMPTY; 2];
         self.chunk_exact = [ChunkSet::EMPTY; 2];
     }
@@ -215,7 +224,7 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
         }
         let g = y - 1;
         self.gradient_row(g);
-        if g < 2 * WINDOW_RADIUS + 1 {
+        if g < WINDOW_ROWS {
             return Ok(&[]);
         }
         let c = g - WINDOW_RADIUS;
@@ -230,8 +239,7 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
 
     /// ICD steps 1 and 2 (vertical part): Sobel gradients of row `g` (from pixel rows
     /// `g - 1 ..= g + 1`) into the gradient ring, and the column sums moved down one row: the
-    /// products of the row leaving the 5-row window (held in the same ring slot) subtracted,
-    /// the new row's added.
+    /// products of row `g - 5`, which leaves the window, subtracted, the new row's added.
     fn gradient_row(&mut self, g: usize) {
         let n = self.regs.width - 2; // gradient columns 1 ..= w - 2
         let px = PixelRows {
@@ -239,70 +247,61 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
             here: &self.pixels[g % PIXEL_ROWS],
             below: &self.pixels[(g + 1) % PIXEL_ROWS],
         };
-        let slot = g % GRADIENT_ROWS;
+        // Slot of row g - 5 (g + 1 = g - 5 mod 6); all zero while g - 5 < 1, so the first
+        // five rows subtract nothing.
+        let leaving = (g + 1) % GRADIENT_ROWS;
+        let [gx_new, gx_old] = self.gx.get_disjoint_mut([g % GRADIENT_ROWS, leaving]).unwrap_or_else(|_| unreachable!("g and g + 1 differ mod 6"));
+        let [gy_new, gy_old] = self.gy.get_disjoint_mut([g % GRADIENT_ROWS, leaving]).unwrap_or_else(|_| unreachable!("g and g + 1 differ mod 6"));
+        let gradients = Gradients {
+            gx: &mut gx_new[1..=n],
+            gy: &mut gy_new[1..=n],
+            old_gx: &gx_old[1..=n],
+            old_gy: &gy_old[1..=n],
+        };
         let sums = ColumnSums {
             xx: &mut self.col_xx[1..=n],
             yy: &mut self.col_yy[1..=n],
             xy: &mut self.col_xy[1..=n],
+            tt: &mut self.col_tt[1..=n],
         };
-        kernels::gradient_row(px, &mut self.gx[slot][1..=n], &mut self.gy[slot][1..=n], sums);
+        let scratch = SobelScratch { smooth: &mut self.smooth, diff: &mut self.diff };
+        kernels::gradient_row(px, scratch, gradients, sums);
     }
 
-    /// ICD steps 2 (horizontal part) and 3 for row `c`: the 5x5 window sums of columns
-    /// `3 ..= w - 4`, then the response where it can matter.
+    /// ICD steps 2 (horizontal part) and 3 for row `c`, columns `3 ..= w - 4`: the response
+    /// where it can matter.
     ///
-    /// The exact response needs 64-bit products and is the costliest step, but most pixels lie
+    /// The exact response needs the three window sums and 64-bit products, but most pixels lie
     /// in flat regions whose response cannot reach the threshold: since `det <= T^2 / 4`,
-    /// `Rs <= 215 T^2`, so a trace `T < trace_min` proves `r <= THRESHOLD`. Such a pixel can be
-    /// neither a candidate nor beat one in suppression, so its response is only needed when a
-    /// direct neighbour's sub-pixel step uses it. The row is handled in chunks of
-    /// [`CHUNK`] pixels: a chunk's responses are computed exactly when the chunk, a chunk beside
-    /// it, or the same chunk of the row above holds a pixel that may exceed the threshold, and
-    /// are left [`UNDECIDED`] otherwise. The row below is not known yet; when it turns out to
-    /// need this row's values, they are computed then from the saved window sums
-    /// (see [`late_exact`](Self::late_exact)).
+    /// `Rs <= 215 T^2`, so a window trace `T < trace_min` proves `r <= THRESHOLD`, and the trace
+    /// is one 5-wide sum of `col_tt`. Such a pixel can be neither a candidate nor beat one in
+    /// suppression, so its response only matters when a direct neighbour's sub-pixel step
+    /// reads it. The row is handled in chunks of [`CHUNK`] pixels: a chunk's responses are
+    /// computed exactly when the chunk, a chunk beside it, or the same chunk of the row above
+    /// holds a pixel that may exceed the threshold, and are left [`UNDECIDED`] otherwise. The
+    /// row below is not known yet; when it turns out to need this row's values, they are
+    /// computed then (see [`late_exact`](Self::late_exact)).
     fn response_row(&mut self, c: usize) {
         let w = self.regs.width;
         let range = RESPONSE_BORDER..w - RESPONSE_BORDER;
-        {
-            let [sxx, syy, sxy] = &mut self.sums[c % 2];
-            let out = WindowSums {
-                xx: &mut sxx[range.clone()],
-                yy: &mut syy[range.clone()],
-                xy: &mut sxy[range.clone()],
-            };
-            let first = RESPONSE_BORDER - WINDOW_RADIUS;
-            kernels::window_row(
-                &self.col_xx[first..],
-                &self.col_yy[first..],
-                &self.col_xy[first..],
-                out,
-                &mut self.maybe[range.clone()],
-                self.trace_min,
-            );
-        }
-        let mut maybe = ChunkSet::EMPTY;
-        for (j, chunk) in self.maybe[range.clone()].chunks(CHUNK).enumerate() {
-            if any_set(chunk) {
-                maybe.insert(j);
-            }
-        }
-        let above = self.chunk_maybe[(c + 1) % 2];
-        let needed = maybe.dilated().union(&above);
+        let first_tap = RESPONSE_BORDER - WINDOW_RADIUS;
+        let flags = &mut self.flags[range.clone()];
+        kernels::may_exceed(&self.col_tt[first_tap..], self.trace_min, flags);
+        let maybe = kernels::chunks_with_flags(flags);
+        let needed = maybe.dilated().union(&self.chunk_maybe[(c + 1) % 2]);
         self.chunk_maybe[c % 2] = maybe;
         self.chunk_exact[c % 2] = needed;
-        let [sxx, syy, sxy] = &self.sums[c % 2];
         let out = &mut self.responses[c % RESPONSE_ROWS];
         for (start, end, exact) in needed.runs(range.clone()) {
             if exact {
-                kernels::response_run(
-                    &sxx[start..end],
-                    &syy[start..end],
-                    &sxy[start..end],
-                    &mut out[start..end],
-                );
+                let cols = Columns {
+                    xx: &self.col_xx[start - WINDOW_RADIUS..],
+                    yy: &self.col_yy[start - WINDOW_RADIUS..],
+                    xy: &self.col_xy[start - WINDOW_RADIUS..],
+                };
+                kernels::response_run(cols, &mut out[start..end]);
             } else {
-                out[start..end].fill(UNDECIDED);
+                kernels::fill(&mut out[start..end], UNDECIDED);
             }
         }
         if c > RESPONSE_BORDER {
@@ -311,20 +310,32 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
     }
 
     /// Exact responses of the chunks of row `m` that were left undecided but that row `m + 1`
-    /// needs (its vertical sub-pixel step reads `r(x, m)`), from row `m`'s saved window sums.
+    /// needs (its vertical sub-pixel step reads `r(x, m)`). Row `m`'s column sums are rebuilt
+    /// from the current ones, which cover gradient rows `m - 1 ..= m + 3`: minus the products
+    /// of row `m + 3`, plus those of row `m - 2`, both still in the gradient ring.
     fn late_exact(&mut self, m: usize) {
         let range = RESPONSE_BORDER..self.regs.width - RESPONSE_BORDER;
         let late = self.chunk_maybe[(m + 1) % 2].minus(&self.chunk_exact[m % 2]);
-        let [sxx, syy, sxy] = &self.sums[m % 2];
+        if late.is_empty() {
+            return;
+        }
+        let (added, removed) = ((m + 3) % GRADIENT_ROWS, (m - 2) % GRADIENT_ROWS);
         let out = &mut self.responses[m % RESPONSE_ROWS];
         for (start, end, exact) in late.runs(range) {
-            if exact {
-                kernels::response_run(
-                    &sxx[start..end],
-                    &syy[start..end],
-                    &sxy[start..end],
-                    &mut out[start..end],
-                );
+            if !exact {
+                continue;
+            }
+            for x in start..end {
+                let (mut sxx, mut syy, mut sxy) = (0, 0, 0);
+                for col in x - WINDOW_RADIUS..=x + WINDOW_RADIUS {
+                    let (ax, ay) = (i32::from(self.gx[added][col]), i32::from(self.gy[added][col]));
+                    let (rx, ry) =
+                        (i32::from(self.gx[removed][col]), i32::from(self.gy[removed][col]));
+                    sxx += self.col_xx[col] - ax * ax + rx * rx;
+                    syy += self.col_yy[col] - ay * ay + ry * ry;
+                    sxy += self.col_xy[col] - ax * ay + rx * ry;
+                }
+                out[x] = response(sxx, syy, sxy);
             }
         }
     }
@@ -356,7 +367,7 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
                 cur: &cur[start - 1..=end],
                 next: &next[start - 1..=end],
             };
-            let flags = &mut self.maybe[start..end];
+            let flags = &mut self.flags[start..end];
             kernels::local_maxima(rows, threshold, flags);
             for (word_start, word) in flags.chunks(8).enumerate() {
                 if !any_set(word) {
@@ -387,22 +398,42 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
 const UNDECIDED: i32 = i32::MIN;
 
 /// Pixels per chunk in the decisions of [`HarrisStream::response_row`].
-const CHUNK: usize = 16;
+pub(crate) const CHUNK: usize = 16;
 
 /// Words of a [`ChunkSet`]: enough chunks for the widest image the ICD allows.
 const CHUNK_WORDS: usize = MAX_SIZE.div_ceil(CHUNK * 64);
 
 /// A set of chunk indices of one row, as a bitset.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct ChunkSet([u64; CHUNK_WORDS]);
+pub(crate) struct ChunkSet([u64; CHUNK_WORDS]);
 
 impl ChunkSet {
-    const EMPTY: Self = Self([0; CHUNK_WORDS]);
+    pub(crate) const EMPTY: Self = Self([0; CHUNK_WORDS]);
 
-    fn insert(&mut self, j: usize) {
+    /// Adds chunk `j` when `yes`, without a branch.
+    pub(crate) fn insert_if(&mut self, j: usize, yes: bool) {
         if let Some(word) = self.0.get_mut(j / 64) {
-            *word |= 1 << (j % 64);
+            *word |= u64::from(yes) << (j % 64);
         }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.0.iter().all(|&w| w == 0)
+    }
+
+    /// The first chunk at or after `j` whose membership differs from chunk `j`'s.
+    fn run_end(&self, j: usize) -> usize {
+        let inside = self.contains(j);
+        let mut k = j;
+        while let Some(&word) = self.0.get(k / 64) {
+            let word = if inside { !word } else { word };
+            let rest = word >> (k % 64);
+            if rest != 0 {
+                return k + rest.trailing_zeros() as usize;
+            }
+            k = (k / 64 + 1) * 64;
+        }
+        k
     }
 
     fn contains(&self, j: usize) -> bool {
@@ -446,11 +477,7 @@ impl ChunkSet {
             }
             let first = (start - range.start) / CHUNK;
             let inside = self.contains(first);
-            let mut j = first + 1;
-            while range.start + j * CHUNK < range.end && self.contains(j) == inside {
-                j += 1;
-            }
-            let end = (range.start + j * CHUNK).min(range.end);
+            let end = (range.start + self.run_end(first) * CHUNK).min(range.end);
             let run = (start, end, inside);
             start = end;
             Some(run)
