@@ -43,8 +43,12 @@ pub(crate) fn read_gray8(path: &Path) -> Result<(usize, usize, Vec<u8>)> {
 
 pub(crate) fn run(args: &Args) -> Result<()> {
     let (width, height, pixels) = read_gray8(&args.image)?;
-    let regs =
-        Registers { width, height, threshold: args.threshold, max_features: args.max_features };
+    let regs = Registers {
+        width,
+        height,
+        threshold: args.threshold,
+        max_features: args.max_features,
+    };
     let detection = detect(&pixels, &regs).with_context(|| args.image.display().to_string())?;
     let mut out = BufWriter::new(io::stdout().lock());
     writeln!(out, "x_q4,y_q4,r")?;

@@ -1,6 +1,7 @@
 //! Speed of the board detector on a real 752x480 frame (EuRoC V1_01, from ../shared/data).
 //!
 //! `cargo bench -p harris-core --bench harris`. Skips (prints why) when ../shared is absent.
+#![allow(clippy::print_stderr)] // says why a bench is skipped
 
 use std::hint::black_box;
 use std::path::PathBuf;

@@ -1,4 +1,5 @@
 //! Runs the detector on one image many times, for profilers (perf, callgrind):
+#![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool: printing is its job
 //! `cargo run --release -p harris-core --example profile_frame -- IMAGE.png [REPEATS]`.
 
 use std::process::ExitCode;

@@ -84,7 +84,7 @@ pub fn integer(image: &[u8], regs: &Registers) -> Result<IntegerReference, Error
             let (sxx, syy, sxy) = window_sums(&gx, &gy, w, x, y);
             let t = sxx + syy;
             let det = sxx * syy - sxy * sxy;
-            let rs = (det << K_SHIFT) - (K_NUMERATOR as i64) * t * t;
+            let rs = (det << K_SHIFT) - K_NUMERATOR.cast_signed() * t * t;
             #[allow(clippy::expect_used)]
             let r = i32::try_from(rs >> RESPONSE_SHIFT).expect("ICD: r fits in i32");
             response[y * w + x] = r;

@@ -188,6 +188,7 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
 
     /// Makes every response exact, not only those that can matter for features, so that
     /// [`last_response_row`](Self::last_response_row) gives the whole response map.
+    #[cfg(feature = "alloc")]
     pub(crate) fn compute_every_response(&mut self) {
         self.trace_min = 0;
     }
@@ -195,6 +196,7 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
     /// The response row completed by the last [`push_row`](Self::push_row), with its image
     /// row: `r(x, y)` for `3 <= x <= WIDTH - 4`, zero left and right of that. Exact everywhere
     /// only after [`compute_every_response`](Self::compute_every_response).
+    #[cfg(feature = "alloc")]
     pub(crate) fn last_response_row(&self) -> Option<(usize, &[i32])> {
         let y = self.last_response_row?;
         let row = self.responses.get(y % RESPONSE_ROWS)?;
@@ -313,6 +315,8 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
     /// needs (its vertical sub-pixel step reads `r(x, m)`). Row `m`'s column sums are rebuilt
     /// from the current ones, which cover gradient rows `m - 1 ..= m + 3`: minus the products
     /// of row `m + 3`, plus those of row `m - 2`, both still in the gradient ring.
+    // `x` and `col` index five arrays at once; iterators would hide the window arithmetic.
+    #[allow(clippy::needless_range_loop)]
     fn late_exact(&mut self, m: usize) {
         let range = RESPONSE_BORDER..self.regs.width - RESPONSE_BORDER;
         let late = self.chunk_maybe[(m + 1) % 2].minus(&self.chunk_exact[m % 2]);
