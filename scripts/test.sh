@@ -19,7 +19,7 @@ cargo fmt --all -- --check
 
 step "cargo clippy (-D warnings)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
-cargo clippy -p harris-core --no-default-features --locked -- -D warnings
+cargo clippy -p harris-core -p fpga-link --no-default-features --locked -- -D warnings
 
 step "cargo test"
 cargo test --workspace --locked
@@ -32,5 +32,9 @@ VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
     .venv/bin/maturin develop --release --locked --quiet -m crates/py/Cargo.toml
 # pytest exits 5 when it collects nothing; under `set -e` that fails the run, as it should.
 .venv/bin/python -m pytest crates/py/tests -q
+
+step "Python stubs against the built module (mypy stubtest) and strict typing"
+(cd crates/py/python && ../../../.venv/bin/python -m mypy.stubtest stereonav)
+.venv/bin/python -m mypy --strict crates/py/python/stereonav
 
 step "all checks passed"

@@ -1,5 +1,7 @@
 //! `stereonav harris` end to end: output format, registers, and one-line errors.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

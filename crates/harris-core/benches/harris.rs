@@ -12,10 +12,17 @@ use harris_core::{BoardStream, Registers, detect};
 fn euroc_frame() -> Option<(usize, usize, Vec<u8>)> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/euroc-v101-stereo/left");
-    let mut paths: Vec<_> = std::fs::read_dir(dir).ok()?.filter_map(|e| Some(e.ok()?.path())).collect();
+    let mut paths: Vec<_> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| Some(e.ok()?.path()))
+        .collect();
     paths.sort();
     let image = image::open(paths.first()?).ok()?.into_luma8();
-    Some((image.width() as usize, image.height() as usize, image.into_raw()))
+    Some((
+        image.width() as usize,
+        image.height() as usize,
+        image.into_raw(),
+    ))
 }
 
 fn bench(c: &mut Criterion) {
@@ -23,8 +30,14 @@ fn bench(c: &mut Criterion) {
         eprintln!("../shared/data/euroc-v101-stereo is absent: harris benches skipped");
         return;
     };
-    let regs = Registers { width, height, ..Registers::default() };
-    let features = detect(&pixels, &regs).map(|d| d.features.len()).unwrap_or(0);
+    let regs = Registers {
+        width,
+        height,
+        ..Registers::default()
+    };
+    let features = detect(&pixels, &regs)
+        .map(|d| d.features.len())
+        .unwrap_or(0);
     eprintln!("EuRoC frame {width}x{height}: {features} features at the default registers");
 
     let mut group = c.benchmark_group("harris_752x480");

@@ -21,7 +21,11 @@ fn main() -> ExitCode {
         }
     };
     let width = image.width() as usize;
-    let regs = Registers { width, height: image.height() as usize, ..Registers::default() };
+    let regs = Registers {
+        width,
+        height: image.height() as usize,
+        ..Registers::default()
+    };
     let mut stream = match BoardStream::new(regs) {
         Ok(s) => Box::new(s),
         Err(e) => {
@@ -42,6 +46,9 @@ fn main() -> ExitCode {
         }
         best = best.min(start.elapsed() / 100);
     }
-    println!("{} features per frame, best batch {best:?} per frame", total / (repeats.div_ceil(100) * 100));
+    println!(
+        "{} features per frame, best batch {best:?} per frame",
+        total / (repeats.div_ceil(100) * 100)
+    );
     ExitCode::SUCCESS
 }

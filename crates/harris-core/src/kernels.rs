@@ -152,7 +152,13 @@ type Taps<'a> = (&'a [i32], &'a [i32], &'a [i32], &'a [i32], &'a [i32]);
 
 #[inline(always)]
 fn taps(col: &[i32], n: usize) -> Taps<'_> {
-    (&col[..n], &col[1..=n], &col[2..n + 2], &col[3..n + 3], &col[4..n + 4])
+    (
+        &col[..n],
+        &col[1..=n],
+        &col[2..n + 2],
+        &col[3..n + 3],
+        &col[4..n + 4],
+    )
 }
 
 /// The response rows around one row of candidates, as slices starting one column to the left

@@ -6,7 +6,7 @@
 //!
 //! * [`HarrisStream`] is the row-streaming detector: push image rows one at a time, receive each
 //!   row's features as soon as they are final, in the board's order. It owns fixed-capacity line
-//!   buffers sized by its `MAX_WIDTH` parameter (about 41 KiB at 752 pixels), never allocates and
+//!   buffers sized by its `MAX_WIDTH` parameter (about 50 KiB at 752 pixels), never allocates and
 //!   works without `std` or `alloc`.
 //! * [`detect`] (feature `alloc`) runs a whole image and returns its features and overflow flag.
 //! * [`reference`] (feature `alloc`) holds two slow, literal transcriptions of the ICD used as
@@ -31,7 +31,11 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
-#![warn(clippy::cast_possible_truncation, clippy::cast_sign_loss, clippy::cast_possible_wrap)]
+#![warn(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 
 #[cfg(feature = "alloc")]
 extern crate alloc;
@@ -112,7 +116,11 @@ impl Registers {
     /// Checks every register against the ICD's ranges.
     pub fn validate(&self) -> Result<(), Error> {
         if !(MIN_SIZE..=MAX_SIZE).contains(&self.width) {
-            return Err(Error::WidthOutOfRange { width: self.width, min: MIN_SIZE, max: MAX_SIZE });
+            return Err(Error::WidthOutOfRange {
+                width: self.width,
+                min: MIN_SIZE,
+                max: MAX_SIZE,
+            });
         }
         if !(MIN_SIZE..=MAX_SIZE).contains(&self.height) {
             return Err(Error::HeightOutOfRange {
@@ -158,8 +166,18 @@ impl Feature {
 ///
 /// `sxx`, `syy` are sums of squares (`0..=26_010_000`) and `|sxy| <= 14_630_625`, so every
 /// product below is an unsigned 32x32->64 bit multiply (cheap on every CPU and in SIMD).
+///
+/// The result is exact for every window an 8-bit image can produce: one pixel's
+/// `gx^2 + gy^2` is at most 1,300,500 (`gx` and `gy` cannot both reach 1020), so
+/// `T <= 32,512,500` and `r <= 215 T^2 / 2^27 < 2^31`. The ICD's separate bounds on
+/// `Sxx` and `Syy` would allow sums (both at 26,010,000 with `Sxy = 0`) whose response does
+/// not fit in 32 bits; no image has them, and for them this function wraps.
 #[inline(always)]
-#[allow(clippy::cast_sign_loss, clippy::cast_possible_truncation, clippy::cast_possible_wrap)]
+#[allow(
+    clippy::cast_sign_loss,
+    clippy::cast_possible_truncation,
+    clippy::cast_possible_wrap
+)]
 pub fn response(sxx: i32, syy: i32, sxy: i32) -> i32 {
     // Sums of squares are never negative, so `as u32` keeps their value.
     let (sxx, syy) = (u64::from(sxx as u32), u64::from(syy as u32));
@@ -194,7 +212,210 @@ pub fn subpixel_offset(before: i32, at: i32, after: i32) -> i32 {
 ///
 /// `p <= 4090` and `|offset| <= 8` for every feature, so the result fits in 16 bits.
 #[inline]
-#[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss, clippy::cast_possible_wrap)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
 pub fn q4_coordinate(p: usize, offset: i32) -> u16 {
     (((p as i32) << Q4_SHIFT) + offset) as u16
+}
+
+#[cfg(test)]
+mod tests {
+    //! The per-pixel arithmetic of ICD steps 3, 6 and 7 against 128-bit transcriptions, over
+    //! its whole domain. (Hand-worked cases and whole images are in `tests/`.)
+
+    use super::*;
+
+    /// xorshift64*, deterministic.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+        fn below(&mut self, n: u64) -> u64 {
+            self.next() % n
+        }
+    }
+
+    /// ICD step 3 in 128 bits: `floor(((det << 10) - 41 T^2) / 2^27)`.
+    fn exact_response(sxx: i32, syy: i32, sxy: i32) -> i128 {
+        let (sxx, syy, sxy) = (i128::from(sxx), i128::from(syy), i128::from(sxy));
+        let t = sxx + syy;
+        let rs = ((sxx * syy - sxy * sxy) << 10) - 41 * t * t;
+        rs.div_euclid(1 << 27)
+    }
+
+    /// Window sums within the ICD's ranges and Cauchy-Schwarz (`Sxy^2 <= Sxx Syy`), as every
+    /// image gives, biased toward small values and the edges of the ranges.
+    fn window_sums(rng: &mut Rng) -> (i32, i32, i32) {
+        let max = match rng.below(4) {
+            0 => 100,
+            1 => 100_000,
+            _ => 26_010_000,
+        };
+        let sxx = rng.below(max + 1);
+        let syy = if rng.below(4) == 0 {
+            sxx
+        } else {
+            rng.below(max + 1)
+        };
+        let limit = (sxx * syy).isqrt().min(14_630_625);
+        let sxy = match rng.below(4) {
+            0 => limit,
+            1 => 0,
+            _ => rng.below(limit + 1),
+        };
+        let sign = if rng.below(2) == 0 { 1 } else { -1 };
+        let as_i32 = |v: u64| i32::try_from(v).unwrap_or(i32::MAX);
+        (as_i32(sxx), as_i32(syy), sign * as_i32(sxy))
+    }
+
+    #[test]
+    fn response_equals_the_exact_floor() {
+        let mut rng = Rng(0x5EED_1234_ABCD_0001);
+        let mut checked = 0;
+        for _ in 0..200_000 {
+            let (sxx, syy, sxy) = window_sums(&mut rng);
+            let exact = exact_response(sxx, syy, sxy);
+            // The ICD's ranges allow triples no image reaches, whose r would not fit in 32 bits
+            // (e.g. Sxx = Syy = 26,010,000 with Sxy = 0); every image's r does (the largest
+            // found by search is about 8.9e8), so only those are compared.
+            let Ok(exact) = i32::try_from(exact) else {
+                continue;
+            };
+            assert_eq!(response(sxx, syy, sxy), exact, "({sxx}, {syy}, {sxy})");
+            assert_eq!(
+                response(syy, sxx, -sxy),
+                exact,
+                "symmetry ({sxx}, {syy}, {sxy})"
+            );
+            checked += 1;
+        }
+        assert!(checked > 150_000, "{checked}");
+    }
+
+    /// ICD step 6 in 128 bits with an explicit truncation toward zero and clamp.
+    fn exact_offset(before: i32, at: i32, after: i32) -> i128 {
+        let (b, a, c) = (i128::from(before), i128::from(at), i128::from(after));
+        let num = 16 * (b - c);
+        let den = 2 * (b - 2 * a + c);
+        if den == 0 {
+            return 0;
+        }
+        let q = num.abs() / den.abs();
+        let q = if (num < 0) != (den < 0) { -q } else { q };
+        q.clamp(-8, 8)
+    }
+
+    #[test]
+    fn subpixel_offset_equals_the_exact_truncation() {
+        let mut rng = Rng(0x5EED_1234_ABCD_0002);
+        let pick = |rng: &mut Rng| -> i32 {
+            const EDGES: [i32; 7] = [i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
+            match rng.below(5) {
+                0 => usize::try_from(rng.below(7))
+                    .ok()
+                    .and_then(|i| EDGES.get(i))
+                    .map_or(0, |&v| v),
+                1 => i32::try_from(rng.below(2001)).unwrap_or(0) - 1000,
+                _ => {
+                    let b = rng.next().to_le_bytes();
+                    i32::from_le_bytes([b[0], b[1], b[2], b[3]])
+                }
+            }
+        };
+        for _ in 0..200_000 {
+            let (b, a, c) = (pick(&mut rng), pick(&mut rng), pick(&mut rng));
+            let got = subpixel_offset(b, a, c);
+            assert_eq!(i128::from(got), exact_offset(b, a, c), "({b}, {a}, {c})");
+            assert_eq!(subpixel_offset(c, a, b), -got, "mirror ({b}, {a}, {c})");
+        }
+        // For a local maximum (`at > before`, `at >= after`) the offset never needs the clamp.
+        for _ in 0..100_000 {
+            let at = i32::try_from(rng.below(1 << 30)).unwrap_or(0);
+            let before = at - 1 - i32::try_from(rng.below(1 << 30)).unwrap_or(0);
+            let after = at - i32::try_from(rng.below(1 << 30)).unwrap_or(0);
+            let num = 16 * (i128::from(before) - i128::from(after));
+            let den = 2 * (i128::from(before) - 2 * i128::from(at) + i128::from(after));
+            assert!(
+                (num / den).abs() <= 8 && (-8..=8).contains(&subpixel_offset(before, at, after))
+            );
+        }
+    }
+
+    #[test]
+    fn q4_coordinates_cover_every_feature_position() {
+        for p in CANDIDATE_BORDER..=MAX_SIZE - 1 - CANDIDATE_BORDER {
+            for offset in -8..=8 {
+                let expected = 16 * i64::try_from(p).unwrap_or(0) + i64::from(offset);
+                assert_eq!(
+                    i64::from(q4_coordinate(p, offset)),
+                    expected,
+                    "({p}, {offset})"
+                );
+            }
+        }
+        let f = Feature {
+            x_q4: 16 * 100 + 8,
+            y_q4: 16 * 4 - 8,
+            r: 1,
+        };
+        assert_eq!((f.u(), f.v()), (100.5, 3.5));
+    }
+
+    #[test]
+    fn register_ranges() {
+        let ok = Registers::default();
+        assert_eq!(ok.validate(), Ok(()));
+        for width in [0, 15, 4096] {
+            assert_eq!(
+                Registers { width, ..ok }.validate(),
+                Err(Error::WidthOutOfRange {
+                    width,
+                    min: 16,
+                    max: 4095
+                })
+            );
+        }
+        for height in [0, 15, 4096] {
+            assert_eq!(
+                Registers { height, ..ok }.validate(),
+                Err(Error::HeightOutOfRange {
+                    height,
+                    min: 16,
+                    max: 4095
+                })
+            );
+        }
+        for max_features in [0, 1024] {
+            assert_eq!(
+                Registers { max_features, ..ok }.validate(),
+                Err(Error::MaxFeaturesOutOfRange {
+                    max_features,
+                    min: 1,
+                    max: 1023
+                })
+            );
+        }
+        for (width, height, max_features) in [(16, 16, 1), (4095, 4095, 1023)] {
+            for threshold in [i32::MIN, 0, i32::MAX] {
+                assert_eq!(
+                    Registers {
+                        width,
+                        height,
+                        threshold,
+                        max_features
+                    }
+                    .validate(),
+                    Ok(())
+                );
+            }
+        }
+    }
 }

@@ -112,8 +112,17 @@ pub fn integer(image: &[u8], regs: &Registers) -> Result<IntegerReference, Error
         }
     }
     let overflow = all_features.len() > regs.max_features;
-    let features = all_features.iter().copied().take(regs.max_features).collect();
-    Ok(IntegerReference { response, all_features, features, overflow })
+    let features = all_features
+        .iter()
+        .copied()
+        .take(regs.max_features)
+        .collect();
+    Ok(IntegerReference {
+        response,
+        all_features,
+        features,
+        overflow,
+    })
 }
 
 /// A feature of the floating-point reference: position in pixels, response before flooring.

@@ -6,9 +6,7 @@
 //! row `m` are therefore final, and returned, when pixel row `m + 4` is pushed. When the last
 //! row is pushed every feature of the image has been returned.
 
-use crate::kernels::{
-    self, ColumnSums, Columns, Gradients, PixelRows, ResponseRows, SobelScratch,
-};
+use crate::kernels::{self, ColumnSums, Columns, Gradients, PixelRows, ResponseRows, SobelScratch};
 use crate::{
     CANDIDATE_BORDER, Error, Feature, K_NUMERATOR, K_SHIFT, MAX_SIZE, RESPONSE_SHIFT, Registers,
     WINDOW_RADIUS, q4_coordinate, response, subpixel_offset,
@@ -41,7 +39,7 @@ pub struct ImageSummary {
 
 /// Row-streaming Harris detector with fixed line buffers for images up to `MAX_WIDTH` wide.
 ///
-/// The state is a few rows of each pipeline stage (`size_of::<BoardStream>()` is about 41 KiB),
+/// The state is a few rows of each pipeline stage (`size_of::<BoardStream>()` is 51,336 bytes, about 50 KiB),
 /// with no heap. Push the `HEIGHT` rows of an image in order with [`push_row`](Self::push_row);
 /// each call returns the features that became final, in the board's raster order, already
 /// limited to `MAX_FEATURES`. [`finish`](Self::finish) closes the image and readies the
@@ -127,7 +125,10 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
     fn check(regs: &Registers) -> Result<(), Error> {
         regs.validate()?;
         if regs.width > MAX_WIDTH {
-            return Err(Error::WidthExceedsCapacity { width: regs.width, capacity: MAX_WIDTH });
+            return Err(Error::WidthExceedsCapacity {
+                width: regs.width,
+                capacity: MAX_WIDTH,
+            });
         }
         Ok(())
     }
@@ -179,9 +180,15 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
     /// overflow flag, and readies the detector for the next image.
     pub fn finish(&mut self) -> Result<ImageSummary, Error> {
         if self.rows_in != self.regs.height {
-            return Err(Error::IncompleteImage { rows: self.rows_in, height: self.regs.height });
+            return Err(Error::IncompleteImage {
+                rows: self.rows_in,
+                height: self.regs.height,
+            });
         }
-        let summary = ImageSummary { features: self.emitted, overflow: self.overflow };
+        let summary = ImageSummary {
+            features: self.emitted,
+            overflow: self.overflow,
+        };
         self.reset();
         Ok(summary)
     }
@@ -209,10 +216,16 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
         let width = self.regs.width;
         let y = self.rows_in;
         if row.len() != width {
-            return Err(Error::RowLength { row: y, expected: width, actual: row.len() });
+            return Err(Error::RowLength {
+                row: y,
+                expected: width,
+                actual: row.len(),
+            });
         }
         if y >= self.regs.height {
-            return Err(Error::TooManyRows { height: self.regs.height });
+            return Err(Error::TooManyRows {
+                height: self.regs.height,
+            });
         }
         self.rows_in += 1;
         self.last_response_row = None;
@@ -252,8 +265,14 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
         // Slot of row g - 5 (g + 1 = g - 5 mod 6); all zero while g - 5 < 1, so the first
         // five rows subtract nothing.
         let leaving = (g + 1) % GRADIENT_ROWS;
-        let [gx_new, gx_old] = self.gx.get_disjoint_mut([g % GRADIENT_ROWS, leaving]).unwrap_or_else(|_| unreachable!("g and g + 1 differ mod 6"));
-        let [gy_new, gy_old] = self.gy.get_disjoint_mut([g % GRADIENT_ROWS, leaving]).unwrap_or_else(|_| unreachable!("g and g + 1 differ mod 6"));
+        let [gx_new, gx_old] = self
+            .gx
+            .get_disjoint_mut([g % GRADIENT_ROWS, leaving])
+            .unwrap_or_else(|_| unreachable!("g and g + 1 differ mod 6"));
+        let [gy_new, gy_old] = self
+            .gy
+            .get_disjoint_mut([g % GRADIENT_ROWS, leaving])
+            .unwrap_or_else(|_| unreachable!("g and g + 1 differ mod 6"));
         let gradients = Gradients {
             gx: &mut gx_new[1..=n],
             gy: &mut gy_new[1..=n],
@@ -266,7 +285,10 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
             xy: &mut self.col_xy[1..=n],
             tt: &mut self.col_tt[1..=n],
         };
-        let scratch = SobelScratch { smooth: &mut self.smooth, diff: &mut self.diff };
+        let scratch = SobelScratch {
+            smooth: &mut self.smooth,
+            diff: &mut self.diff,
+        };
         kernels::gradient_row(px, scratch, gradients, sums);
     }
 
@@ -332,9 +354,14 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
             for x in start..end {
                 let (mut sxx, mut syy, mut sxy) = (0, 0, 0);
                 for col in x - WINDOW_RADIUS..=x + WINDOW_RADIUS {
-                    let (ax, ay) = (i32::from(self.gx[added][col]), i32::from(self.gy[added][col]));
-                    let (rx, ry) =
-                        (i32::from(self.gx[removed][col]), i32::from(self.gy[removed][col]));
+                    let (ax, ay) = (
+                        i32::from(self.gx[added][col]),
+                        i32::from(self.gy[added][col]),
+                    );
+                    let (rx, ry) = (
+                        i32::from(self.gx[removed][col]),
+                        i32::from(self.gy[removed][col]),
+                    );
                     sxx += self.col_xx[col] - ax * ax + rx * rx;
                     syy += self.col_yy[col] - ay * ay + ry * ry;
                     sxy += self.col_xy[col] - ax * ay + rx * ry;
@@ -360,7 +387,8 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
         let next = &self.responses[(m + 1) % RESPONSE_ROWS];
         let candidates = CANDIDATE_BORDER..w - CANDIDATE_BORDER;
         let mut count = 0;
-        for (start, end, maybe) in self.chunk_maybe[m % 2].runs(RESPONSE_BORDER..w - RESPONSE_BORDER)
+        for (start, end, maybe) in
+            self.chunk_maybe[m % 2].runs(RESPONSE_BORDER..w - RESPONSE_BORDER)
         {
             let (start, end) = (start.max(candidates.start), end.min(candidates.end));
             if !maybe || start >= end {
@@ -386,8 +414,11 @@ impl<const MAX_WIDTH: usize> HarrisStream<MAX_WIDTH> {
                     let r = cur[x];
                     let ox = subpixel_offset(cur[x - 1], r, cur[x + 1]);
                     let oy = subpixel_offset(prev[x], r, next[x]);
-                    self.row_features[count] =
-                        Feature { x_q4: q4_coordinate(x, ox), y_q4: q4_coordinate(m, oy), r };
+                    self.row_features[count] = Feature {
+                        x_q4: q4_coordinate(x, ox),
+                        y_q4: q4_coordinate(m, oy),
+                        r,
+                    };
                     count += 1;
                     self.emitted += 1;
                 }
@@ -441,7 +472,9 @@ impl ChunkSet {
     }
 
     fn contains(&self, j: usize) -> bool {
-        self.0.get(j / 64).is_some_and(|word| word >> (j % 64) & 1 != 0)
+        self.0
+            .get(j / 64)
+            .is_some_and(|word| word >> (j % 64) & 1 != 0)
     }
 
     /// The set with each chunk's left and right neighbours added.
@@ -449,7 +482,11 @@ impl ChunkSet {
         let mut out = *self;
         for i in 0..CHUNK_WORDS {
             let carry_in_left = if i > 0 { self.0[i - 1] >> 63 } else { 0 };
-            let carry_in_right = if i + 1 < CHUNK_WORDS { self.0[i + 1] << 63 } else { 0 };
+            let carry_in_right = if i + 1 < CHUNK_WORDS {
+                self.0[i + 1] << 63
+            } else {
+                0
+            };
             out.0[i] |= (self.0[i] << 1) | carry_in_left | (self.0[i] >> 1) | carry_in_right;
         }
         out
@@ -473,7 +510,10 @@ impl ChunkSet {
 
     /// The columns of `range`, chunk by chunk from `range.start`, as maximal runs
     /// `(start, end, in_set)` of chunks all in or all out of the set.
-    fn runs(&self, range: core::ops::Range<usize>) -> impl Iterator<Item = (usize, usize, bool)> + '_ {
+    fn runs(
+        &self,
+        range: core::ops::Range<usize>,
+    ) -> impl Iterator<Item = (usize, usize, bool)> + '_ {
         let mut start = range.start;
         core::iter::from_fn(move || {
             if start >= range.end {
@@ -493,7 +533,9 @@ impl ChunkSet {
 #[inline]
 fn any_set(flags: &[u8]) -> bool {
     let mut words = flags.chunks_exact(8);
-    let any = words.by_ref().any(|w| <[u8; 8]>::try_from(w).map_or(1, u64::from_ne_bytes) != 0);
+    let any = words
+        .by_ref()
+        .any(|w| <[u8; 8]>::try_from(w).map_or(1, u64::from_ne_bytes) != 0);
     any || words.remainder().iter().any(|&f| f != 0)
 }
 
@@ -511,4 +553,237 @@ fn trace_min(threshold: i32) -> i32 {
     }
     // t < 2^26 for every i32 threshold.
     i32::try_from(t).unwrap_or(i32::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    //! The private machinery of the lazy responses: the trace bound and the chunk bitsets.
+    //! (Whole-detector behaviour is tested against the reference in `tests/`.)
+
+    use super::*;
+
+    /// `215 T^2` against `(threshold + 1) 2^27`, in 128 bits so the test cannot overflow.
+    fn bound(t: i64) -> i128 {
+        215 * i128::from(t) * i128::from(t)
+    }
+
+    fn needed(threshold: i32) -> i128 {
+        (i128::from(threshold) + 1) << 27
+    }
+
+    /// `trace_min` is the smallest trace whose response can exceed the threshold: below it
+    /// `Rs <= 215 T^2 < (threshold + 1) 2^27`, so `r <= threshold` (sound); at it the bound
+    /// reaches the threshold (minimal, so no chunk is left undecided without need).
+    #[test]
+    fn trace_min_is_sound_and_minimal() {
+        let check = |threshold: i32| {
+            let t = trace_min(threshold);
+            if threshold < 0 {
+                assert_eq!(t, 0, "threshold {threshold}: any trace may exceed it");
+                return;
+            }
+            let t = i64::from(t);
+            assert!((1..1 << 26).contains(&t), "threshold {threshold}: {t}");
+            assert!(
+                bound(t - 1) < needed(threshold),
+                "threshold {threshold}: {t} is not sound"
+            );
+            assert!(
+                bound(t) >= needed(threshold),
+                "threshold {threshold}: {t} is not minimal"
+            );
+        };
+        for threshold in [
+            i32::MIN,
+            -1_000_000,
+            -2,
+            -1,
+            0,
+            1,
+            2,
+            1000,
+            (1 << 18) - 1,
+            1 << 18,
+            (1 << 18) + 1,
+            1 << 24,
+            1 << 30,
+            i32::MAX - 1,
+            i32::MAX,
+        ] {
+            check(threshold);
+        }
+        // A deterministic xorshift sweep of the whole range.
+        let mut x: u32 = 0x1234_5678;
+        for _ in 0..4000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            check(x.cast_signed());
+            check((x >> 8).cast_signed());
+        }
+    }
+
+    /// The best case of the bound, `Sxx = Syy = T / 2`, `Sxy = 0`: just below `trace_min` it
+    /// does not exceed the threshold; at `trace_min` (rounded up to even) it does. (Not for
+    /// thresholds near `i32::MAX`, whose `trace_min` lies beyond any image's traces, where
+    /// this best case is no image's and its `r` would not fit in 32 bits.)
+    #[test]
+    fn trace_min_against_the_response() {
+        for threshold in [0, 1, 5000, 1 << 18, 1 << 20, 1 << 28, 1 << 29] {
+            let t = trace_min(threshold);
+            let below = t - 1;
+            assert!(
+                response(below / 2, below - below / 2, 0) <= threshold,
+                "{threshold}"
+            );
+            let even = t + t % 2;
+            assert!(response(even / 2, even / 2, 0) > threshold, "{threshold}");
+        }
+    }
+
+    fn set_of(chunks: &[usize]) -> ChunkSet {
+        let mut set = ChunkSet::EMPTY;
+        for &j in chunks {
+            set.insert_if(j, true);
+        }
+        set
+    }
+
+    fn members(set: &ChunkSet) -> impl Iterator<Item = usize> + '_ {
+        (0..CHUNK_WORDS * 64).filter(|&j| set.contains(j))
+    }
+
+    #[test]
+    fn chunk_set_basics() {
+        let mut set = ChunkSet::EMPTY;
+        assert!(set.is_empty());
+        set.insert_if(5, false);
+        assert!(set.is_empty());
+        set.insert_if(5, true);
+        set.insert_if(64, true);
+        set.insert_if(255, true);
+        // Beyond the widest image: ignored, never a panic.
+        set.insert_if(CHUNK_WORDS * 64, true);
+        set.insert_if(usize::MAX, true);
+        assert!(members(&set).eq([5, 64, 255]));
+        assert!(!set.contains(CHUNK_WORDS * 64) && !set.contains(usize::MAX));
+        let other = set_of(&[5, 63, 200]);
+        assert!(members(&set.union(&other)).eq([5, 63, 64, 200, 255]));
+        assert!(members(&set.minus(&other)).eq([64, 255]));
+        assert!(set.minus(&set).is_empty());
+    }
+
+    /// Dilation adds each chunk's neighbours, also across the 64-bit words (chunks 63/64,
+    /// 127/128, 191/192) and at both ends.
+    #[test]
+    fn chunk_set_dilation_crosses_words() {
+        let cases: [(&[usize], &[usize]); 7] = [
+            (&[0], &[0, 1]),
+            (&[63], &[62, 63, 64]),
+            (&[64], &[63, 64, 65]),
+            (&[127, 128], &[126, 127, 128, 129]),
+            (&[191], &[190, 191, 192]),
+            (&[255], &[254, 255]),
+            (&[10, 12], &[9, 10, 11, 12, 13]),
+        ];
+        for (input, expected) in cases {
+            assert!(
+                members(&set_of(input).dilated()).eq(expected.iter().copied()),
+                "{input:?}"
+            );
+        }
+        assert!(ChunkSet::EMPTY.dilated().is_empty());
+    }
+
+    /// `runs` partitions the range into maximal runs of chunks in or out of the set, chunk
+    /// boundaries counted from `range.start`, the last chunk partial.
+    #[test]
+    fn chunk_set_runs_partition_the_range() {
+        let check = |set: &ChunkSet, range: core::ops::Range<usize>| {
+            let mut next = range.start;
+            let mut last_inside = None;
+            for (start, end, inside) in set.runs(range.clone()) {
+                assert_eq!(start, next, "runs are contiguous");
+                assert!(start < end && end <= range.end);
+                assert_ne!(Some(inside), last_inside, "runs are maximal");
+                for x in start..end {
+                    assert_eq!(
+                        set.contains((x - range.start) / CHUNK),
+                        inside,
+                        "column {x}"
+                    );
+                }
+                next = end;
+                last_inside = Some(inside);
+            }
+            assert_eq!(next, range.end, "runs cover the range");
+        };
+        let sets = [
+            ChunkSet::EMPTY,
+            set_of(&[0]),
+            set_of(&[1, 2, 3]),
+            set_of(&[63, 64]),
+            set_of(&[62, 65, 127, 128, 200]),
+            set_of(&[255]),
+            ChunkSet([u64::MAX; CHUNK_WORDS]),
+            set_of(&[0, 2, 4, 6]).dilated(),
+        ];
+        for set in &sets {
+            for range in [
+                3..13,
+                3..19,
+                3..20,
+                3..4089,
+                3..4092,
+                3..3 + 16 * 64 + 1,
+                3..749,
+            ] {
+                check(set, range);
+            }
+        }
+        assert_eq!(ChunkSet::EMPTY.runs(3..3).count(), 0);
+    }
+
+    /// `chunks_with_flags` sets a chunk when any of its (up to) 16 flags is set, including the
+    /// last partial chunk.
+    #[test]
+    fn chunks_with_flags_sees_every_flag() {
+        let mut flags = [0u8; 4089];
+        for len in [10, 16, 17, 31, 32, 33, 1025, 4089] {
+            for i in [0, 15, 16, len / 2, len - 1]
+                .into_iter()
+                .filter(|&i| i < len)
+            {
+                flags[..len].fill(0);
+                flags[i] = 1;
+                let set = kernels::chunks_with_flags(&flags[..len]);
+                assert!(members(&set).eq([i / CHUNK]), "len {len} flag {i}");
+            }
+            flags[..len].fill(0);
+            assert!(kernels::chunks_with_flags(&flags[..len]).is_empty());
+        }
+    }
+
+    #[test]
+    fn any_set_sees_every_flag() {
+        let mut flags = [0u8; 21];
+        for len in 0..=21 {
+            assert!(!any_set(&flags[..len]));
+            for i in 0..len {
+                flags[i] = 1;
+                assert!(any_set(&flags[..len]), "len {len} flag {i}");
+                flags[i] = 0;
+            }
+        }
+    }
+
+    /// The undecided marker is below every response the ICD allows (`r >= -41 T^2 / 2^27`
+    /// with `T <= 2 * 26,010,000`), so comparisons against it always go the ICD's way.
+    #[test]
+    fn undecided_is_below_every_response() {
+        let t = 2 * 26_010_000i64;
+        let lowest = (-41 * t * t) >> 27;
+        assert!(i64::from(UNDECIDED) < lowest, "{lowest}");
+        assert!(response(26_010_000, 0, 0) > UNDECIDED);
+    }
 }
