@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod fpga;
 mod harris;
 
 /// Ceiling-lamp stereo navigation for autonomous forklifts.
@@ -22,6 +23,8 @@ enum Command {
     /// Run the board's Harris detector on an 8-bit grayscale PGM or PNG image and print
     /// `x_q4,y_q4,r`, one feature a line, in the board's order.
     Harris(harris::Args),
+    /// The board's feature stream (board-icd.md section 3).
+    Fpga(fpga::Args),
 }
 
 /// Parses the command line; a usage error becomes one line on stderr and exit status 2, while
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Harris(args) => harris::run(&args),
+        Command::Fpga(args) => fpga::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

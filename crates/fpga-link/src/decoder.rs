@@ -160,7 +160,7 @@ impl Decoder {
                 step => return (used, self.event(step)),
             }
         }
-        let (n, event) = self.decode_in_place(&input[used..]);
+        let (n, event) = self.decode_in_place(input.get(used..).unwrap_or_default());
         (used + n, event)
     }
 
@@ -178,9 +178,11 @@ impl Decoder {
 
     fn event(&self, step: Step) -> Option<Event<'_>> {
         match step {
-            Step::Frame { header, lost, len } => {
-                Some(Event::Frame(Frame::new(header, lost, &self.buf[..len])))
-            }
+            Step::Frame { header, lost, len } => Some(Event::Frame(Frame::new(
+                header,
+                lost,
+                self.buf.get(..len).unwrap_or_default(),
+            ))),
             Step::Corrupt(why) => Some(Event::Corrupt(why)),
             Step::Pending | Step::Drained => None,
         }
@@ -195,6 +197,11 @@ impl Decoder {
         }
     }
 
+    /// The buffered bytes.
+    fn pending(&self) -> &[u8] {
+        self.buf.get(..self.len).unwrap_or_default()
+    }
+
     /// Removes `n` bytes from the front of the buffer.
     fn drop_front(&mut self, n: usize) {
         let n = n.min(self.len);
@@ -205,7 +212,7 @@ impl Decoder {
     /// Makes the buffer start at the next sync candidate (a prefix of [`SYNC`] as far as the
     /// bytes go), counting the bytes before it as skipped.
     fn resync_buffer(&mut self) {
-        let at = next_candidate(&self.buf[..self.len], 0).unwrap_or(self.len);
+        let at = next_candidate(self.pending(), 0).unwrap_or(self.len);
         self.stats.bytes_skipped += at as u64;
         self.drop_front(at);
     }
@@ -239,10 +246,15 @@ impl Decoder {
             }
             let Need::Bytes(needed) = self.need();
             if self.len < needed {
-                let take = (needed - self.len).min(input.len() - used);
-                self.buf[self.len..self.len + take].copy_from_slice(&input[used..used + take]);
-                self.len += take;
-                used += take;
+                let src = input.get(used..).unwrap_or_default();
+                let take = (needed - self.len).min(src.len());
+                if let (Some(dst), Some(src)) =
+                    (self.buf.get_mut(self.len..self.len + take), src.get(..take))
+                {
+                    dst.copy_from_slice(src);
+                    self.len += take;
+                    used += take;
+                }
             }
             if self.len < needed {
                 if !ended {
@@ -261,14 +273,14 @@ impl Decoder {
                 return (used, self.reject_buffered(why));
             }
             // `needed` bytes are here: check what they allow.
-            if self.buf[..SYNC.len()] != SYNC {
+            if self.buf.get(..SYNC.len()) != Some(&SYNC[..]) {
                 // The prefix looked like a sync, the fourth byte says otherwise.
                 self.stats.bytes_skipped += 1;
                 self.drop_front(1);
                 self.resync_buffer();
                 continue;
             }
-            let header = match Header::parse(&self.buf[..self.len]) {
+            let header = match Header::parse(self.pending()) {
                 None => continue, // need() now asks for the header
                 Some(Err(why)) => return (used, self.reject_buffered(why)),
                 Some(Ok(header)) => header,
@@ -277,7 +289,7 @@ impl Decoder {
             if self.len < total {
                 continue; // need() now asks for the whole packet
             }
-            if let Err(why) = check_crc(&self.buf[..total]) {
+            if let Err(why) = check_crc(self.buf.get(..total).unwrap_or_default()) {
                 return (used, self.reject_buffered(why));
             }
             let lost = self.accept(&header);
@@ -298,7 +310,7 @@ impl Decoder {
         if self.len < SYNC.len() {
             return Need::Bytes(SYNC.len());
         }
-        match Header::parse(&self.buf[..self.len]) {
+        match Header::parse(self.pending()) {
             None => Need::Bytes(HEADER_LEN),
             Some(Ok(header)) => Need::Bytes(header.packet_len()),
             Some(Err(_)) => Need::Bytes(HEADER_LEN), // rejected as soon as it is looked at
@@ -314,12 +326,12 @@ impl Decoder {
                 return (input.len(), None);
             };
             self.stats.bytes_skipped += (start - pos) as u64;
-            let rest = &input[start..];
+            let rest = input.get(start..).unwrap_or_default();
             if rest.len() < HEADER_LEN {
                 // A sync prefix or a short header: keep it for the next chunk.
                 return (input.len(), self.hold(rest));
             }
-            if rest[..SYNC.len()] != SYNC {
+            if rest.get(..SYNC.len()) != Some(&SYNC[..]) {
                 self.stats.bytes_skipped += 1;
                 pos = start + 1;
                 continue;
@@ -353,8 +365,10 @@ impl Decoder {
     /// Buffers the start of a packet (at most one packet's bytes, so it always fits).
     fn hold(&mut self, bytes: &[u8]) -> Option<Event<'static>> {
         let n = bytes.len().min(MAX_PACKET_LEN);
-        self.buf[..n].copy_from_slice(&bytes[..n]);
-        self.len = n;
+        if let (Some(dst), Some(src)) = (self.buf.get_mut(..n), bytes.get(..n)) {
+            dst.copy_from_slice(src);
+            self.len = n;
+        }
         None
     }
 }
@@ -365,9 +379,9 @@ fn next_candidate(bytes: &[u8], from: usize) -> Option<usize> {
     let mut pos = from;
     loop {
         let at = pos + memchr::memchr(SYNC[0], bytes.get(pos..)?)?;
-        let rest = &bytes[at..];
+        let rest = bytes.get(at..).unwrap_or_default();
         let n = rest.len().min(SYNC.len());
-        if rest[..n] == SYNC[..n] {
+        if rest.get(..n) == SYNC.get(..n) {
             return Some(at);
         }
         pos = at + 1;

@@ -114,7 +114,7 @@ impl Encoder {
     ) -> Result<usize, EncodeError> {
         let start = out.len();
         out.resize(start + packet_len(left.0.len() + right.0.len()), 0);
-        let result = self.encode(t_us, left, right, &mut out[start..]);
+        let result = self.encode(t_us, left, right, out.get_mut(start..).unwrap_or_default());
         if result.is_err() {
             out.truncate(start);
         }

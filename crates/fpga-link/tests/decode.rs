@@ -247,7 +247,8 @@ fn bad_version_reserved_bits_field_and_counts_are_corrupt() {
     )
     .unwrap();
     let good = template[..n].to_vec();
-    let cases: [(usize, u8, fn(&Corruption) -> bool); 5] = [
+    type Case = (usize, u8, fn(&Corruption) -> bool);
+    let cases: [Case; 5] = [
         (4, 2, |c| {
             matches!(
                 c,

@@ -1,5 +1,5 @@
 //! Helpers shared by the decoder tests.
-#![allow(dead_code, unreachable_pub)]
+#![allow(dead_code, unreachable_pub, clippy::unwrap_used)] // test helpers: a failed encode is a test bug
 
 use fpga_link::{Decoder, Encoder, Event, Feature, Stats};
 

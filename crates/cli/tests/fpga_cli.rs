@@ -1,0 +1,113 @@
+//! `stereonav fpga decode FILE` end to end (vehicle-interfaces.md section 5).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use fpga_link::{Encoder, Feature};
+use serde_json::{Value, json};
+
+fn stereonav(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_stereonav"))
+        .args(args)
+        .output()
+        .expect("stereonav runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("stereonav-fpga-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir.join(name)
+}
+
+fn lines(out: &Output) -> Vec<Value> {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("each line is JSON"))
+        .collect()
+}
+
+#[test]
+fn decodes_packets_skips_garbage_and_counts() {
+    let f = |x, y, r| Feature {
+        x_q4: x,
+        y_q4: y,
+        r,
+    };
+    let mut enc = Encoder::starting_at(41);
+    let mut bytes = b"noise before the first sync".to_vec();
+    enc.encode_to_vec(
+        1_000,
+        (&[f(16, 32, 300_000)], false),
+        (&[], true),
+        &mut bytes,
+    )
+    .unwrap();
+    let corrupt_at = bytes.len();
+    enc.encode_to_vec(
+        51_000,
+        (&[f(1, 2, 3)], false),
+        (&[f(4, 5, -6)], false),
+        &mut bytes,
+    )
+    .unwrap();
+    bytes[corrupt_at + 30] ^= 0x01; // a bit flip in the second packet's features
+    enc.encode_to_vec(
+        101_000,
+        (&[], true),
+        (&[f(7, 8, 9), f(10, 11, 12)], false),
+        &mut bytes,
+    )
+    .unwrap();
+    let path = scratch("stream.bin");
+    std::fs::write(&path, &bytes).unwrap();
+
+    let out = lines(&stereonav(&["fpga", "decode", path.to_str().unwrap()]));
+    assert_eq!(
+        out,
+        [
+            json!({"frame": 41, "t_us": 1000, "flags": 2, "left": [[16, 32, 300000]], "right": []}),
+            json!({"frame": 43, "t_us": 101000, "flags": 1, "left": [],
+                   "right": [[7, 8, 9], [10, 11, 12]]}),
+            json!({"packets": 2, "corrupt": 1, "lost": 1,
+                   "bytes_skipped": 27 + fpga_link::packet_len(2)}),
+        ]
+    );
+}
+
+#[test]
+fn an_empty_stream_prints_only_the_counters() {
+    let path = scratch("empty.bin");
+    std::fs::write(&path, b"").unwrap();
+    let out = lines(&stereonav(&["fpga", "decode", path.to_str().unwrap()]));
+    assert_eq!(
+        out,
+        [json!({"packets": 0, "corrupt": 0, "lost": 0, "bytes_skipped": 0})]
+    );
+}
+
+#[test]
+fn unreadable_input_is_one_line_and_non_zero() {
+    for (args, needle) in [
+        (
+            vec!["fpga", "decode", "/nonexistent/stream.bin"],
+            "cannot open /nonexistent/stream.bin",
+        ),
+        (vec!["fpga", "decode", "/"], "cannot read /"),
+        (vec!["fpga", "decode"], "<FILE>"),
+        (vec!["fpga", "encode"], "encode"),
+    ] {
+        let out = stereonav(&args);
+        assert!(!out.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(needle), "{stderr:?} lacks {needle:?}");
+        assert!(out.stdout.is_empty());
+    }
+}

@@ -1,0 +1,239 @@
+"""stereonav: ceiling-lamp stereo navigation for autonomous forklifts.
+
+The Python face of the stereonav navigation stack. The heavy lifting happens in Rust, in the
+native module :mod:`stereonav._native`; the functions here check their arguments, call it with
+the GIL released, and hand back plain NumPy arrays with documented dtypes and shapes.
+
+Corner detection (the camera board's detector, ``board-icd.md`` section 2, bit for bit):
+
+- :func:`harris` -- the features of one image, as the board sends them;
+- :func:`harris_detect` -- the same, with the board's overflow flag;
+- :func:`harris_response` -- the board's Harris response map.
+
+The board's feature stream (``board-icd.md`` section 3): :class:`StreamDecoder` takes the raw
+bytes in any chunking and returns :class:`Frame` objects; :func:`encode_packet` writes packets.
+
+Exceptions derive from :class:`Error`: :class:`InputError` (also a ``ValueError``) for values
+out of range, :class:`InputTypeError` (also a ``TypeError``) for arguments of the wrong type.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _native
+from ._errors import Error, InputError, InputTypeError
+from .board_stream import Frame, StreamDecoder, StreamStats, encode_packet
+
+__all__ = [
+    "DEFAULT_MAX_FEATURES",
+    "DEFAULT_THRESHOLD",
+    "Error",
+    "FEATURE_DTYPE",
+    "Frame",
+    "InputError",
+    "InputTypeError",
+    "MAX_FEATURES_LIMIT",
+    "MAX_IMAGE_SIZE",
+    "MIN_IMAGE_SIZE",
+    "StreamDecoder",
+    "StreamStats",
+    "__version__",
+    "encode_packet",
+    "harris",
+    "harris_detect",
+    "harris_response",
+]
+
+#: The package version (the Rust workspace's version).
+__version__: Final[str] = _native.__version__
+
+#: One feature as the board sends it (``board-icd.md`` section 2, step 7): column ``x_q4`` and
+#: row ``y_q4`` in Q12.4 pixels (``u = x_q4 / 16``, ``v = y_q4 / 16``) and the Harris response
+#: ``r`` at the integer pixel. Little-endian and packed, 8 bytes, as in the board's stream.
+FEATURE_DTYPE: Final[np.dtype[np.void]] = np.dtype(
+    [("x_q4", "<u2"), ("y_q4", "<u2"), ("r", "<i4")]
+)
+
+#: The board's default ``THRESHOLD`` register, 2**18: a pixel is a candidate when ``r > T``.
+DEFAULT_THRESHOLD: Final[int] = 1 << 18
+#: The board's default ``MAX_FEATURES`` register: features kept per image.
+DEFAULT_MAX_FEATURES: Final[int] = 512
+#: Largest ``MAX_FEATURES`` register value (``max_features`` is in ``1..=1023``).
+MAX_FEATURES_LIMIT: Final[int] = 1023
+#: Smallest image width and height the board takes, in pixels.
+MIN_IMAGE_SIZE: Final[int] = 16
+#: Largest image width and height the board takes, in pixels.
+MAX_IMAGE_SIZE: Final[int] = 4095
+
+_I32_MIN: Final[int] = -(1 << 31)
+_I32_MAX: Final[int] = (1 << 31) - 1
+
+
+def _checked_image(image: object) -> npt.NDArray[np.uint8]:
+    """Return ``image`` if it is a 2-D ``uint8`` array of a size the board takes, else raise."""
+    if not isinstance(image, np.ndarray):
+        raise InputTypeError(
+            f"image must be a numpy.ndarray of dtype uint8, got {type(image).__qualname__}"
+        )
+    if image.dtype != np.uint8:
+        raise InputTypeError(
+            f"image dtype is {image.dtype}, expected uint8 (the board's 8-bit sensor); "
+            "convert explicitly, e.g. with image.astype(np.uint8) after scaling"
+        )
+    if image.ndim != 2:
+        raise InputError(
+            f"image shape is {image.shape}, expected a 2-D (height, width) array "
+            "(one grayscale image)"
+        )
+    height, width = image.shape
+    for name, size in (("height", height), ("width", width)):
+        if not MIN_IMAGE_SIZE <= size <= MAX_IMAGE_SIZE:
+            raise InputError(
+                f"image {name} {size} (shape {image.shape}) is outside the board's range "
+                f"{MIN_IMAGE_SIZE}..={MAX_IMAGE_SIZE}"
+            )
+    return image
+
+
+def _checked_int(name: str, value: object, low: int, high: int) -> int:
+    """Return ``value`` as an ``int`` if it is an integer in ``low..=high``, else raise."""
+    # bool is an int subclass, but True is no register value; NumPy integers are welcome.
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputTypeError(f"{name} must be an int, got {type(value).__qualname__} {value!r}")
+    number = int(value)
+    if not low <= number <= high:
+        raise InputError(f"{name} {number} is outside the board's range {low}..={high}")
+    return number
+
+
+def harris_detect(
+    image: npt.NDArray[np.uint8],
+    *,
+    threshold: int = DEFAULT_THRESHOLD,
+    max_features: int = DEFAULT_MAX_FEATURES,
+) -> tuple[npt.NDArray[np.void], bool]:
+    """Detect the camera board's Harris features of an image, with the overflow flag.
+
+    Runs the board's fixed-point Harris detector (``board-icd.md`` section 2) exactly: Sobel
+    gradients, 5x5 window sums, response ``r = ((det << 10) - 41 T**2) >> 27`` (``k = 41/1024``),
+    threshold, 3x3 non-maximum suppression with ties broken in raster order, sub-pixel offsets.
+
+    Parameters
+    ----------
+    image : numpy.ndarray of uint8, shape (H, W)
+        One 8-bit grayscale image, ``16 <= H, W <= 4095``. Any memory layout (views, strides,
+        Fortran order) is accepted; a non-C-contiguous image is copied once.
+    threshold : int, keyword-only
+        The ``THRESHOLD`` register, a signed 32-bit integer: a pixel is a candidate when its
+        response ``r > threshold``. Default ``2**18``.
+    max_features : int, keyword-only
+        The ``MAX_FEATURES`` register, ``1..=1023``: at most this many features are returned,
+        the first ones in raster order. Default 512.
+
+    Returns
+    -------
+    features : numpy.ndarray of FEATURE_DTYPE, shape (N,)
+        ``N <= max_features`` features in the board's order (row by row, left to right, by
+        the integer pixel): fields ``x_q4`` (``<u2``), ``y_q4`` (``<u2``), ``r`` (``<i4``).
+        A new, writable, C-contiguous array.
+    overflow : bool
+        True when the image had more than ``max_features`` features (the board's overflow
+        flag); the rest were dropped.
+
+    Raises
+    ------
+    InputTypeError
+        (a ``TypeError``) ``image`` is not a NumPy array or not ``uint8``; ``threshold`` or
+        ``max_features`` is not an integer (``bool`` is refused).
+    InputError
+        (a ``ValueError``) ``image`` is not 2-D, or its size, ``threshold`` or ``max_features``
+        is outside the board's range.
+    """
+    checked = _checked_image(image)
+    t = _checked_int("threshold", threshold, _I32_MIN, _I32_MAX)
+    n = _checked_int("max_features", max_features, 1, MAX_FEATURES_LIMIT)
+    records, overflow = _native.harris(checked, t, n)
+    # The native records are packed little-endian x_q4 u16, y_q4 u16, r i32: FEATURE_DTYPE.
+    return records.view(FEATURE_DTYPE), bool(overflow)
+
+
+def harris(
+    image: npt.NDArray[np.uint8],
+    threshold: int = DEFAULT_THRESHOLD,
+    max_features: int = DEFAULT_MAX_FEATURES,
+) -> npt.NDArray[np.void]:
+    """Detect the camera board's Harris features of an image.
+
+    The same as :func:`harris_detect` without the overflow flag: the features the board would
+    send for this image with these registers, bit for bit (``board-icd.md`` section 2).
+
+    Parameters
+    ----------
+    image : numpy.ndarray of uint8, shape (H, W)
+        One 8-bit grayscale image, ``16 <= H, W <= 4095``, any memory layout.
+    threshold : int
+        The ``THRESHOLD`` register (signed 32-bit): candidates have ``r > threshold``.
+        Default ``2**18``.
+    max_features : int
+        The ``MAX_FEATURES`` register, ``1..=1023``. Default 512.
+
+    Returns
+    -------
+    numpy.ndarray of FEATURE_DTYPE, shape (N,)
+        ``N <= max_features`` features in the board's (raster) order, fields ``x_q4``
+        (``<u2``, column in 1/16 pixel), ``y_q4`` (``<u2``, row in 1/16 pixel) and ``r``
+        (``<i4``, the response at the integer pixel).
+
+    Raises
+    ------
+    InputTypeError
+        (a ``TypeError``) wrong type of ``image`` (not an ndarray, not ``uint8``),
+        ``threshold`` or ``max_features``.
+    InputError
+        (a ``ValueError``) ``image`` not 2-D, or a size or register value out of range.
+
+    Examples
+    --------
+    >>> import numpy as np, stereonav
+    >>> image = np.zeros((64, 64), np.uint8)
+    >>> image[31:34, 31:34] = 255                      # one small bright lamp
+    >>> features = stereonav.harris(image)
+    >>> features["x_q4"] / 16, features["y_q4"] / 16
+    (array([32.]), array([32.]))
+    """
+    features, _ = harris_detect(image, threshold=threshold, max_features=max_features)
+    return features
+
+
+def harris_response(image: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
+    """Compute the camera board's Harris response map of an image.
+
+    ``r(x, y) = ((det << 10) - 41 T**2) >> 27`` with ``det = Sxx Syy - Sxy**2`` and
+    ``T = Sxx + Syy`` over the 5x5 window of Sobel gradients (``board-icd.md`` section 2,
+    steps 1 to 3), exactly. Inside the border it equals
+    ``cv2.cornerHarris(image, 5, 3, 41/1024) * 5100**4 / 2**17`` up to float32 rounding and
+    the floor.
+
+    Parameters
+    ----------
+    image : numpy.ndarray of uint8, shape (H, W)
+        One 8-bit grayscale image, ``16 <= H, W <= 4095``, any memory layout.
+
+    Returns
+    -------
+    numpy.ndarray of int32, shape (H, W)
+        The response ``r[y, x]``, zero outside ``3 <= x <= W - 4``, ``3 <= y <= H - 4``,
+        where the board computes none. A new, C-contiguous array.
+
+    Raises
+    ------
+    InputTypeError
+        (a ``TypeError``) ``image`` is not a NumPy array or not ``uint8``.
+    InputError
+        (a ``ValueError``) ``image`` is not 2-D or its size is outside ``16..=4095``.
+    """
+    return _native.harris_response(_checked_image(image))
