@@ -111,3 +111,98 @@ fn unreadable_input_is_one_line_and_non_zero() {
         assert!(out.stdout.is_empty());
     }
 }
+
+#[test]
+fn emulated_board_stream_decodes_to_the_detector_output() {
+    let image = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/images/ceiling-lamps.png")
+        .to_string_lossy()
+        .into_owned();
+    let out = scratch("emulated.bin");
+    let out_str = out.to_str().unwrap();
+    let status = stereonav(&[
+        "fpga",
+        "emulate",
+        out_str,
+        &image,
+        &image,
+        &image,
+        &image,
+        "--max-features",
+        "5",
+        "--first-frame",
+        "4294967295",
+        "--t0-us",
+        "7",
+        "--period-us",
+        "100",
+    ]);
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let decoded = lines(&stereonav(&["fpga", "decode", out_str]));
+    // The detector's first five features of the image, as `stereonav harris` prints them.
+    let harris =
+        String::from_utf8(stereonav(&["harris", &image, "--max-features", "5"]).stdout).unwrap();
+    let expected: Vec<Value> = harris
+        .lines()
+        .skip(1)
+        .map(|l| {
+            Value::from(
+                l.split(',')
+                    .map(|v| v.parse::<i64>().unwrap())
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    assert_eq!(decoded.len(), 3);
+    for (i, frame) in decoded[..2].iter().enumerate() {
+        assert_eq!(frame["frame"], json!([4_294_967_295u64, 0][i]));
+        assert_eq!(frame["t_us"], json!(7 + 100 * i));
+        assert_eq!(
+            frame["flags"],
+            json!(3),
+            "12 features > 5 on both sides: overflow"
+        );
+        assert_eq!(frame["left"], Value::from(expected.clone()));
+        assert_eq!(frame["right"], Value::from(expected.clone()));
+    }
+    assert_eq!(
+        decoded[2]["lost"],
+        json!(0),
+        "the counter wraps without a loss"
+    );
+
+    for (args, needle) in [
+        (
+            vec!["fpga", "emulate", out_str, &image],
+            "2 values required",
+        ),
+        (
+            vec!["fpga", "emulate", out_str, &image, &image, &image],
+            "pairs of LEFT RIGHT",
+        ),
+        (
+            vec!["fpga", "emulate", out_str, &image, "/nonexistent.png"],
+            "cannot open image",
+        ),
+        (
+            vec![
+                "fpga",
+                "emulate",
+                "/nonexistent/dir/out.bin",
+                &image,
+                &image,
+            ],
+            "cannot write",
+        ),
+    ] {
+        let out = stereonav(&args);
+        assert!(!out.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(needle), "{stderr:?} lacks {needle:?}");
+    }
+}
