@@ -1,0 +1,239 @@
+//! The camera parameters `C` (vehicle-interfaces.md section 1) and the robot pose.
+
+use nalgebra::{Matrix3, SVector, Vector3};
+
+/// Number of camera parameters in `C`.
+pub const N_PARAMS: usize = 10;
+
+/// The camera parameters as a vector, in [`Param::ALL`] order.
+pub type ParamVector = SVector<f64, N_PARAMS>;
+
+/// One camera parameter of `C`, any subset of which may be estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Param {
+    /// Focal length, pixels (both cameras).
+    F,
+    /// Principal point column, pixels.
+    Cx,
+    /// Principal point row, pixels.
+    Cy,
+    /// Baseline `B`, the camera separation, metres.
+    Baseline,
+    /// Rig origin in the robot frame, x (forward), metres.
+    MountX,
+    /// Rig origin in the robot frame, y (left), metres.
+    MountY,
+    /// Rig origin in the robot frame, z (up), metres.
+    MountZ,
+    /// Rig roll about robot x, radians.
+    MountRoll,
+    /// Rig pitch about y, radians; positive tilts the optical axis toward the front.
+    MountPitch,
+    /// Rig yaw about z, radians.
+    MountYaw,
+}
+
+impl Param {
+    /// Every parameter, in the order of [`ParamVector`].
+    pub const ALL: [Self; N_PARAMS] = [
+        Self::F,
+        Self::Cx,
+        Self::Cy,
+        Self::Baseline,
+        Self::MountX,
+        Self::MountY,
+        Self::MountZ,
+        Self::MountRoll,
+        Self::MountPitch,
+        Self::MountYaw,
+    ];
+
+    /// The parameter's name in rig files and summaries (`f`, `cx`, ..., `mount_yaw`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::F => "f",
+            Self::Cx => "cx",
+            Self::Cy => "cy",
+            Self::Baseline => "baseline",
+            Self::MountX => "mount_x",
+            Self::MountY => "mount_y",
+            Self::MountZ => "mount_z",
+            Self::MountRoll => "mount_roll",
+            Self::MountPitch => "mount_pitch",
+            Self::MountYaw => "mount_yaw",
+        }
+    }
+
+    /// The parameter with this name, if any.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// Position in [`ParamVector`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+}
+
+impl core::fmt::Display for Param {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The rig's pose in the robot frame: `t = (x, y, z)` and `R_RS = Rz(yaw) Ry(pitch) Rx(roll)`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Mount {
+    /// Forward, metres.
+    pub x: f64,
+    /// Left, metres.
+    pub y: f64,
+    /// Up, metres.
+    pub z: f64,
+    /// Radians about x.
+    pub roll: f64,
+    /// Radians about y; positive tilts the optical axis toward the robot's front.
+    pub pitch: f64,
+    /// Radians about z.
+    pub yaw: f64,
+}
+
+impl Mount {
+    /// `robot_from_rig` rotation `R_RS = Rz(yaw) Ry(pitch) Rx(roll)`.
+    pub fn robot_from_rig_rotation(&self) -> Matrix3<f64> {
+        rot_z(self.yaw) * rot_y(self.pitch) * rot_x(self.roll)
+    }
+
+    /// The rig origin in the robot frame.
+    pub fn translation(&self) -> Vector3<f64> {
+        Vector3::new(self.x, self.y, self.z)
+    }
+}
+
+/// The camera parameters `C`: shared intrinsics of the two rectified cameras, the baseline
+/// and the mount.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraParams {
+    /// Focal length, pixels.
+    pub f: f64,
+    /// Principal point column, pixels.
+    pub cx: f64,
+    /// Principal point row, pixels.
+    pub cy: f64,
+    /// Camera separation `B`, metres.
+    pub baseline: f64,
+    /// Rig pose in the robot frame.
+    pub mount: Mount,
+}
+
+impl CameraParams {
+    /// The value of one parameter.
+    pub fn get(&self, p: Param) -> f64 {
+        match p {
+            Param::F => self.f,
+            Param::Cx => self.cx,
+            Param::Cy => self.cy,
+            Param::Baseline => self.baseline,
+            Param::MountX => self.mount.x,
+            Param::MountY => self.mount.y,
+            Param::MountZ => self.mount.z,
+            Param::MountRoll => self.mount.roll,
+            Param::MountPitch => self.mount.pitch,
+            Param::MountYaw => self.mount.yaw,
+        }
+    }
+
+    /// Sets one parameter.
+    pub fn set(&mut self, p: Param, value: f64) {
+        let slot = match p {
+            Param::F => &mut self.f,
+            Param::Cx => &mut self.cx,
+            Param::Cy => &mut self.cy,
+            Param::Baseline => &mut self.baseline,
+            Param::MountX => &mut self.mount.x,
+            Param::MountY => &mut self.mount.y,
+            Param::MountZ => &mut self.mount.z,
+            Param::MountRoll => &mut self.mount.roll,
+            Param::MountPitch => &mut self.mount.pitch,
+            Param::MountYaw => &mut self.mount.yaw,
+        };
+        *slot = value;
+    }
+
+    /// All parameters as a vector in [`Param::ALL`] order.
+    pub fn to_vector(&self) -> ParamVector {
+        ParamVector::from_fn(|i, _| self.get(Param::ALL[i]))
+    }
+
+    /// Parameters from a vector in [`Param::ALL`] order.
+    pub fn from_vector(v: &ParamVector) -> Self {
+        let mut c = Self {
+            f: 0.0,
+            cx: 0.0,
+            cy: 0.0,
+            baseline: 0.0,
+            mount: Mount::default(),
+        };
+        for (i, p) in Param::ALL.into_iter().enumerate() {
+            c.set(p, v[i]);
+        }
+        c
+    }
+}
+
+/// A planar robot pose in the world frame (vehicle-interfaces.md section 1).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose2 {
+    /// Metres.
+    pub x: f64,
+    /// Metres.
+    pub y: f64,
+    /// Heading, radians.
+    pub theta: f64,
+}
+
+impl Pose2 {
+    /// A pose.
+    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
+        Self { x, y, theta }
+    }
+
+    /// `world_from_robot` rotation `Rz(theta)`.
+    pub fn world_from_robot_rotation(&self) -> Matrix3<f64> {
+        rot_z(self.theta)
+    }
+
+    /// A robot-frame point in the world frame.
+    pub fn point_in_world(&self, p_in_robot: &Vector3<f64>) -> Vector3<f64> {
+        self.world_from_robot_rotation() * p_in_robot + Vector3::new(self.x, self.y, 0.0)
+    }
+
+    /// A world point in the robot frame: `Rz(-theta) (L - (X, Y, 0))`.
+    pub fn point_in_robot(&self, p_in_world: &Vector3<f64>) -> Vector3<f64> {
+        self.world_from_robot_rotation().transpose()
+            * (p_in_world - Vector3::new(self.x, self.y, 0.0))
+    }
+}
+
+/// Rotation about x.
+pub fn rot_x(a: f64) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(a), libm::cos(a));
+    Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
+}
+
+/// Rotation about y.
+pub fn rot_y(a: f64) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(a), libm::cos(a));
+    Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+}
+
+/// Rotation about z.
+pub fn rot_z(a: f64) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(a), libm::cos(a));
+    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
+}
+
+/// The cross-product matrix `[v]x`, so that `[v]x w = v x w`.
+pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}

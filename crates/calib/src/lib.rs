@@ -1,0 +1,34 @@
+//! The stereo rig model and phase 1 of the method: self-calibration.
+//!
+//! * [`camera`]: the camera parameters `C` (`f, cx, cy, baseline, mount_x .. mount_yaw`) and
+//!   the planar robot pose (vehicle-interfaces.md section 1).
+//! * [`rig`]: projection of a world point to the four measurements `(uL, vL, uR, vR)` with its
+//!   analytic Jacobians with respect to the pose, the landmark and every camera parameter, and
+//!   stereo triangulation with covariance propagation.
+//! * [`config`] (feature `alloc`): the rig configuration: nominal `C`, what to estimate, priors,
+//!   noise; [`rig_file`] (feature `std`) reads and writes it as TOML (section 3) and JSON.
+//!
+//! Builds without `std` (with `alloc`; nalgebra with `libm`) so that firmware can link it.
+#![cfg_attr(not(feature = "std"), no_std)]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+#[cfg(feature = "alloc")]
+extern crate alloc;
+
+pub mod camera;
+#[cfg(feature = "alloc")]
+pub mod config;
+pub mod rig;
+#[cfg(feature = "std")]
+pub mod rig_file;
+
+pub use camera::{CameraParams, Mount, N_PARAMS, Param, ParamVector, Pose2};
+#[cfg(feature = "alloc")]
+pub use config::{Noise, Rig};
+pub use rig::{
+    Measurement, ProjectionJacobians, RigError, Triangulation, point_in_rig, project,
+    project_with_jacobians, triangulate,
+};
+#[cfg(feature = "std")]
+pub use rig_file::RigFileError;

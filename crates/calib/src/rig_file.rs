@@ -1,0 +1,388 @@
+//! The rig file (vehicle-interfaces.md section 3): nominal camera parameters, which of them to
+//! estimate, their priors, and the noise model. Read from TOML files, or from the JSON of a
+//! log's `/rig` message; written back as JSON.
+
+use std::format;
+use std::path::Path;
+use std::string::{String, ToString};
+use std::vec::Vec;
+
+use toml::{Table, Value};
+
+use crate::camera::{CameraParams, Mount, N_PARAMS, Param};
+use crate::config::{Noise, Rig};
+
+/// A rig file that cannot be used; the message names the file, the key and the problem.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RigFileError {
+    /// The file could not be read.
+    #[error("{path}: cannot read rig file: {reason}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The operating system's reason.
+        reason: String,
+    },
+    /// The text is not valid TOML (or JSON).
+    #[error("{source_name}: not a valid rig file: {reason}")]
+    Syntax {
+        /// The file or message the text came from.
+        source_name: String,
+        /// The parser's reason, on one line.
+        reason: String,
+    },
+    /// A key is missing, has the wrong type or an impossible value, or is unknown.
+    #[error("{source_name}: {key}: {problem}")]
+    Key {
+        /// The file or message the text came from.
+        source_name: String,
+        /// The key, as `[table] key`.
+        key: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+}
+
+const TABLES: [&str; 5] = ["camera", "mount", "estimate", "prior", "noise"];
+
+struct Reader<'a> {
+    source: &'a str,
+    root: &'a Table,
+}
+
+impl Reader<'_> {
+    fn error(&self, key: String, problem: String) -> RigFileError {
+        RigFileError::Key {
+            source_name: self.source.to_string(),
+            key,
+            problem,
+        }
+    }
+
+    fn table(&self, name: &str) -> Result<&Table, RigFileError> {
+        match self.root.get(name) {
+            Some(Value::Table(t)) => Ok(t),
+            Some(other) => Err(self.error(
+                format!("[{name}]"),
+                format!("expected a table, found {}", describe(other)),
+            )),
+            None => Err(self.error(format!("[{name}]"), "missing table".to_string())),
+        }
+    }
+
+    fn check_keys(&self, table: &str, allowed: &[&str]) -> Result<(), RigFileError> {
+        for key in self.table(table)?.keys() {
+            if !allowed.contains(&key.as_str()) {
+                return Err(self.error(
+                    format!("[{table}] {key}"),
+                    format!("unknown key (known: {})", allowed.join(", ")),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn number(&self, table: &str, key: &str) -> Result<f64, RigFileError> {
+        let value = self
+            .table(table)?
+            .get(key)
+            .ok_or_else(|| self.error(format!("[{table}] {key}"), "missing key".to_string()))?;
+        let x = match value {
+            Value::Float(x) => *x,
+            #[allow(clippy::cast_precision_loss)] // rig values are far below 2^53
+            Value::Integer(i) => *i as f64,
+            other => {
+                return Err(self.error(
+                    format!("[{table}] {key}"),
+                    format!("expected a number, found {}", describe(other)),
+                ));
+            }
+        };
+        if !x.is_finite() {
+            return Err(self.error(
+                format!("[{table}] {key}"),
+                format!("{x} is not a finite number"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn positive(&self, table: &str, key: &str) -> Result<f64, RigFileError> {
+        let x = self.number(table, key)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(self.error(format!("[{table}] {key}"), format!("{x} must be positive")))
+        }
+    }
+
+    fn size(&self, key: &str) -> Result<u32, RigFileError> {
+        let name = format!("[camera] {key}");
+        match self.table("camera")?.get(key) {
+            Some(Value::Integer(i)) if (16..=4095).contains(i) => {
+                u32::try_from(*i).map_err(|_| self.error(name, format!("{i} is out of range")))
+            }
+            Some(Value::Integer(i)) => {
+                Err(self.error(name, format!("{i} is outside the board's range 16..=4095")))
+            }
+            Some(other) => Err(self.error(
+                name,
+                format!("expected an integer, found {}", describe(other)),
+            )),
+            None => Err(self.error(name, "missing key".to_string())),
+        }
+    }
+}
+
+fn describe(v: &Value) -> String {
+    match v {
+        Value::String(s) => format!("string {s:?}"),
+        Value::Integer(i) => format!("integer {i}"),
+        Value::Float(x) => format!("float {x}"),
+        Value::Boolean(b) => format!("boolean {b}"),
+        Value::Datetime(d) => format!("datetime {d}"),
+        Value::Array(_) => "an array".to_string(),
+        Value::Table(_) => "a table".to_string(),
+    }
+}
+
+impl Rig {
+    /// Reads a rig file (TOML). Errors name the file, the key and what was wrong.
+    pub fn load(path: &Path) -> Result<Self, RigFileError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| RigFileError::Io {
+            path: name.clone(),
+            reason: e.to_string(),
+        })?;
+        Self::from_toml_str(&text, &name)
+    }
+
+    /// Parses a rig file's TOML text; `source_name` names it in errors.
+    pub fn from_toml_str(text: &str, source_name: &str) -> Result<Self, RigFileError> {
+        let root: Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| RigFileError::Syntax {
+                source_name: source_name.to_string(),
+                reason: one_line(&e.to_string()),
+            })?;
+        Self::from_table(&root, source_name)
+    }
+
+    /// Parses the JSON form of a rig file (a log's `/rig` message: the same tables as JSON).
+    pub fn from_json_str(text: &str, source_name: &str) -> Result<Self, RigFileError> {
+        let json: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| RigFileError::Syntax {
+                source_name: source_name.to_string(),
+                reason: one_line(&e.to_string()),
+            })?;
+        let Some(Value::Table(root)) = json_to_toml(&json) else {
+            return Err(RigFileError::Syntax {
+                source_name: source_name.to_string(),
+                reason: "expected a JSON object of tables (camera, mount, estimate, prior, noise)"
+                    .to_string(),
+            });
+        };
+        Self::from_table(&root, source_name)
+    }
+
+    fn from_table(root: &Table, source: &str) -> Result<Self, RigFileError> {
+        let r = Reader { source, root };
+        for key in root.keys() {
+            if !TABLES.contains(&key.as_str()) {
+                return Err(r.error(
+                    format!("[{key}]"),
+                    format!("unknown table (known: {})", TABLES.join(", ")),
+                ));
+            }
+        }
+        r.check_keys("camera", &["width", "height", "f", "cx", "cy", "baseline"])?;
+        r.check_keys("mount", &["x", "y", "z", "roll", "pitch", "yaw"])?;
+        r.check_keys("estimate", &["parameters"])?;
+        r.check_keys("noise", &["pixel", "velocity", "yaw_rate"])?;
+        let nominal = CameraParams {
+            f: r.positive("camera", "f")?,
+            cx: r.number("camera", "cx")?,
+            cy: r.number("camera", "cy")?,
+            baseline: r.positive("camera", "baseline")?,
+            mount: Mount {
+                x: r.number("mount", "x")?,
+                y: r.number("mount", "y")?,
+                z: r.number("mount", "z")?,
+                roll: r.number("mount", "roll")?,
+                pitch: r.number("mount", "pitch")?,
+                yaw: r.number("mount", "yaw")?,
+            },
+        };
+        let list = match r.table("estimate")?.get("parameters") {
+            Some(Value::Array(a)) => a,
+            Some(other) => {
+                return Err(r.error(
+                    "[estimate] parameters".to_string(),
+                    format!(
+                        "expected an array of parameter names, found {}",
+                        describe(other)
+                    ),
+                ));
+            }
+            None => {
+                return Err(r.error(
+                    "[estimate] parameters".to_string(),
+                    "missing key".to_string(),
+                ));
+            }
+        };
+        let known = || {
+            Param::ALL
+                .iter()
+                .map(|p| p.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let mut estimate = Vec::new();
+        for item in list {
+            let Value::String(name) = item else {
+                return Err(r.error(
+                    "[estimate] parameters".to_string(),
+                    format!("expected parameter names, found {}", describe(item)),
+                ));
+            };
+            let param = Param::from_name(name).ok_or_else(|| {
+                r.error(
+                    "[estimate] parameters".to_string(),
+                    format!("unknown parameter {name:?} (known: {})", known()),
+                )
+            })?;
+            if estimate.contains(&param) {
+                return Err(r.error(
+                    "[estimate] parameters".to_string(),
+                    format!("{name:?} is listed twice"),
+                ));
+            }
+            estimate.push(param);
+        }
+        estimate.sort();
+        let mut prior = [None; N_PARAMS];
+        for (name, _) in r.table("prior")? {
+            let param = Param::from_name(name).ok_or_else(|| {
+                r.error(
+                    format!("[prior] {name}"),
+                    format!("unknown parameter (known: {})", known()),
+                )
+            })?;
+            if !estimate.contains(&param) {
+                return Err(r.error(
+                    format!("[prior] {name}"),
+                    "prior given for a parameter that [estimate] does not list".to_string(),
+                ));
+            }
+            prior[param.index()] = Some(r.positive("prior", name)?);
+        }
+        for param in &estimate {
+            if prior[param.index()].is_none() {
+                return Err(r.error(
+                    format!("[prior] {param}"),
+                    "missing key: every estimated parameter needs a prior sigma".to_string(),
+                ));
+            }
+        }
+        let noise = Noise {
+            pixel: r.positive("noise", "pixel")?,
+            velocity: r.positive("noise", "velocity")?,
+            yaw_rate: r.positive("noise", "yaw_rate")?,
+        };
+        Ok(Self {
+            width: r.size("width")?,
+            height: r.size("height")?,
+            nominal,
+            estimate,
+            prior,
+            noise,
+        })
+    }
+
+    /// The rig file's tables as JSON (the `/rig` message of a log).
+    pub fn to_json(&self) -> String {
+        let c = &self.nominal;
+        let m = &c.mount;
+        let mut prior = serde_json::Map::new();
+        for p in &self.estimate {
+            if let Some(s) = self.prior[p.index()] {
+                prior.insert(p.name().to_string(), s.into());
+            }
+        }
+        serde_json::json!({
+            "camera": {"width": self.width, "height": self.height, "f": c.f, "cx": c.cx, "cy": c.cy, "baseline": c.baseline},
+            "mount": {"x": m.x, "y": m.y, "z": m.z, "roll": m.roll, "pitch": m.pitch, "yaw": m.yaw},
+            "estimate": {"parameters": self.estimate.iter().map(|p| p.name()).collect::<Vec<_>>()},
+            "prior": prior,
+            "noise": {"pixel": self.noise.pixel, "velocity": self.noise.velocity, "yaw_rate": self.noise.yaw_rate},
+        })
+        .to_string()
+    }
+
+    /// The rig file as TOML text.
+    pub fn to_toml(&self) -> String {
+        let c = &self.nominal;
+        let m = &c.mount;
+        let names: Vec<String> = self
+            .estimate
+            .iter()
+            .map(|p| format!("{:?}", p.name()))
+            .collect();
+        let mut out = format!(
+            "[camera]\nwidth = {}\nheight = {}\nf = {:?}\ncx = {:?}\ncy = {:?}\nbaseline = {:?}\n\n\
+             [mount]\nx = {:?}\ny = {:?}\nz = {:?}\nroll = {:?}\npitch = {:?}\nyaw = {:?}\n\n\
+             [estimate]\nparameters = [{}]\n\n[prior]\n",
+            self.width,
+            self.height,
+            c.f,
+            c.cx,
+            c.cy,
+            c.baseline,
+            m.x,
+            m.y,
+            m.z,
+            m.roll,
+            m.pitch,
+            m.yaw,
+            names.join(", ")
+        );
+        for p in &self.estimate {
+            if let Some(s) = self.prior[p.index()] {
+                out.push_str(&format!("{} = {s:?}\n", p.name()));
+            }
+        }
+        out.push_str(&format!(
+            "\n[noise]\npixel = {:?}\nvelocity = {:?}\nyaw_rate = {:?}\n",
+            self.noise.pixel, self.noise.velocity, self.noise.yaw_rate
+        ));
+        out
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+fn json_to_toml(v: &serde_json::Value) -> Option<Value> {
+    Some(match v {
+        serde_json::Value::Null => return None,
+        serde_json::Value::Bool(b) => Value::Boolean(*b),
+        serde_json::Value::Number(n) => match n.as_i64() {
+            Some(i) => Value::Integer(i),
+            None => Value::Float(n.as_f64()?),
+        },
+        serde_json::Value::String(s) => Value::String(s.clone()),
+        serde_json::Value::Array(a) => {
+            Value::Array(a.iter().map(json_to_toml).collect::<Option<_>>()?)
+        }
+        serde_json::Value::Object(o) => {
+            let mut t = Table::new();
+            for (k, v) in o {
+                t.insert(k.clone(), json_to_toml(v)?);
+            }
+            Value::Table(t)
+        }
+    })
+}
