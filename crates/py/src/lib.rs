@@ -14,6 +14,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+mod rig;
 mod stream;
 
 use std::borrow::Cow;
@@ -212,6 +213,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(harris, m)?)?;
     m.add_function(wrap_pyfunction!(harris_response, m)?)?;
     m.add_class::<stream::StreamDecoder>()?;
+    m.add_function(wrap_pyfunction!(rig::project, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::triangulate, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::load_rig, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::camera_parameter_names, m)?)?;
     m.add_function(wrap_pyfunction!(stream::encode_packet, m)?)?;
     Ok(())
 }

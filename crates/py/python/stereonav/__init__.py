@@ -27,8 +27,26 @@ import numpy.typing as npt
 from . import _native
 from ._errors import Error, InputError, InputTypeError
 from .board_stream import Frame, StreamDecoder, StreamStats, encode_packet
+from .rig import (
+    CAMERA_PARAMETERS,
+    Camera,
+    Projection,
+    RigConfig,
+    Triangulated,
+    load_rig,
+    project,
+    triangulate,
+)
 
 __all__ = [
+    "CAMERA_PARAMETERS",
+    "Camera",
+    "Projection",
+    "RigConfig",
+    "Triangulated",
+    "load_rig",
+    "project",
+    "triangulate",
     "DEFAULT_MAX_FEATURES",
     "DEFAULT_THRESHOLD",
     "Error",

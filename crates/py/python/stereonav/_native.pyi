@@ -12,6 +12,10 @@ __all__ = [
     "__version__",
     "FEATURE_RECORD_BYTES",
     "StreamDecoder",
+    "camera_parameter_names",
+    "load_rig",
+    "project",
+    "triangulate",
     "encode_packet",
     "harris",
     "harris_response",
@@ -60,3 +64,23 @@ class StreamDecoder:
 
 def encode_packet(frame: int, t_us: int, flags: int, left: bytes, right: bytes) -> bytes:
     """One packet from packed left and right records; raises ``stereonav.InputError``."""
+
+_F64 = npt.NDArray[np.float64]
+
+def project(
+    landmarks: _F64, pose_xyt: _F64, camera_params: _F64
+) -> tuple[_F64, _F64, _F64, _F64]:
+    """``(z (N,4), d_pose (N,4,3), d_landmark (N,4,3), d_camera (N,4,10))``."""
+
+def triangulate(
+    measurements: _F64, pose_xyt: _F64, camera_params: _F64, sigma_px: float
+) -> tuple[_F64, _F64, _F64, _F64]:
+    """``(p_in_rig, p_in_robot, p_in_world, cov_in_world)``."""
+
+def load_rig(
+    path: str,
+) -> tuple[int, int, list[float], list[str], list[tuple[str, float]], tuple[float, float, float]]:
+    """The rig file's values; raises ``stereonav.InputError``."""
+
+def camera_parameter_names() -> list[str]:
+    """The ten camera parameter names in array order."""

@@ -1,0 +1,226 @@
+//! The stereo rig model (`vehicle-interfaces.md` sections 1 and 3) for Python: projection with
+//! Jacobians and triangulation over NumPy arrays, and rig files.
+
+use calib::{CameraParams, N_PARAMS, Param, ParamVector, Pose2, Rig};
+use nalgebra::Vector3;
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+
+use crate::input_error;
+
+/// The camera parameters from a 1-D array of the 10 values in `Param::ALL` order.
+fn camera(py: Python<'_>, c: &PyReadonlyArray1<'_, f64>) -> PyResult<CameraParams> {
+    let c = c.as_array();
+    if c.len() != N_PARAMS {
+        return Err(input_error(
+            py,
+            format!("camera has {} values, expected {N_PARAMS}", c.len()),
+        ));
+    }
+    if let Some((i, v)) = c.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(input_error(
+            py,
+            format!("camera {} is {v}, not a finite number", Param::ALL[i]),
+        ));
+    }
+    Ok(CameraParams::from_vector(&ParamVector::from_iterator(
+        c.iter().copied(),
+    )))
+}
+
+fn pose(py: Python<'_>, p: &PyReadonlyArray1<'_, f64>) -> PyResult<Pose2> {
+    let p = p.as_array();
+    match p.as_slice() {
+        Some(&[x, y, theta]) if x.is_finite() && y.is_finite() && theta.is_finite() => {
+            Ok(Pose2::new(x, y, theta))
+        }
+        _ => Err(input_error(
+            py,
+            format!("pose must be 3 finite values (x, y, theta), got {p}"),
+        )),
+    }
+}
+
+fn rows<const N: usize>(
+    py: Python<'_>,
+    name: &str,
+    a: &PyReadonlyArray2<'_, f64>,
+) -> PyResult<Vec<[f64; N]>> {
+    let a = a.as_array();
+    if a.ncols() != N {
+        return Err(input_error(
+            py,
+            format!("{name} has shape {:?}, expected (N, {N})", a.shape()),
+        ));
+    }
+    let mut out = Vec::with_capacity(a.nrows());
+    for (i, row) in a.rows().into_iter().enumerate() {
+        let mut r = [0.0; N];
+        for (k, v) in row.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(input_error(
+                    py,
+                    format!("{name}[{i}, {k}] is {v}, not a finite number"),
+                ));
+            }
+            r[k] = *v;
+        }
+        out.push(r);
+    }
+    Ok(out)
+}
+
+/// The measurements `(uL, vL, uR, vR)` of world landmarks `(N, 3)` seen from `pose` with camera
+/// parameters `camera` (10 values), with the analytic Jacobians. Returns `(z (N, 4),
+/// d_pose (N, 4, 3), d_landmark (N, 4, 3), d_camera (N, 4, 10))`; a landmark behind the
+/// cameras gives NaN rows (and NaN Jacobians).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub(crate) fn project<'py>(
+    py: Python<'py>,
+    landmarks: PyReadonlyArray2<'py, f64>,
+    pose_xyt: PyReadonlyArray1<'py, f64>,
+    camera_params: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<f64>>,
+)> {
+    let c = camera(py, &camera_params)?;
+    let pose = pose(py, &pose_xyt)?;
+    let points = rows::<3>(py, "landmarks", &landmarks)?;
+    let n = points.len();
+    let mut z = Array2::from_elem((n, 4), f64::NAN);
+    let mut jp = Array3::from_elem((n, 4, 3), f64::NAN);
+    let mut jl = Array3::from_elem((n, 4, 3), f64::NAN);
+    let mut jc = Array3::from_elem((n, 4, N_PARAMS), f64::NAN);
+    for (i, p) in points.iter().enumerate() {
+        let Ok((m, j)) = calib::project_with_jacobians(&c, &pose, &Vector3::from(*p)) else {
+            continue;
+        };
+        for r in 0..4 {
+            z[[i, r]] = m[r];
+            for k in 0..3 {
+                jp[[i, r, k]] = j.pose[(r, k)];
+                jl[[i, r, k]] = j.landmark[(r, k)];
+            }
+            for k in 0..N_PARAMS {
+                jc[[i, r, k]] = j.camera[(r, k)];
+            }
+        }
+    }
+    Ok((
+        z.into_pyarray(py),
+        jp.into_pyarray(py),
+        jl.into_pyarray(py),
+        jc.into_pyarray(py),
+    ))
+}
+
+/// Triangulates stereo measurements `(N, 4)` = `(uL, vL, uR, vR)`. Returns `(p_in_rig (N, 3),
+/// p_in_robot (N, 3), p_in_world (N, 3), cov_in_world (N, 3, 3))` for the robot at `pose` with
+/// pixel noise `sigma_px`; rows with a non-positive disparity are NaN.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub(crate) fn triangulate<'py>(
+    py: Python<'py>,
+    measurements: PyReadonlyArray2<'py, f64>,
+    pose_xyt: PyReadonlyArray1<'py, f64>,
+    camera_params: PyReadonlyArray1<'py, f64>,
+    sigma_px: f64,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray3<f64>>,
+)> {
+    let c = camera(py, &camera_params)?;
+    let pose = pose(py, &pose_xyt)?;
+    if !(sigma_px.is_finite() && sigma_px >= 0.0) {
+        return Err(input_error(
+            py,
+            format!("sigma_px {sigma_px} must be finite and >= 0"),
+        ));
+    }
+    let zs = rows::<4>(py, "measurements", &measurements)?;
+    let n = zs.len();
+    let mut rig = Array2::from_elem((n, 3), f64::NAN);
+    let mut robot = Array2::from_elem((n, 3), f64::NAN);
+    let mut world = Array2::from_elem((n, 3), f64::NAN);
+    let mut cov = Array3::from_elem((n, 3, 3), f64::NAN);
+    for (i, z) in zs.iter().enumerate() {
+        let Ok(t) = calib::triangulate(&c, &calib::Measurement::from(*z)) else {
+            continue;
+        };
+        let (pr, pw) = (t.p_in_robot(&c), t.p_in_world(&c, &pose));
+        let cw = t.covariance_in_world(&c, &pose, sigma_px, None, None);
+        for k in 0..3 {
+            rig[[i, k]] = t.p_in_rig[k];
+            robot[[i, k]] = pr[k];
+            world[[i, k]] = pw[k];
+            for l in 0..3 {
+                cov[[i, k, l]] = cw[(k, l)];
+            }
+        }
+    }
+    Ok((
+        rig.into_pyarray(py),
+        robot.into_pyarray(py),
+        world.into_pyarray(py),
+        cov.into_pyarray(py),
+    ))
+}
+
+/// Reads a rig file (TOML). Returns `(width, height, nominal camera (10 values), estimated
+/// parameter names, prior sigmas {name: sigma}, noise (pixel, velocity, yaw_rate))`; raises
+/// `stereonav.InputError` naming the file, the key and the problem.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub(crate) fn load_rig(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+) -> PyResult<(
+    u32,
+    u32,
+    Vec<f64>,
+    Vec<&'static str>,
+    Vec<(&'static str, f64)>,
+    (f64, f64, f64),
+)> {
+    let rig = Rig::load(&path).map_err(|e| input_error(py, e.to_string()))?;
+    Ok(rig_tuple(&rig))
+}
+
+#[allow(clippy::type_complexity)]
+fn rig_tuple(
+    rig: &Rig,
+) -> (
+    u32,
+    u32,
+    Vec<f64>,
+    Vec<&'static str>,
+    Vec<(&'static str, f64)>,
+    (f64, f64, f64),
+) {
+    let prior = rig
+        .estimate
+        .iter()
+        .filter_map(|p| rig.prior[p.index()].map(|s| (p.name(), s)))
+        .collect();
+    (
+        rig.width,
+        rig.height,
+        rig.nominal.to_vector().iter().copied().collect(),
+        rig.estimate.iter().map(|p| p.name()).collect(),
+        prior,
+        (rig.noise.pixel, rig.noise.velocity, rig.noise.yaw_rate),
+    )
+}
+
+/// The names of the 10 camera parameters, in the order of the camera arrays.
+#[pyfunction]
+pub(crate) fn camera_parameter_names() -> Vec<&'static str> {
+    Param::ALL.iter().map(|p| p.name()).collect()
+}
