@@ -237,3 +237,71 @@ pub fn rot_z(a: f64) -> Matrix3<f64> {
 pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parameter_names_and_indices_agree() {
+        for (i, p) in Param::ALL.into_iter().enumerate() {
+            assert_eq!(p.index(), i);
+            assert_eq!(Param::from_name(p.name()), Some(p));
+        }
+        for bad in ["", "F", "focal", "yaw", "mount_", "f "] {
+            assert_eq!(Param::from_name(bad), None, "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn camera_parameters_round_trip_through_vector_get_and_set() {
+        let v = ParamVector::from_fn(|i, _| 0.5 + f64::from(u8::try_from(i).unwrap_or(0)));
+        let c = CameraParams::from_vector(&v);
+        assert_eq!(c.to_vector(), v);
+        for p in Param::ALL {
+            assert_eq!(c.get(p), v[p.index()]);
+            let mut d = c;
+            d.set(p, -7.0);
+            assert_eq!(d.get(p), -7.0);
+            for q in Param::ALL.into_iter().filter(|q| *q != p) {
+                assert_eq!(d.get(q), c.get(q), "setting {p} changed {q}");
+            }
+        }
+    }
+
+    #[test]
+    fn rotations_turn_the_right_way() {
+        let h = core::f64::consts::FRAC_PI_2;
+        let close = |a: Vector3<f64>, b: Vector3<f64>| (a - b).norm() < 1e-15;
+        assert!(close(rot_x(h) * Vector3::y(), Vector3::z()));
+        assert!(close(rot_y(h) * Vector3::z(), Vector3::x()));
+        assert!(close(rot_z(h) * Vector3::x(), Vector3::y()));
+        for a in [-3.0, -0.4, 0.0, 0.25, 2.0] {
+            for r in [rot_x(a), rot_y(a), rot_z(a)] {
+                assert!((r * r.transpose() - Matrix3::identity()).norm() < 1e-15);
+                assert!((r.determinant() - 1.0).abs() < 1e-15);
+            }
+        }
+        let (v, w) = (Vector3::new(0.3, -1.2, 2.0), Vector3::new(-0.7, 0.1, 0.9));
+        assert!(close(skew(&v) * w, v.cross(&w)));
+        let m = Mount {
+            roll: 0.1,
+            pitch: -0.2,
+            yaw: 0.3,
+            ..Mount::default()
+        };
+        assert!(
+            (m.robot_from_rig_rotation() - rot_z(0.3) * rot_y(-0.2) * rot_x(0.1)).norm() < 1e-15
+        );
+    }
+
+    #[test]
+    fn pose_transforms_are_inverse() {
+        let pose = Pose2::new(3.0, -4.0, 2.5);
+        let p = Vector3::new(1.0, 2.0, 3.0);
+        assert!((pose.point_in_world(&pose.point_in_robot(&p)) - p).norm() < 1e-12);
+        assert!((pose.point_in_robot(&pose.point_in_world(&p)) - p).norm() < 1e-12);
+        // Heights are not touched by the planar pose.
+        assert_eq!(pose.point_in_world(&p).z, p.z);
+    }
+}

@@ -62,7 +62,7 @@ pub fn point_in_rig(c: &CameraParams, pose: &Pose2, landmark: &Vector3<f64>) -> 
 
 /// Pixel measurements of a point given in the rig frame.
 pub fn project_rig_point(c: &CameraParams, p: &Vector3<f64>) -> Result<Measurement, RigError> {
-    if !(p.z > 0.0) {
+    if p.z.is_nan() || p.z <= 0.0 {
         return Err(RigError::BehindCamera { depth_m: p.z });
     }
     let half_b = c.baseline / 2.0;
@@ -287,7 +287,7 @@ pub fn triangulate(c: &CameraParams, z: &Measurement) -> Result<Triangulation, R
     }
     let (ul, vl, ur, vr) = (z[0], z[1], z[2], z[3]);
     let d = ul - ur;
-    if !(d > 0.0) {
+    if d.is_nan() || d <= 0.0 {
         return Err(RigError::NonPositiveDisparity { disparity_px: d });
     }
     let (f, b) = (c.f, c.baseline);

@@ -386,3 +386,41 @@ fn json_to_toml(v: &serde_json::Value) -> Option<Value> {
         }
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_line_collapses_all_whitespace() {
+        assert_eq!(
+            one_line("TOML parse error at line 1\n  |\n1 | a =\n  |    ^\r\n\tmissing value"),
+            "TOML parse error at line 1 | 1 | a = | ^ missing value"
+        );
+        assert_eq!(one_line(""), "");
+    }
+
+    #[test]
+    fn json_values_map_to_toml_values() {
+        let j = |s: &str| serde_json::from_str::<serde_json::Value>(s).unwrap_or_default();
+        assert_eq!(json_to_toml(&j("752")), Some(Value::Integer(752)));
+        assert_eq!(json_to_toml(&j("-3")), Some(Value::Integer(-3)));
+        assert_eq!(json_to_toml(&j("752.0")), Some(Value::Float(752.0)));
+        assert_eq!(json_to_toml(&j("1e3")), Some(Value::Float(1000.0)));
+        // Beyond i64: a float (the size check then reports a float, not a wrapped integer).
+        assert_eq!(
+            json_to_toml(&j("18446744073709551615")),
+            Some(Value::Float(18_446_744_073_709_551_615.0))
+        );
+        assert_eq!(json_to_toml(&j("true")), Some(Value::Boolean(true)));
+        assert_eq!(
+            json_to_toml(&j(r#"["f", 1]"#)),
+            Some(Value::Array(std::vec![
+                Value::String("f".to_string()),
+                Value::Integer(1)
+            ]))
+        );
+        assert_eq!(json_to_toml(&j("null")), None);
+        assert_eq!(json_to_toml(&j(r#"{"a": {"b": [1, null]}}"#)), None);
+    }
+}
