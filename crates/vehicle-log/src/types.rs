@@ -1,0 +1,94 @@
+//! What a vehicle log holds.
+
+use serde::{Deserialize, Serialize};
+
+/// One odometry sample on `/odom` (vehicle-interfaces.md section 2): robot-frame velocities,
+/// each held constant from `t_us` until the next sample.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OdomSample {
+    /// Timestamp, microseconds, on the clock of the board's packet timestamps.
+    pub t_us: u64,
+    /// Velocity along robot x (forward), m/s.
+    pub vx: f64,
+    /// Velocity along robot y (left), m/s.
+    pub vy: f64,
+    /// Yaw rate about robot z (up), rad/s.
+    pub vtheta: f64,
+}
+
+/// Simulator truth on `/truth/pose`: the robot's planar pose in the world frame at one
+/// stereo frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TruthPose {
+    /// Timestamp of the stereo frame (the packet's), microseconds.
+    pub t_us: u64,
+    /// World X, m.
+    pub x: f64,
+    /// World Y, m.
+    pub y: f64,
+    /// Heading, rad.
+    pub theta: f64,
+}
+
+/// One landmark (lamp) of simulator truth on `/truth/landmarks`, in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TruthLandmark {
+    /// The simulator's landmark id.
+    pub id: u32,
+    /// World X, m.
+    pub x: f64,
+    /// World Y, m.
+    pub y: f64,
+    /// World Z (height), m.
+    pub z: f64,
+}
+
+/// Simulator truth on `/truth/camera`: the true camera parameters `C`
+/// (vehicle-interfaces.md section 1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TruthCamera {
+    /// Focal length, px.
+    pub f: f64,
+    /// Principal point column, px.
+    pub cx: f64,
+    /// Principal point row, px.
+    pub cy: f64,
+    /// Camera separation, m.
+    pub baseline: f64,
+    /// Rig origin in the robot frame, x, m.
+    pub mount_x: f64,
+    /// Rig origin in the robot frame, y, m.
+    pub mount_y: f64,
+    /// Rig origin in the robot frame, z, m.
+    pub mount_z: f64,
+    /// Mount roll, rad.
+    pub mount_roll: f64,
+    /// Mount pitch, rad (positive tilts the optical axis toward the robot's front).
+    pub mount_pitch: f64,
+    /// Mount yaw, rad.
+    pub mount_yaw: f64,
+}
+
+/// One message of a vehicle log, in log order.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Record {
+    /// A chunk of the board's raw byte stream on `/fpga/features`, as received; concatenate
+    /// the chunks in log order to get the stream.
+    Features {
+        /// Arrival time, nanoseconds (the message's log time).
+        log_time_ns: u64,
+        /// The bytes.
+        bytes: Vec<u8>,
+    },
+    /// An odometry sample on `/odom`.
+    Odom(OdomSample),
+    /// The rig file's tables on `/rig`: the message's text, a JSON object, as logged.
+    Rig(String),
+    /// Simulator truth: the pose at a stereo frame.
+    TruthPose(TruthPose),
+    /// Simulator truth: every landmark.
+    TruthLandmarks(Vec<TruthLandmark>),
+    /// Simulator truth: the camera parameters.
+    TruthCamera(TruthCamera),
+}
