@@ -1,8 +1,19 @@
-//! Links the firmware crates into a `#![no_std]` static library (see Cargo.toml).
+//! Links the firmware crates, and `calib` with `alloc` only, into a `#![no_std]` static
+//! library (see Cargo.toml). `calib`'s rig configuration needs a heap, so the library brings
+//! its own global allocator: a bump allocator over a static buffer.
 #![no_std]
 
+extern crate alloc;
+
+use core::alloc::{GlobalAlloc, Layout};
+use core::cell::UnsafeCell;
+use core::sync::atomic::{AtomicUsize, Ordering};
+
+use alloc::vec::Vec;
+use calib::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, triangulate};
 use fpga_link::{Decoder, Event, Header, MAX_PACKET_LEN, encode_packet};
 use harris_core::{Feature, HarrisStream, Registers};
+use nalgebra::Vector3;
 
 /// Width of the test image: the detector's line buffers are sized for it at compile time.
 const WIDTH: usize = 32;
@@ -55,6 +66,98 @@ pub extern "C" fn stereonav_nostd_stream_round_trip() -> i32 {
         }
     }
     i32::try_from(features).unwrap_or(-1)
+}
+
+/// Size of the bump allocator's heap: ample for the few small vectors made here.
+const HEAP_BYTES: usize = 16 * 1024;
+
+/// The heap's bytes, aligned for any ordinary type.
+#[repr(C, align(16))]
+struct Heap(UnsafeCell<[u8; HEAP_BYTES]>);
+
+/// A bump allocator: hands out successive slices of a static buffer and never frees. Enough
+/// for a proof that links `alloc`; firmware would bring its own allocator (or none).
+struct BumpAllocator {
+    heap: Heap,
+    /// Offset of the first free byte.
+    next: AtomicUsize,
+}
+
+// SAFETY: the buffer is only reached through the disjoint ranges that `alloc` reserves, each
+// exactly once, by an atomic update of `next`.
+unsafe impl Sync for BumpAllocator {}
+
+// SAFETY: `alloc` returns either null or a pointer to `layout.size()` bytes inside `heap`,
+// aligned to `layout.align()` and never handed out again; `dealloc` does nothing.
+unsafe impl GlobalAlloc for BumpAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let base = self.heap.0.get().cast::<u8>();
+        let mut start = 0;
+        let reserved = self.next.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |next| {
+            // Padding to the next aligned address (alignments are powers of two).
+            let addr = base.addr().checked_add(next)?;
+            let pad = addr.wrapping_neg() & (layout.align() - 1);
+            start = next.checked_add(pad)?;
+            let end = start.checked_add(layout.size())?;
+            (end <= HEAP_BYTES).then_some(end)
+        });
+        match reserved {
+            // SAFETY: `start + size <= HEAP_BYTES`, so the pointer stays inside the buffer.
+            Ok(_) => unsafe { base.add(start) },
+            Err(_) => core::ptr::null_mut(),
+        }
+    }
+
+    unsafe fn dealloc(&self, _ptr: *mut u8, _layout: Layout) {}
+}
+
+#[global_allocator]
+static ALLOCATOR: BumpAllocator = BumpAllocator {
+    heap: Heap(UnsafeCell::new([0; HEAP_BYTES])),
+    next: AtomicUsize::new(0),
+};
+
+/// Builds the rig configuration of vehicle-interfaces.md section 3 (its estimate list on the
+/// heap), projects four ceiling lamps seen from a turned robot with a tilted mount, triangulates
+/// them back and returns how many came back within a micrometre (4), or -1 on an error.
+#[unsafe(no_mangle)]
+pub extern "C" fn stereonav_nostd_rig_round_trip() -> i32 {
+    let mut prior = [None; N_PARAMS];
+    prior[Param::F.index()] = Some(30.0);
+    prior[Param::Baseline.index()] = Some(0.01);
+    let rig = Rig {
+        width: 752,
+        height: 480,
+        nominal: CameraParams {
+            f: 700.0,
+            cx: 376.0,
+            cy: 240.0,
+            baseline: 0.12,
+            mount: Mount { x: 0.2, y: -0.1, z: 1.0, roll: 0.05, pitch: 0.2, yaw: -0.1 },
+        },
+        estimate: alloc::vec![Param::F, Param::Baseline],
+        prior,
+        noise: Noise { pixel: 0.3, velocity: 0.02, yaw_rate: 0.01 },
+    };
+    let c = rig.nominal;
+    let pose = Pose2::new(3.0, -1.5, 2.0);
+    let lamps: Vec<Vector3<f64>> = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
+        .into_iter()
+        .map(|(ahead, left)| pose.point_in_world(&Vector3::new(ahead, left, 4.0)))
+        .collect();
+    let mut recovered = 0;
+    for lamp in &lamps {
+        let Ok(z) = project(&c, &pose, lamp) else {
+            return -1;
+        };
+        let Ok(tri) = triangulate(&c, &z) else {
+            return -1;
+        };
+        if (tri.p_in_world(&c, &pose) - lamp).norm() < 1e-6 {
+            recovered += 1;
+        }
+    }
+    recovered
 }
 
 #[panic_handler]

@@ -33,6 +33,12 @@ pub enum RigError {
         /// `uL - uR`, pixels.
         disparity_px: f64,
     },
+    /// A pose, landmark or measurement value is NaN or infinite.
+    #[error("{what} is not finite")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+    },
     /// The focal length or baseline is not positive and finite.
     #[error("camera parameter {param} = {value} must be positive and finite")]
     BadCamera {
@@ -54,6 +60,26 @@ pub struct ProjectionJacobians {
     pub camera: Jac4xC,
 }
 
+/// Checks that `f` and the baseline are positive and finite.
+fn check_camera(c: &CameraParams) -> Result<(), RigError> {
+    for (param, value) in [(Param::F, c.f), (Param::Baseline, c.baseline)] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(RigError::BadCamera { param, value });
+        }
+    }
+    Ok(())
+}
+
+fn check_inputs(pose: &Pose2, landmark: &Vector3<f64>) -> Result<(), RigError> {
+    if !(pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite()) {
+        return Err(RigError::NonFinite { what: "robot pose" });
+    }
+    if !landmark.iter().all(|v| v.is_finite()) {
+        return Err(RigError::NonFinite { what: "landmark" });
+    }
+    Ok(())
+}
+
 /// The landmark in the rig frame, `p_in_rig = R_RS^T (Rz(-theta) (L - (X, Y, 0)) - t)`.
 pub fn point_in_rig(c: &CameraParams, pose: &Pose2, landmark: &Vector3<f64>) -> Vector3<f64> {
     let robot_from_rig = c.mount.robot_from_rig_rotation();
@@ -62,6 +88,12 @@ pub fn point_in_rig(c: &CameraParams, pose: &Pose2, landmark: &Vector3<f64>) -> 
 
 /// Pixel measurements of a point given in the rig frame.
 pub fn project_rig_point(c: &CameraParams, p: &Vector3<f64>) -> Result<Measurement, RigError> {
+    check_camera(c)?;
+    if !p.iter().all(|v| v.is_finite()) {
+        return Err(RigError::NonFinite {
+            what: "point in the rig frame",
+        });
+    }
     if p.z.is_nan() || p.z <= 0.0 {
         return Err(RigError::BehindCamera { depth_m: p.z });
     }
@@ -90,6 +122,7 @@ pub fn project_with_jacobians(
     pose: &Pose2,
     landmark: &Vector3<f64>,
 ) -> Result<(Measurement, ProjectionJacobians), RigError> {
+    check_inputs(pose, landmark)?;
     let robot_from_rig = c.mount.robot_from_rig_rotation();
     let rig_from_robot = robot_from_rig.transpose();
     let robot_from_world = pose.world_from_robot_rotation().transpose();
@@ -280,10 +313,16 @@ impl Triangulation {
 /// Triangulates one stereo measurement `(uL, vL, uR, vR)` into the rig frame:
 /// `zs = f B / (uL - uR)`, `xs = ((uL + uR) / 2 - cx) zs / f`, `ys = ((vL + vR) / 2 - cy) zs / f`.
 pub fn triangulate(c: &CameraParams, z: &Measurement) -> Result<Triangulation, RigError> {
-    for (param, value) in [(Param::F, c.f), (Param::Baseline, c.baseline)] {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(RigError::BadCamera { param, value });
-        }
+    check_camera(c)?;
+    if !(c.cx.is_finite() && c.cy.is_finite()) {
+        return Err(RigError::NonFinite {
+            what: "principal point",
+        });
+    }
+    if z[1].is_nan() || z[3].is_nan() || z[1].is_infinite() || z[3].is_infinite() {
+        return Err(RigError::NonFinite {
+            what: "measurement row (vL or vR)",
+        });
     }
     let (ul, vl, ur, vr) = (z[0], z[1], z[2], z[3]);
     let d = ul - ur;

@@ -75,7 +75,7 @@ impl Reader<'_> {
         for key in self.table(table)?.keys() {
             if !allowed.contains(&key.as_str()) {
                 return Err(self.error(
-                    format!("[{table}] {key}"),
+                    format!("[{table}] {}", key.escape_debug()),
                     format!("unknown key (known: {})", allowed.join(", ")),
                 ));
             }
@@ -176,6 +176,13 @@ impl Rig {
                 source_name: source_name.to_string(),
                 reason: one_line(&e.to_string()),
             })?;
+        if let Some(key) = null_key(&json) {
+            return Err(RigFileError::Key {
+                source_name: source_name.to_string(),
+                key,
+                problem: "null is not a value: expected a number, string or array".to_string(),
+            });
+        }
         let Some(Value::Table(root)) = json_to_toml(&json) else {
             return Err(RigFileError::Syntax {
                 source_name: source_name.to_string(),
@@ -191,7 +198,7 @@ impl Rig {
         for key in root.keys() {
             if !TABLES.contains(&key.as_str()) {
                 return Err(r.error(
-                    format!("[{key}]"),
+                    format!("[{}]", key.escape_debug()),
                     format!("unknown table (known: {})", TABLES.join(", ")),
                 ));
             }
@@ -266,7 +273,7 @@ impl Rig {
         for (name, _) in r.table("prior")? {
             let param = Param::from_name(name).ok_or_else(|| {
                 r.error(
-                    format!("[prior] {name}"),
+                    format!("[prior] {}", name.escape_debug()),
                     format!("unknown parameter (known: {})", known()),
                 )
             })?;
@@ -363,6 +370,34 @@ impl Rig {
 
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// The `[table] key` of the first JSON `null` in a rig object, if any.
+fn null_key(json: &serde_json::Value) -> Option<String> {
+    let serde_json::Value::Object(tables) = json else {
+        return None;
+    };
+    for (table, value) in tables {
+        match value {
+            serde_json::Value::Null => return Some(format!("[{}]", table.escape_debug())),
+            serde_json::Value::Object(keys) => {
+                for (key, v) in keys {
+                    let has_null = match v {
+                        serde_json::Value::Null => true,
+                        serde_json::Value::Array(items) => {
+                            items.iter().any(serde_json::Value::is_null)
+                        }
+                        _ => false,
+                    };
+                    if has_null {
+                        return Some(format!("[{}] {}", table.escape_debug(), key.escape_debug()));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    None
 }
 
 fn json_to_toml(v: &serde_json::Value) -> Option<Value> {
