@@ -19,9 +19,12 @@ extern crate alloc;
 pub mod camera;
 #[cfg(feature = "alloc")]
 pub mod config;
+pub mod odometry;
 pub mod rig;
 #[cfg(feature = "std")]
 pub mod rig_file;
+#[cfg(feature = "alloc")]
+pub mod selfcal;
 
 pub use camera::{CameraParams, Mount, N_PARAMS, Param, ParamVector, Pose2};
 #[cfg(feature = "alloc")]

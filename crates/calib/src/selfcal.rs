@@ -1,0 +1,553 @@
+//! Phase 1 of the method: self-calibration of the camera parameters from relative motion.
+//!
+//! Landmarks triangulated in the robot frame at two instants, `L_t` and `L_{t+1}`, and the
+//! odometry motion between them, `(dtheta, dT)`, must satisfy eq. (1):
+//! `L_t = Rot_z(dtheta) L_{t+1} + dT`. The mismatch `E_L` over every landmark of every frame
+//! pair drives a Levenberg-Marquardt update of the estimated camera parameters, eq. (2):
+//! `dC = -(J^T W J + k D)^-1 J^T W E_L` (the paper writes it with `E_L` of the opposite sign and
+//! `W = I`, `D = I`), with `W` the inverse covariance of `E_L` from the pixel and odometry noise,
+//! a Huber loss against wrong associations, the rig file's priors, and an adaptive damping `k`.
+//!
+//! Before and after solving, an observability analysis compares what the data say about each
+//! estimated parameter with its prior; a parameter the data cannot constrain is held at its
+//! nominal value and reported with the reason (the known traps: an upward-looking camera on
+//! planar motion cannot give `f`; planar motion never gives the camera height; a straight path
+//! cannot give the mounting offsets or the roll).
+
+// Loops over the ten parameter indices address several arrays at once.
+#![allow(clippy::needless_range_loop)]
+
+use alloc::vec::Vec;
+
+use nalgebra::{Matrix3, SMatrix, Vector3};
+
+use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, rot_z};
+use crate::config::Rig;
+use crate::odometry::Motion;
+use crate::rig::{Jac3xC, Measurement, triangulate};
+
+fn sq(x: f64) -> f64 {
+    x * x
+}
+
+/// Normal-equation matrices over all ten parameters.
+type Mat10 = SMatrix<f64, N_PARAMS, N_PARAMS>;
+
+/// One landmark seen at both instants of a frame pair.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LandmarkPair {
+    /// `(uL, vL, uR, vR)` at the first instant.
+    pub first: Measurement,
+    /// `(uL, vL, uR, vR)` at the second instant.
+    pub second: Measurement,
+}
+
+/// Two stereo frames close in time, the odometry motion between them, and the landmarks
+/// associated across them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FramePair {
+    /// Timestamp of the second frame, microseconds (for histories).
+    pub t_us: u64,
+    /// Motion from the first frame to the second, in the first frame's robot frame.
+    pub motion: Motion,
+    /// The landmarks seen in both.
+    pub landmarks: Vec<LandmarkPair>,
+}
+
+/// Settings of the solver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverSettings {
+    /// Huber threshold on the Mahalanobis norm of a landmark's `E_L` (unitless).
+    pub huber: f64,
+    /// Most Levenberg-Marquardt iterations.
+    pub max_iterations: usize,
+    /// Convergence: every step below this fraction of the parameter's sigma.
+    pub step_tolerance: f64,
+    /// A parameter is observable when the data shrink its sigma to at most this fraction of
+    /// its prior sigma.
+    pub observable_ratio: f64,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        Self {
+            huber: 3.0,
+            max_iterations: 50,
+            step_tolerance: 1e-4,
+            observable_ratio: 0.5,
+        }
+    }
+}
+
+/// How well one estimated parameter is constrained.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamObservability {
+    /// The parameter.
+    pub param: Param,
+    /// Its prior sigma (rig file).
+    pub prior_sigma: f64,
+    /// Its sigma from the data alone (infinite when the data say nothing).
+    pub data_sigma: f64,
+    /// Its sigma from data and prior together.
+    pub posterior_sigma: f64,
+    /// Whether the data constrain it (`posterior_sigma <= observable_ratio * prior_sigma`).
+    pub observable: bool,
+    /// Why not, when it is not.
+    pub reason: Option<&'static str>,
+}
+
+/// The observability analysis of the estimated parameters.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ObservabilityReport {
+    /// One entry per estimated parameter.
+    pub params: Vec<ParamObservability>,
+    /// Largest absolute correlation between two estimated, observable parameters, and which.
+    pub max_correlation: Option<(Param, Param, f64)>,
+    /// Eigenvalues of the data's information matrix in prior-sigma units, ascending.
+    pub information_eigenvalues: Vec<f64>,
+}
+
+impl ObservabilityReport {
+    /// The parameters the data cannot give.
+    pub fn unobservable(&self) -> impl Iterator<Item = &ParamObservability> {
+        self.params.iter().filter(|p| !p.observable)
+    }
+}
+
+/// How a solve ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolveStatus {
+    /// Steps fell below the tolerance.
+    Converged,
+    /// The iteration limit came first; the best estimate is returned.
+    MaxIterations,
+    /// No step could lower the cost (damping exhausted); the best estimate is returned.
+    Stalled,
+    /// No usable landmark pair (nothing to estimate from); the nominal values are returned.
+    NoData,
+}
+
+/// The result of a calibration: the best estimate with its uncertainty and the why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    /// The estimated camera parameters (unestimated and unobservable ones at nominal).
+    pub camera: CameraParams,
+    /// Covariance of all ten parameters (zero rows for those not estimated).
+    pub covariance: Mat10,
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Landmark residuals used, and how many the robust loss down-weighted.
+    pub residuals: usize,
+    /// Residuals beyond the Huber threshold at the solution.
+    pub outliers: usize,
+    /// Sum of squared Mahalanobis norms at the solution divided by the degrees of freedom.
+    pub reduced_chi2: f64,
+    /// The observability analysis at the solution.
+    pub observability: ObservabilityReport,
+    /// The parameter vector after each accepted iteration (the start first).
+    pub history: Vec<ParamVector>,
+}
+
+impl Calibration {
+    /// 1-sigma uncertainty of one parameter (0 for a parameter held fixed).
+    pub fn sigma(&self, p: Param) -> f64 {
+        libm::sqrt(self.covariance[(p.index(), p.index())].max(0.0))
+    }
+}
+
+/// One landmark pair's `E_L` and its covariance.
+struct Residual {
+    e: Vector3<f64>,
+    cov: Matrix3<f64>,
+}
+
+fn residual(c: &CameraParams, pair: &FramePair, lm: &LandmarkPair, rig: &Rig) -> Option<Residual> {
+    let t0 = triangulate(c, &lm.first).ok()?;
+    let t1 = triangulate(c, &lm.second).ok()?;
+    let (l0, l1) = (t0.p_in_robot(c), t1.p_in_robot(c));
+    let m = &pair.motion;
+    let r = rot_z(m.dtheta);
+    let e = l0 - (r * l1 + Vector3::new(m.dx, m.dy, 0.0));
+    let sigma = rig.noise.pixel;
+    let mut cov =
+        t0.covariance_in_robot(c, sigma) + r * t1.covariance_in_robot(c, sigma) * r.transpose();
+    // Odometry noise: white velocity noise per sample, held for the sample period.
+    if m.samples > 0 {
+        #[allow(clippy::cast_precision_loss)]
+        let n = m.samples as f64;
+        let period = m.dt_s / n;
+        let var_t = sq(rig.noise.velocity * period) * n;
+        let var_theta = sq(rig.noise.yaw_rate * period) * n;
+        // dE/d(dtheta) = -dRz/dtheta L1 = -(-(R L1).y, (R L1).x, 0).
+        let rl1 = r * l1;
+        let de_dtheta = Vector3::new(rl1.y, -rl1.x, 0.0);
+        cov[(0, 0)] += var_t;
+        cov[(1, 1)] += var_t;
+        cov += de_dtheta * de_dtheta.transpose() * var_theta;
+    }
+    e.iter()
+        .all(|v| v.is_finite())
+        .then_some(Residual { e, cov })
+}
+
+/// The whitened residual `r = chol(Cov(E_L))^-1 E_L` of one landmark pair at `c`.
+///
+/// Whitening with the covariance *at the same* `C` matters: the triangulated points, and so
+/// `E_L` and its covariance, scale with `f` (depth) and `B` (everything); measured in units of
+/// its own uncertainty the error is unchanged by such a scaling unless the odometry's metric
+/// motion pins it. A fixed weight would instead reward shrinking `f` or `B`.
+fn whitened(
+    c: &CameraParams,
+    pair: &FramePair,
+    lm: &LandmarkPair,
+    rig: &Rig,
+) -> Option<Vector3<f64>> {
+    let res = residual(c, pair, lm, rig)?;
+    let chol = res.cov.cholesky()?;
+    let r = chol.l().solve_lower_triangular(&res.e)?;
+    r.iter().all(|v| v.is_finite()).then_some(r)
+}
+
+/// Huber weight and cost of a whitened residual of norm `d`.
+fn huber(d: f64, k: f64) -> (f64, f64) {
+    if d <= k {
+        (1.0, d * d)
+    } else {
+        (k / d, 2.0 * k * d - k * k)
+    }
+}
+
+/// The linearised problem at one parameter vector.
+struct Linearised {
+    h: Mat10,
+    g: ParamVector,
+    cost: f64,
+    residuals: usize,
+    outliers: usize,
+    chi2: f64,
+}
+
+/// Finite-difference step of each parameter.
+fn fd_step(c: &CameraParams, rig: &Rig, i: usize) -> f64 {
+    let scale = rig.prior[i]
+        .unwrap_or(0.0)
+        .max(libm::fabs(c.get(Param::ALL[i])) * 1e-3)
+        .max(1e-6);
+    scale * 1e-4
+}
+
+fn linearise(
+    c: &CameraParams,
+    pairs: &[FramePair],
+    rig: &Rig,
+    huber_k: f64,
+    active: &[bool; N_PARAMS],
+) -> Linearised {
+    let mut out = Linearised {
+        h: Mat10::zeros(),
+        g: ParamVector::zeros(),
+        cost: 0.0,
+        residuals: 0,
+        outliers: 0,
+        chi2: 0.0,
+    };
+    // Cameras displaced along each active parameter, for central differences.
+    let mut plus = [*c; N_PARAMS];
+    let mut minus = [*c; N_PARAMS];
+    let mut step = [0.0; N_PARAMS];
+    for i in 0..N_PARAMS {
+        if active[i] {
+            step[i] = fd_step(c, rig, i);
+            let p = Param::ALL[i];
+            plus[i].set(p, c.get(p) + step[i]);
+            minus[i].set(p, c.get(p) - step[i]);
+        }
+    }
+    for pair in pairs {
+        for lm in &pair.landmarks {
+            let Some(r) = whitened(c, pair, lm, rig) else {
+                continue;
+            };
+            let mut j = Jac3xC::zeros();
+            let mut ok = true;
+            for i in 0..N_PARAMS {
+                if !active[i] {
+                    continue;
+                }
+                match (
+                    whitened(&plus[i], pair, lm, rig),
+                    whitened(&minus[i], pair, lm, rig),
+                ) {
+                    (Some(a), Some(b)) => j.set_column(i, &((a - b) / (2.0 * step[i]))),
+                    _ => ok = false,
+                }
+            }
+            if !ok {
+                continue;
+            }
+            let d2 = r.norm_squared();
+            let (weight, cost) = huber(libm::sqrt(d2), huber_k);
+            if weight < 1.0 {
+                out.outliers += 1;
+            }
+            let jw = j.transpose() * weight;
+            out.h += jw * j;
+            out.g += jw * r;
+            out.cost += cost;
+            out.chi2 += d2;
+            out.residuals += 1;
+        }
+    }
+    out
+}
+
+/// The robust cost at `c`.
+fn cost_at(c: &CameraParams, pairs: &[FramePair], rig: &Rig, huber_k: f64) -> f64 {
+    let mut cost = 0.0;
+    for pair in pairs {
+        for lm in &pair.landmarks {
+            if let Some(r) = whitened(c, pair, lm, rig) {
+                cost += huber(r.norm(), huber_k).1;
+            }
+        }
+    }
+    cost
+}
+
+/// Prior precision (inverse variance) of each parameter; zero for those not estimated.
+fn prior_precision(rig: &Rig, active: &[bool; N_PARAMS]) -> ParamVector {
+    ParamVector::from_fn(|i, _| match (active[i], rig.prior[i]) {
+        (true, Some(s)) if s > 0.0 => 1.0 / (s * s),
+        _ => 0.0,
+    })
+}
+
+/// Restricts a 10x10 system to `active` parameters: inactive rows and columns become the
+/// identity, so that their step is zero.
+fn masked(h: &Mat10, active: &[bool; N_PARAMS]) -> Mat10 {
+    let mut m = *h;
+    for i in 0..N_PARAMS {
+        if !active[i] {
+            m.row_mut(i).fill(0.0);
+            m.column_mut(i).fill(0.0);
+            m[(i, i)] = 1.0;
+        }
+    }
+    m
+}
+
+fn covariance(h: &Mat10, active: &[bool; N_PARAMS]) -> Mat10 {
+    let mut cov = masked(h, active)
+        .cholesky()
+        .map_or_else(Mat10::zeros, |ch| ch.inverse());
+    for i in 0..N_PARAMS {
+        if !active[i] {
+            cov.row_mut(i).fill(0.0);
+            cov.column_mut(i).fill(0.0);
+        }
+    }
+    cov
+}
+
+/// Observability of the estimated parameters from the data's information matrix `h_data`.
+fn observability(
+    h_data: &Mat10,
+    rig: &Rig,
+    pairs: &[FramePair],
+    c: &CameraParams,
+    settings: &SolverSettings,
+) -> ObservabilityReport {
+    let mut estimated = [false; N_PARAMS];
+    for p in &rig.estimate {
+        estimated[p.index()] = true;
+    }
+    let prior = prior_precision(rig, &estimated);
+    let posterior = covariance(&(h_data + Mat10::from_diagonal(&prior)), &estimated);
+    let total_rotation: f64 = pairs.iter().map(|p| libm::fabs(p.motion.dtheta)).sum();
+    let tilted = libm::fabs(c.mount.pitch) > 0.05 || libm::fabs(c.mount.roll) > 0.05;
+    let mut report = ObservabilityReport::default();
+    // Information in prior-sigma units: S H S with S = diag(prior sigma).
+    let mut scaled = Mat10::identity();
+    let idx: Vec<usize> = rig.estimate.iter().map(|p| p.index()).collect();
+    for &i in &idx {
+        for &j in &idx {
+            let (si, sj) = (rig.prior[i].unwrap_or(1.0), rig.prior[j].unwrap_or(1.0));
+            scaled[(i, j)] = h_data[(i, j)] * si * sj;
+        }
+    }
+    let sub = nalgebra::DMatrix::from_fn(idx.len(), idx.len(), |a, b| scaled[(idx[a], idx[b])]);
+    let mut eig: Vec<f64> = sub.symmetric_eigenvalues().iter().copied().collect();
+    eig.sort_by(f64::total_cmp);
+    report.information_eigenvalues = eig;
+    for p in &rig.estimate {
+        let i = p.index();
+        let prior_sigma = rig.prior[i].unwrap_or(f64::INFINITY);
+        let posterior_sigma = libm::sqrt(posterior[(i, i)].max(0.0));
+        let info = h_data[(i, i)];
+        let data_sigma = if info > 0.0 {
+            1.0 / libm::sqrt(info)
+        } else {
+            f64::INFINITY
+        };
+        let observable = posterior_sigma <= settings.observable_ratio * prior_sigma;
+        let reason = (!observable).then_some(match p {
+            Param::F if !tilted => "with the camera looking straight up and planar motion, f and every landmark depth scale together: f is not observable unless the camera is tilted or a lamp height is known",
+            Param::MountZ => "the camera height is not observable from planar motion: it cancels between the two instants",
+            Param::MountX | Param::MountY | Param::MountYaw if total_rotation < 0.3 => "a straight path cannot give the mounting offsets: they cancel unless the vehicle turns",
+            Param::MountRoll | Param::MountPitch if total_rotation < 0.3 => "a straight path cannot give the roll about the direction of travel: the vehicle must turn",
+            _ => "the data so far constrain it less than its prior: more motion (turns, speed) or more landmarks are needed",
+        });
+        report.params.push(ParamObservability {
+            param: *p,
+            prior_sigma,
+            data_sigma,
+            posterior_sigma,
+            observable,
+            reason,
+        });
+    }
+    let obs: Vec<usize> = report
+        .params
+        .iter()
+        .filter(|p| p.observable)
+        .map(|p| p.param.index())
+        .collect();
+    for (a, &i) in obs.iter().enumerate() {
+        for &j in obs.iter().skip(a + 1) {
+            let denom = libm::sqrt(posterior[(i, i)] * posterior[(j, j)]);
+            if denom > 0.0 {
+                let r = posterior[(i, j)] / denom;
+                if report
+                    .max_correlation
+                    .is_none_or(|(_, _, m)| libm::fabs(r) > libm::fabs(m))
+                {
+                    report.max_correlation = Some((Param::ALL[i], Param::ALL[j], r));
+                }
+            }
+        }
+    }
+    report
+}
+
+/// Calibrates the rig's estimated parameters from frame pairs (batch), starting from `start`
+/// (usually the nominal values, or the last estimate when fed incrementally).
+///
+/// Parameters the data cannot constrain are held at their nominal values and reported in
+/// [`Calibration::observability`]. Never fails: without data it returns the nominal values with
+/// [`SolveStatus::NoData`], and when the iterations run out or stall it returns the best
+/// estimate with the status saying so.
+pub fn calibrate(
+    pairs: &[FramePair],
+    rig: &Rig,
+    start: &CameraParams,
+    settings: &SolverSettings,
+) -> Calibration {
+    let nominal = rig.nominal.to_vector();
+    let mut c = *start;
+    // Observability at the start decides what is estimated.
+    let mut estimated = [false; N_PARAMS];
+    for p in &rig.estimate {
+        estimated[p.index()] = true;
+    }
+    let lin = linearise(&c, pairs, rig, settings.huber, &estimated);
+    let report = observability(&lin.h, rig, pairs, &c, settings);
+    let mut active = [false; N_PARAMS];
+    for p in report.params.iter().filter(|p| p.observable) {
+        active[p.param.index()] = true;
+    }
+    for i in 0..N_PARAMS {
+        if !active[i] {
+            c.set(Param::ALL[i], nominal[i]);
+        }
+    }
+    let prior = prior_precision(rig, &active);
+    let prior_cost = |v: &ParamVector| -> f64 {
+        (0..N_PARAMS)
+            .map(|i| prior[i] * sq(v[i] - nominal[i]))
+            .sum()
+    };
+    let mut history = alloc::vec![c.to_vector()];
+    let mut status = if lin.residuals == 0 {
+        SolveStatus::NoData
+    } else {
+        SolveStatus::MaxIterations
+    };
+    let mut iterations = 0;
+    let mut lambda = 1e-3;
+    if status != SolveStatus::NoData && active.iter().any(|&a| a) {
+        let mut lin = linearise(&c, pairs, rig, settings.huber, &active);
+        let mut cost = lin.cost + prior_cost(&c.to_vector());
+        'outer: while iterations < settings.max_iterations {
+            iterations += 1;
+            let v = c.to_vector();
+            let h = lin.h + Mat10::from_diagonal(&prior);
+            let g = lin.g + prior.component_mul(&(v - nominal));
+            loop {
+                let mut damped = h;
+                for i in 0..N_PARAMS {
+                    damped[(i, i)] += lambda * h[(i, i)].max(1e-12);
+                }
+                let Some(ch) = masked(&damped, &active).cholesky() else {
+                    lambda *= 10.0;
+                    if lambda > 1e12 {
+                        status = SolveStatus::Stalled;
+                        break 'outer;
+                    }
+                    continue;
+                };
+                let mut step = -ch.solve(&g);
+                for i in 0..N_PARAMS {
+                    if !active[i] {
+                        step[i] = 0.0;
+                    }
+                }
+                let candidate = CameraParams::from_vector(&(v + step));
+                let new_cost = cost_at(&candidate, pairs, rig, settings.huber)
+                    + prior_cost(&candidate.to_vector());
+                if new_cost.is_finite() && new_cost <= cost {
+                    c = candidate;
+                    lambda = (lambda * 0.1).max(1e-9);
+                    history.push(c.to_vector());
+                    lin = linearise(&c, pairs, rig, settings.huber, &active);
+                    cost = new_cost;
+                    let cov = covariance(&(lin.h + Mat10::from_diagonal(&prior)), &active);
+                    let small = (0..N_PARAMS).all(|i| {
+                        !active[i]
+                            || libm::fabs(step[i])
+                                <= settings.step_tolerance * libm::sqrt(cov[(i, i)].max(1e-300))
+                    });
+                    if small {
+                        status = SolveStatus::Converged;
+                        break 'outer;
+                    }
+                    break;
+                }
+                lambda *= 10.0;
+                if lambda > 1e12 {
+                    // No step lowers the cost: at a minimum (to numerical precision).
+                    status = SolveStatus::Converged;
+                    break 'outer;
+                }
+            }
+        }
+    }
+    let lin = linearise(&c, pairs, rig, settings.huber, &estimated);
+    let covariance = covariance(&(lin.h + Mat10::from_diagonal(&prior)), &active);
+    let dof = (3 * lin.residuals).saturating_sub(active.iter().filter(|&&a| a).count());
+    #[allow(clippy::cast_precision_loss)]
+    let reduced_chi2 = if dof > 0 { lin.chi2 / dof as f64 } else { 0.0 };
+    let observability = observability(&lin.h, rig, pairs, &c, settings);
+    Calibration {
+        camera: c,
+        covariance,
+        status,
+        iterations,
+        residuals: lin.residuals,
+        outliers: lin.outliers,
+        reduced_chi2,
+        observability,
+        history,
+    }
+}
