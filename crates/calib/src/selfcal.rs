@@ -73,7 +73,7 @@ impl Default for SolverSettings {
         Self {
             huber: 3.0,
             max_iterations: 50,
-            step_tolerance: 1e-4,
+            step_tolerance: 1e-2,
             observable_ratio: 0.5,
         }
     }
@@ -163,16 +163,41 @@ struct Residual {
     cov: Matrix3<f64>,
 }
 
-fn residual(c: &CameraParams, pair: &FramePair, lm: &LandmarkPair, rig: &Rig) -> Option<Residual> {
+/// A camera with the rotations that every residual needs computed once.
+struct Prepared {
+    c: CameraParams,
+    robot_from_rig: Matrix3<f64>,
+    mount: Vector3<f64>,
+}
+
+impl Prepared {
+    fn new(c: &CameraParams) -> Self {
+        Self {
+            c: *c,
+            robot_from_rig: c.mount.robot_from_rig_rotation(),
+            mount: c.mount.translation(),
+        }
+    }
+}
+
+fn residual(
+    prep: &Prepared,
+    rot: &Matrix3<f64>,
+    pair: &FramePair,
+    lm: &LandmarkPair,
+    rig: &Rig,
+) -> Option<Residual> {
+    let c = &prep.c;
     let t0 = triangulate(c, &lm.first).ok()?;
     let t1 = triangulate(c, &lm.second).ok()?;
-    let (l0, l1) = (t0.p_in_robot(c), t1.p_in_robot(c));
+    let rr = &prep.robot_from_rig;
+    let (l0, l1) = (prep.mount + rr * t0.p_in_rig, prep.mount + rr * t1.p_in_rig);
     let m = &pair.motion;
-    let r = rot_z(m.dtheta);
-    let e = l0 - (r * l1 + Vector3::new(m.dx, m.dy, 0.0));
-    let sigma = rig.noise.pixel;
-    let mut cov =
-        t0.covariance_in_robot(c, sigma) + r * t1.covariance_in_robot(c, sigma) * r.transpose();
+    let rl1 = rot * l1;
+    let e = l0 - (rl1 + Vector3::new(m.dx, m.dy, 0.0));
+    let sigma2 = sq(rig.noise.pixel);
+    let (j0, j1) = (rr * t0.jac_measurement, rot * rr * t1.jac_measurement);
+    let mut cov = (j0 * j0.transpose() + j1 * j1.transpose()) * sigma2;
     // Odometry noise: white velocity noise per sample, held for the sample period.
     if m.samples > 0 {
         #[allow(clippy::cast_precision_loss)]
@@ -180,8 +205,7 @@ fn residual(c: &CameraParams, pair: &FramePair, lm: &LandmarkPair, rig: &Rig) ->
         let period = m.dt_s / n;
         let var_t = sq(rig.noise.velocity * period) * n;
         let var_theta = sq(rig.noise.yaw_rate * period) * n;
-        // dE/d(dtheta) = -dRz/dtheta L1 = -(-(R L1).y, (R L1).x, 0).
-        let rl1 = r * l1;
+        // dE/d(dtheta) = -dRz/dtheta L1 = ((R L1).y, -(R L1).x, 0).
         let de_dtheta = Vector3::new(rl1.y, -rl1.x, 0.0);
         cov[(0, 0)] += var_t;
         cov[(1, 1)] += var_t;
@@ -192,19 +216,20 @@ fn residual(c: &CameraParams, pair: &FramePair, lm: &LandmarkPair, rig: &Rig) ->
         .then_some(Residual { e, cov })
 }
 
-/// The whitened residual `r = chol(Cov(E_L))^-1 E_L` of one landmark pair at `c`.
+/// The whitened residual `r = chol(Cov(E_L))^-1 E_L` of one landmark pair.
 ///
 /// Whitening with the covariance *at the same* `C` matters: the triangulated points, and so
 /// `E_L` and its covariance, scale with `f` (depth) and `B` (everything); measured in units of
 /// its own uncertainty the error is unchanged by such a scaling unless the odometry's metric
 /// motion pins it. A fixed weight would instead reward shrinking `f` or `B`.
 fn whitened(
-    c: &CameraParams,
+    prep: &Prepared,
+    rot: &Matrix3<f64>,
     pair: &FramePair,
     lm: &LandmarkPair,
     rig: &Rig,
 ) -> Option<Vector3<f64>> {
-    let res = residual(c, pair, lm, rig)?;
+    let res = residual(prep, rot, pair, lm, rig)?;
     let chol = res.cov.cholesky()?;
     let r = chol.l().solve_lower_triangular(&res.e)?;
     r.iter().all(|v| v.is_finite()).then_some(r)
@@ -253,35 +278,32 @@ fn linearise(
         outliers: 0,
         chi2: 0.0,
     };
-    // Cameras displaced along each active parameter, for central differences.
-    let mut plus = [*c; N_PARAMS];
-    let mut minus = [*c; N_PARAMS];
-    let mut step = [0.0; N_PARAMS];
+    let prep = Prepared::new(c);
+    // Cameras displaced along each active parameter, for forward differences of the whitened
+    // residual (its covariance depends on C too, which an analytic Jacobian of E_L misses).
+    let mut displaced: [Option<(Prepared, f64)>; N_PARAMS] = Default::default();
     for i in 0..N_PARAMS {
         if active[i] {
-            step[i] = fd_step(c, rig, i);
-            let p = Param::ALL[i];
-            plus[i].set(p, c.get(p) + step[i]);
-            minus[i].set(p, c.get(p) - step[i]);
+            let h = fd_step(c, rig, i);
+            let mut moved = *c;
+            moved.set(Param::ALL[i], c.get(Param::ALL[i]) + h);
+            displaced[i] = Some((Prepared::new(&moved), h));
         }
     }
     for pair in pairs {
+        let rot = rot_z(pair.motion.dtheta);
         for lm in &pair.landmarks {
-            let Some(r) = whitened(c, pair, lm, rig) else {
+            let Some(r) = whitened(&prep, &rot, pair, lm, rig) else {
                 continue;
             };
             let mut j = Jac3xC::zeros();
             let mut ok = true;
-            for i in 0..N_PARAMS {
-                if !active[i] {
-                    continue;
-                }
-                match (
-                    whitened(&plus[i], pair, lm, rig),
-                    whitened(&minus[i], pair, lm, rig),
-                ) {
-                    (Some(a), Some(b)) => j.set_column(i, &((a - b) / (2.0 * step[i]))),
-                    _ => ok = false,
+            for (i, d) in displaced.iter().enumerate() {
+                if let Some((moved, h)) = d {
+                    match whitened(moved, &rot, pair, lm, rig) {
+                        Some(a) => j.set_column(i, &((a - r) / *h)),
+                        None => ok = false,
+                    }
                 }
             }
             if !ok {
@@ -305,10 +327,12 @@ fn linearise(
 
 /// The robust cost at `c`.
 fn cost_at(c: &CameraParams, pairs: &[FramePair], rig: &Rig, huber_k: f64) -> f64 {
+    let prep = Prepared::new(c);
     let mut cost = 0.0;
     for pair in pairs {
+        let rot = rot_z(pair.motion.dtheta);
         for lm in &pair.landmarks {
-            if let Some(r) = whitened(c, pair, lm, rig) {
+            if let Some(r) = whitened(&prep, &rot, pair, lm, rig) {
                 cost += huber(r.norm(), huber_k).1;
             }
         }
@@ -451,8 +475,8 @@ pub fn calibrate(
     for p in &rig.estimate {
         estimated[p.index()] = true;
     }
-    let lin = linearise(&c, pairs, rig, settings.huber, &estimated);
-    let report = observability(&lin.h, rig, pairs, &c, settings);
+    let lin0 = linearise(&c, pairs, rig, settings.huber, &estimated);
+    let report = observability(&lin0.h, rig, pairs, &c, settings);
     let mut active = [false; N_PARAMS];
     for p in report.params.iter().filter(|p| p.observable) {
         active[p.param.index()] = true;
@@ -469,7 +493,7 @@ pub fn calibrate(
             .sum()
     };
     let mut history = alloc::vec![c.to_vector()];
-    let mut status = if lin.residuals == 0 {
+    let mut status = if lin0.residuals == 0 {
         SolveStatus::NoData
     } else {
         SolveStatus::MaxIterations
@@ -477,7 +501,12 @@ pub fn calibrate(
     let mut iterations = 0;
     let mut lambda = 1e-3;
     if status != SolveStatus::NoData && active.iter().any(|&a| a) {
-        let mut lin = linearise(&c, pairs, rig, settings.huber, &active);
+        let start_changed = report.params.iter().any(|p| !p.observable);
+        let mut lin = if start_changed {
+            linearise(&c, pairs, rig, settings.huber, &active)
+        } else {
+            lin0
+        };
         let mut cost = lin.cost + prior_cost(&c.to_vector());
         'outer: while iterations < settings.max_iterations {
             iterations += 1;
@@ -510,9 +539,9 @@ pub fn calibrate(
                     c = candidate;
                     lambda = (lambda * 0.1).max(1e-9);
                     history.push(c.to_vector());
-                    lin = linearise(&c, pairs, rig, settings.huber, &active);
                     cost = new_cost;
-                    let cov = covariance(&(lin.h + Mat10::from_diagonal(&prior)), &active);
+                    // Converged when every step is a small fraction of the parameter's sigma.
+                    let cov = covariance(&h, &active);
                     let small = (0..N_PARAMS).all(|i| {
                         !active[i]
                             || libm::fabs(step[i])
@@ -522,6 +551,7 @@ pub fn calibrate(
                         status = SolveStatus::Converged;
                         break 'outer;
                     }
+                    lin = linearise(&c, pairs, rig, settings.huber, &active);
                     break;
                 }
                 lambda *= 10.0;

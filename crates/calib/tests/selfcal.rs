@@ -132,8 +132,13 @@ fn tilted_camera_with_turns_recovers_f_and_baseline() {
     let data = pairs(&truth, 0.3, 1, 200);
     let cal = calibrate(&data, &rig, &nominal, &SolverSettings::default());
     println!(
-        "{:?} {} {} {} {:?}",
-        cal.status, cal.camera.f, cal.camera.baseline, cal.reduced_chi2, cal.observability
+        "{:?} after {} iterations ({} accepted): f {} baseline {} chi2/dof {}",
+        cal.status,
+        cal.iterations,
+        cal.history.len() - 1,
+        cal.camera.f,
+        cal.camera.baseline,
+        cal.reduced_chi2
     );
     assert!(matches!(cal.status, SolveStatus::Converged));
     assert!(cal.observability.unobservable().next().is_none());
