@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 
 mod fpga;
 mod harris;
+mod simulate;
 
 /// Ceiling-lamp stereo navigation for autonomous forklifts.
 #[derive(Debug, Parser)]
@@ -25,6 +26,9 @@ enum Command {
     Harris(harris::Args),
     /// The board's feature stream (board-icd.md section 3).
     Fpga(fpga::Args),
+    /// Simulate a scenario (seeded) and write a vehicle log, optionally the nominal rig file
+    /// and the ground truth.
+    Simulate(simulate::Args),
 }
 
 /// Parses the command line; a usage error becomes one line on stderr and exit status 2, while
@@ -61,6 +65,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Harris(args) => harris::run(&args),
         Command::Fpga(args) => fpga::run(&args),
+        Command::Simulate(args) => simulate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

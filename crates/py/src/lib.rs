@@ -15,6 +15,7 @@
 #![deny(missing_docs)]
 
 mod rig;
+mod simulation;
 mod stream;
 
 use std::borrow::Cow;
@@ -217,6 +218,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rig::triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(rig::load_rig, m)?)?;
     m.add_function(wrap_pyfunction!(rig::camera_parameter_names, m)?)?;
+    m.add_class::<simulation::SimRun>()?;
+    m.add_function(wrap_pyfunction!(simulation::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(stream::encode_packet, m)?)?;
     Ok(())
 }

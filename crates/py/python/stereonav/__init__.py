@@ -27,6 +27,7 @@ import numpy.typing as npt
 from . import _native
 from ._errors import Error, InputError, InputTypeError
 from .board_stream import Frame, StreamDecoder, StreamStats, encode_packet
+from .simulation import ODOMETRY_DTYPE, TRAJECTORY_DTYPE, Simulation, simulate
 from .rig import (
     CAMERA_PARAMETERS,
     Camera,
@@ -39,6 +40,10 @@ from .rig import (
 )
 
 __all__ = [
+    "ODOMETRY_DTYPE",
+    "TRAJECTORY_DTYPE",
+    "Simulation",
+    "simulate",
     "CAMERA_PARAMETERS",
     "Camera",
     "Projection",

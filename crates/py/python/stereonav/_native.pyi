@@ -11,7 +11,9 @@ import numpy.typing as npt
 __all__ = [
     "__version__",
     "FEATURE_RECORD_BYTES",
+    "SimRun",
     "StreamDecoder",
+    "simulate",
     "camera_parameter_names",
     "load_rig",
     "project",
@@ -84,3 +86,39 @@ def load_rig(
 
 def camera_parameter_names() -> list[str]:
     """The ten camera parameter names in array order."""
+
+@final
+class SimRun:
+    """One simulated run (see ``stereonav.Simulation``)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def mode(self) -> str: ...
+    @property
+    def camera(self) -> _F64: ...
+    @property
+    def rig_toml(self) -> str: ...
+    @property
+    def frame_t_us(self) -> npt.NDArray[np.uint64]: ...
+    @property
+    def frame_poses(self) -> _F64: ...
+    @property
+    def visible(self) -> npt.NDArray[np.uint64]: ...
+    @property
+    def landmarks(self) -> _F64: ...
+    @property
+    def odometry(self) -> _F64: ...
+    @property
+    def odometry_truth(self) -> _F64: ...
+    @property
+    def stream(self) -> bytes: ...
+    def truth_json(self) -> str:
+        """Ground truth as JSON."""
+    def write_log(self, path: str) -> None:
+        """Write the vehicle log (MCAP)."""
+
+def simulate(scenario: str, rendered: bool, seed: int | None = None) -> SimRun:
+    """Simulate a scenario file; raises ``stereonav.InputError``."""
