@@ -232,3 +232,37 @@ fn no_data_returns_the_nominal_values() {
     assert_eq!(cal.status, SolveStatus::NoData);
     assert_eq!(cal.camera, nominal);
 }
+
+#[test]
+fn incremental_calibration_becomes_stable_and_hands_over() {
+    use calib::selfcal::{SelfCalibrator, StableRule};
+    let truth = true_camera(0.3);
+    let mut nominal = truth;
+    nominal.f = 680.0;
+    nominal.baseline = 0.118;
+    let rule = StableRule {
+        min_pairs: 100,
+        ..StableRule::default()
+    };
+    let mut cal = SelfCalibrator::new(
+        rig(nominal, &[Param::F, Param::Baseline]),
+        SolverSettings::default(),
+        rule,
+        20,
+    );
+    assert!(cal.handover().is_none());
+    for pair in pairs(&truth, 0.3, 4, 400) {
+        cal.add_pair(pair);
+    }
+    let hand = cal.handover().expect("stable within 400 pairs");
+    assert!(hand.t_us > 0 && cal.history().len() == 399 / 20);
+    let sigma_f = hand.covariance[(Param::F.index(), Param::F.index())].sqrt();
+    assert!(
+        (hand.camera.f - truth.f).abs() < 3.0 * sigma_f + 0.5,
+        "f {}",
+        hand.camera.f
+    );
+    assert!((hand.camera.baseline - truth.baseline).abs() < 0.0015);
+    // Stability needs the parameters to have settled: not before the minimum number of pairs.
+    assert!(hand.t_us >= 50_000 * 100);
+}
