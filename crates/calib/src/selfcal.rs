@@ -19,12 +19,12 @@
 
 use alloc::vec::Vec;
 
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
 use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, rot_z};
 use crate::config::Rig;
 use crate::odometry::Motion;
-use crate::rig::{Jac3xC, Measurement, triangulate};
+use crate::rig::{Measurement, triangulate};
 
 fn sq(x: f64) -> f64 {
     x * x
@@ -157,12 +157,6 @@ impl Calibration {
     }
 }
 
-/// One landmark pair's `E_L` and its covariance.
-struct Residual {
-    e: Vector3<f64>,
-    cov: Matrix3<f64>,
-}
-
 /// A camera with the rotations that every residual needs computed once.
 struct Prepared {
     c: CameraParams,
@@ -180,24 +174,49 @@ impl Prepared {
     }
 }
 
-fn residual(
+/// The whitened residual of one frame pair: `E_L` of every landmark seen at both instants,
+/// stacked, times the inverse Cholesky factor of their joint covariance.
+///
+/// The covariance is the triangulation noise of each landmark at both instants (independent
+/// between landmarks) plus the odometry noise of the pair's motion, which is *shared* by all
+/// its landmarks: treating the landmarks as independent would count the odometry error once
+/// per landmark and make the sigmas of `C` too small.
+///
+/// Whitening with the covariance *at the same* `C` matters too: the triangulated points, and
+/// so `E_L` and its covariance, scale with `f` (depth) and `B` (everything); measured in units
+/// of its own uncertainty the error is unchanged by such a scaling unless the odometry's
+/// metric motion pins it. A fixed weight would instead reward shrinking `f` or `B`.
+/// Returns `None` when a landmark cannot be triangulated or the covariance is singular.
+fn whitened(
     prep: &Prepared,
     rot: &Matrix3<f64>,
     pair: &FramePair,
-    lm: &LandmarkPair,
     rig: &Rig,
-) -> Option<Residual> {
+) -> Option<DVector<f64>> {
     let c = &prep.c;
-    let t0 = triangulate(c, &lm.first).ok()?;
-    let t1 = triangulate(c, &lm.second).ok()?;
-    let rr = &prep.robot_from_rig;
-    let (l0, l1) = (prep.mount + rr * t0.p_in_rig, prep.mount + rr * t1.p_in_rig);
-    let m = &pair.motion;
-    let rl1 = rot * l1;
-    let e = l0 - (rl1 + Vector3::new(m.dx, m.dy, 0.0));
+    let k = pair.landmarks.len();
+    let mut e = DVector::zeros(3 * k);
+    let mut cov = DMatrix::zeros(3 * k, 3 * k);
+    let mut g = DMatrix::zeros(3 * k, 3); // dE / d(dx, dy, dtheta)
     let sigma2 = sq(rig.noise.pixel);
-    let (j0, j1) = (rr * t0.jac_measurement, rot * rr * t1.jac_measurement);
-    let mut cov = (j0 * j0.transpose() + j1 * j1.transpose()) * sigma2;
+    let rr = &prep.robot_from_rig;
+    let m = &pair.motion;
+    for (i, lm) in pair.landmarks.iter().enumerate() {
+        let t0 = triangulate(c, &lm.first).ok()?;
+        let t1 = triangulate(c, &lm.second).ok()?;
+        let (l0, l1) = (prep.mount + rr * t0.p_in_rig, prep.mount + rr * t1.p_in_rig);
+        let rl1 = rot * l1;
+        let ei = l0 - (rl1 + Vector3::new(m.dx, m.dy, 0.0));
+        let (j0, j1) = (rr * t0.jac_measurement, rot * rr * t1.jac_measurement);
+        let ci = (j0 * j0.transpose() + j1 * j1.transpose()) * sigma2;
+        e.fixed_rows_mut::<3>(3 * i).copy_from(&ei);
+        cov.fixed_view_mut::<3, 3>(3 * i, 3 * i).copy_from(&ci);
+        g[(3 * i, 0)] = -1.0;
+        g[(3 * i + 1, 1)] = -1.0;
+        // dE/d(dtheta) = -dRz/dtheta L1 = ((R L1).y, -(R L1).x, 0).
+        g[(3 * i, 2)] = rl1.y;
+        g[(3 * i + 1, 2)] = -rl1.x;
+    }
     // Odometry noise: white velocity noise per sample, held for the sample period.
     if m.samples > 0 {
         #[allow(clippy::cast_precision_loss)]
@@ -205,33 +224,14 @@ fn residual(
         let period = m.dt_s / n;
         let var_t = sq(rig.noise.velocity * period) * n;
         let var_theta = sq(rig.noise.yaw_rate * period) * n;
-        // dE/d(dtheta) = -dRz/dtheta L1 = ((R L1).y, -(R L1).x, 0).
-        let de_dtheta = Vector3::new(rl1.y, -rl1.x, 0.0);
-        cov[(0, 0)] += var_t;
-        cov[(1, 1)] += var_t;
-        cov += de_dtheta * de_dtheta.transpose() * var_theta;
+        let motion_cov = Matrix3::from_diagonal(&Vector3::new(var_t, var_t, var_theta));
+        cov += &g * motion_cov * g.transpose();
     }
-    e.iter()
-        .all(|v| v.is_finite())
-        .then_some(Residual { e, cov })
-}
-
-/// The whitened residual `r = chol(Cov(E_L))^-1 E_L` of one landmark pair.
-///
-/// Whitening with the covariance *at the same* `C` matters: the triangulated points, and so
-/// `E_L` and its covariance, scale with `f` (depth) and `B` (everything); measured in units of
-/// its own uncertainty the error is unchanged by such a scaling unless the odometry's metric
-/// motion pins it. A fixed weight would instead reward shrinking `f` or `B`.
-fn whitened(
-    prep: &Prepared,
-    rot: &Matrix3<f64>,
-    pair: &FramePair,
-    lm: &LandmarkPair,
-    rig: &Rig,
-) -> Option<Vector3<f64>> {
-    let res = residual(prep, rot, pair, lm, rig)?;
-    let chol = res.cov.cholesky()?;
-    let r = chol.l().solve_lower_triangular(&res.e)?;
+    if !e.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let chol = cov.cholesky()?;
+    let r = chol.l().solve_lower_triangular(&e)?;
     r.iter().all(|v| v.is_finite()).then_some(r)
 }
 
@@ -291,50 +291,57 @@ fn linearise(
         }
     }
     for pair in pairs {
+        if pair.landmarks.is_empty() {
+            continue;
+        }
         let rot = rot_z(pair.motion.dtheta);
-        for lm in &pair.landmarks {
-            let Some(r) = whitened(&prep, &rot, pair, lm, rig) else {
-                continue;
-            };
-            let mut j = Jac3xC::zeros();
-            let mut ok = true;
-            for (i, d) in displaced.iter().enumerate() {
-                if let Some((moved, h)) = d {
-                    match whitened(moved, &rot, pair, lm, rig) {
-                        Some(a) => j.set_column(i, &((a - r) / *h)),
-                        None => ok = false,
-                    }
+        let Some(r) = whitened(&prep, &rot, pair, rig) else {
+            continue;
+        };
+        let mut j = DMatrix::zeros(r.len(), N_PARAMS);
+        let mut ok = true;
+        for (i, d) in displaced.iter().enumerate() {
+            if let Some((moved, h)) = d {
+                match whitened(moved, &rot, pair, rig) {
+                    Some(a) => j.set_column(i, &((a - &r) / *h)),
+                    None => ok = false,
                 }
             }
-            if !ok {
-                continue;
-            }
-            let d2 = r.norm_squared();
-            let (weight, cost) = huber(libm::sqrt(d2), huber_k);
-            if weight < 1.0 {
-                out.outliers += 1;
-            }
-            let jw = j.transpose() * weight;
-            out.h += jw * j;
-            out.g += jw * r;
-            out.cost += cost;
-            out.chi2 += d2;
-            out.residuals += 1;
         }
+        if !ok {
+            continue;
+        }
+        let d2 = r.norm_squared();
+        let (weight, cost) = huber(libm::sqrt(d2), pair_threshold(huber_k, pair));
+        if weight < 1.0 {
+            out.outliers += 1;
+        }
+        let jt = j.transpose() * weight;
+        out.h += Mat10::from_iterator((&jt * &j).iter().copied());
+        out.g += ParamVector::from_iterator((&jt * &r).iter().copied());
+        out.cost += cost;
+        out.chi2 += d2;
+        out.residuals += pair.landmarks.len();
     }
     out
+}
+
+/// Huber threshold of a frame pair: `huber_k` per landmark, grown with the pair's degrees of
+/// freedom so that a pair of `k` good landmarks sits as far inside it as one landmark does.
+fn pair_threshold(huber_k: f64, pair: &FramePair) -> f64 {
+    #[allow(clippy::cast_precision_loss)]
+    let k = pair.landmarks.len().max(1) as f64;
+    huber_k * libm::sqrt(k)
 }
 
 /// The robust cost at `c`.
 fn cost_at(c: &CameraParams, pairs: &[FramePair], rig: &Rig, huber_k: f64) -> f64 {
     let prep = Prepared::new(c);
     let mut cost = 0.0;
-    for pair in pairs {
+    for pair in pairs.iter().filter(|p| !p.landmarks.is_empty()) {
         let rot = rot_z(pair.motion.dtheta);
-        for lm in &pair.landmarks {
-            if let Some(r) = whitened(&prep, &rot, pair, lm, rig) {
-                cost += huber(r.norm(), huber_k).1;
-            }
+        if let Some(r) = whitened(&prep, &rot, pair, rig) {
+            cost += huber(r.norm(), pair_threshold(huber_k, pair)).1;
         }
     }
     cost
@@ -401,7 +408,7 @@ fn observability(
             scaled[(i, j)] = h_data[(i, j)] * si * sj;
         }
     }
-    let sub = nalgebra::DMatrix::from_fn(idx.len(), idx.len(), |a, b| scaled[(idx[a], idx[b])]);
+    let sub = DMatrix::from_fn(idx.len(), idx.len(), |a, b| scaled[(idx[a], idx[b])]);
     let mut eig: Vec<f64> = sub.symmetric_eigenvalues().iter().copied().collect();
     eig.sort_by(f64::total_cmp);
     report.information_eigenvalues = eig;
