@@ -19,7 +19,7 @@
 
 use alloc::vec::Vec;
 
-use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix3, SMatrix, Vector3};
 
 use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, rot_z};
 use crate::config::Rig;
@@ -174,65 +174,104 @@ impl Prepared {
     }
 }
 
-/// The whitened residual of one frame pair: `E_L` of every landmark seen at both instants,
-/// stacked, times the inverse Cholesky factor of their joint covariance.
+/// The whitened residual of one frame pair, written into `out` (cleared first): `E_L` of
+/// every landmark seen at both instants, whitened by their joint covariance.
 ///
-/// The covariance is the triangulation noise of each landmark at both instants (independent
-/// between landmarks) plus the odometry noise of the pair's motion, which is *shared* by all
-/// its landmarks: treating the landmarks as independent would count the odometry error once
-/// per landmark and make the sigmas of `C` too small.
+/// That covariance is the triangulation noise of each landmark at both instants (independent
+/// between landmarks, `D_i`) plus the odometry noise `M` of the pair's motion, which is
+/// *shared* by all its landmarks (`E = eps + G delta`, `delta ~ N(0, M)`): treating the
+/// landmarks as independent would count the odometry error once per landmark and make the
+/// sigmas of `C` too small. Rather than factor the dense `3k x 3k` matrix `D + G M G^T`, the
+/// shared motion error is solved for in closed form (variable projection): with
+/// `delta* = argmin sum |D_i^-1/2 (E_i - G_i delta)|^2 + |M^-1/2 delta|^2`, the vector
+/// `[D_i^-1/2 (E_i - G_i delta*) ..., M^-1/2 delta*]` has exactly `E^T (D + G M G^T)^-1 E` as
+/// its squared norm (a Schur complement), and only 3x3 systems are solved.
 ///
 /// Whitening with the covariance *at the same* `C` matters too: the triangulated points, and
 /// so `E_L` and its covariance, scale with `f` (depth) and `B` (everything); measured in units
 /// of its own uncertainty the error is unchanged by such a scaling unless the odometry's
 /// metric motion pins it. A fixed weight would instead reward shrinking `f` or `B`.
-/// Returns `None` when a landmark cannot be triangulated or the covariance is singular.
+/// Returns `false` when a landmark cannot be triangulated or a covariance is singular.
+/// Per-landmark pieces of [`whitened`]: `E_i`, the Cholesky factor of `D_i`, and `G_i`.
+type Block = (
+    Vector3<f64>,
+    nalgebra::Cholesky<f64, nalgebra::U3>,
+    Matrix3<f64>,
+);
+
+/// `blocks` is scratch space reused between calls (no allocation once grown).
 fn whitened(
     prep: &Prepared,
     rot: &Matrix3<f64>,
     pair: &FramePair,
     rig: &Rig,
-) -> Option<DVector<f64>> {
+    out: &mut Vec<f64>,
+    blocks: &mut Vec<Block>,
+) -> bool {
+    out.clear();
+    blocks.clear();
     let c = &prep.c;
-    let k = pair.landmarks.len();
-    let mut e = DVector::zeros(3 * k);
-    let mut cov = DMatrix::zeros(3 * k, 3 * k);
-    let mut g = DMatrix::zeros(3 * k, 3); // dE / d(dx, dy, dtheta)
     let sigma2 = sq(rig.noise.pixel);
     let rr = &prep.robot_from_rig;
     let m = &pair.motion;
-    for (i, lm) in pair.landmarks.iter().enumerate() {
-        let t0 = triangulate(c, &lm.first).ok()?;
-        let t1 = triangulate(c, &lm.second).ok()?;
+    // Per landmark: E_i, the Cholesky factor of D_i, and G_i (dE_i / d(dx, dy, dtheta)).
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for lm in &pair.landmarks {
+        let (Ok(t0), Ok(t1)) = (triangulate(c, &lm.first), triangulate(c, &lm.second)) else {
+            return false;
+        };
         let (l0, l1) = (prep.mount + rr * t0.p_in_rig, prep.mount + rr * t1.p_in_rig);
         let rl1 = rot * l1;
-        let ei = l0 - (rl1 + Vector3::new(m.dx, m.dy, 0.0));
+        let e = l0 - (rl1 + Vector3::new(m.dx, m.dy, 0.0));
         let (j0, j1) = (rr * t0.jac_measurement, rot * rr * t1.jac_measurement);
-        let ci = (j0 * j0.transpose() + j1 * j1.transpose()) * sigma2;
-        e.fixed_rows_mut::<3>(3 * i).copy_from(&ei);
-        cov.fixed_view_mut::<3, 3>(3 * i, 3 * i).copy_from(&ci);
-        g[(3 * i, 0)] = -1.0;
-        g[(3 * i + 1, 1)] = -1.0;
+        let d = (j0 * j0.transpose() + j1 * j1.transpose()) * sigma2;
         // dE/d(dtheta) = -dRz/dtheta L1 = ((R L1).y, -(R L1).x, 0).
-        g[(3 * i, 2)] = rl1.y;
-        g[(3 * i + 1, 2)] = -rl1.x;
+        let g = Matrix3::new(-1.0, 0.0, rl1.y, 0.0, -1.0, -rl1.x, 0.0, 0.0, 0.0);
+        let Some(chol) = d.cholesky() else {
+            return false;
+        };
+        let d_inv_g = chol.solve(&g);
+        a += g.transpose() * d_inv_g;
+        b += d_inv_g.transpose() * e;
+        blocks.push((e, chol, g));
     }
     // Odometry noise: white velocity noise per sample, held for the sample period.
-    if m.samples > 0 {
+    let motion_var = if m.samples > 0 {
         #[allow(clippy::cast_precision_loss)]
         let n = m.samples as f64;
         let period = m.dt_s / n;
-        let var_t = sq(rig.noise.velocity * period) * n;
-        let var_theta = sq(rig.noise.yaw_rate * period) * n;
-        let motion_cov = Matrix3::from_diagonal(&Vector3::new(var_t, var_t, var_theta));
-        cov += &g * motion_cov * g.transpose();
+        Vector3::new(
+            sq(rig.noise.velocity * period) * n,
+            sq(rig.noise.velocity * period) * n,
+            sq(rig.noise.yaw_rate * period) * n,
+        )
+    } else {
+        Vector3::zeros()
+    };
+    let mut delta = Vector3::zeros();
+    if motion_var.iter().all(|&v| v > 0.0) {
+        a += Matrix3::from_diagonal(&motion_var.map(|v| 1.0 / v));
+        let Some(chol) = a.cholesky() else {
+            return false;
+        };
+        delta = chol.solve(&b);
     }
-    if !e.iter().all(|v| v.is_finite()) {
-        return None;
+    for (e, chol, g) in blocks.iter() {
+        let Some(w) = chol.l().solve_lower_triangular(&(e - g * delta)) else {
+            return false;
+        };
+        out.extend_from_slice(w.as_slice());
     }
-    let chol = cov.cholesky()?;
-    let r = chol.l().solve_lower_triangular(&e)?;
-    r.iter().all(|v| v.is_finite()).then_some(r)
+    if motion_var.iter().all(|&v| v > 0.0) {
+        out.extend(
+            delta
+                .iter()
+                .zip(motion_var.iter())
+                .map(|(d, v)| d / libm::sqrt(*v)),
+        );
+    }
+    out.iter().all(|v| v.is_finite())
 }
 
 /// Huber weight and cost of a whitened residual of norm `d`.
@@ -290,35 +329,55 @@ fn linearise(
             displaced[i] = Some((Prepared::new(&moved), h));
         }
     }
+    let mut r = Vec::new();
+    let mut blocks = Vec::new();
+    let mut moved_r: [Vec<f64>; N_PARAMS] = Default::default();
     for pair in pairs {
         if pair.landmarks.is_empty() {
             continue;
         }
         let rot = rot_z(pair.motion.dtheta);
-        let Some(r) = whitened(&prep, &rot, pair, rig) else {
+        if !whitened(&prep, &rot, pair, rig, &mut r, &mut blocks) {
             continue;
-        };
-        let mut j = DMatrix::zeros(r.len(), N_PARAMS);
-        let mut ok = true;
-        for (i, d) in displaced.iter().enumerate() {
-            if let Some((moved, h)) = d {
-                match whitened(moved, &rot, pair, rig) {
-                    Some(a) => j.set_column(i, &((a - &r) / *h)),
-                    None => ok = false,
-                }
-            }
         }
+        let ok = displaced
+            .iter()
+            .zip(moved_r.iter_mut())
+            .all(|(d, buf)| match d {
+                Some((moved, _)) => {
+                    whitened(moved, &rot, pair, rig, buf, &mut blocks) && buf.len() == r.len()
+                }
+                None => true,
+            });
         if !ok {
             continue;
         }
-        let d2 = r.norm_squared();
+        let d2: f64 = r.iter().map(|v| v * v).sum();
         let (weight, cost) = huber(libm::sqrt(d2), pair_threshold(huber_k, pair));
         if weight < 1.0 {
             out.outliers += 1;
         }
-        let jt = j.transpose() * weight;
-        out.h += Mat10::from_iterator((&jt * &j).iter().copied());
-        out.g += ParamVector::from_iterator((&jt * &r).iter().copied());
+        // J[k, i] = (r_i[k] - r[k]) / h_i for the active parameters.
+        for i in 0..N_PARAMS {
+            let Some((_, hi)) = &displaced[i] else {
+                continue;
+            };
+            let ji = |k: usize| (moved_r[i][k] - r[k]) / hi;
+            out.g[i] += weight * (0..r.len()).map(|k| ji(k) * r[k]).sum::<f64>();
+            for j in i..N_PARAMS {
+                let Some((_, hj)) = &displaced[j] else {
+                    continue;
+                };
+                let v = weight
+                    * (0..r.len())
+                        .map(|k| ji(k) * (moved_r[j][k] - r[k]) / hj)
+                        .sum::<f64>();
+                out.h[(i, j)] += v;
+                if i != j {
+                    out.h[(j, i)] += v;
+                }
+            }
+        }
         out.cost += cost;
         out.chi2 += d2;
         out.residuals += pair.landmarks.len();
@@ -338,10 +397,13 @@ fn pair_threshold(huber_k: f64, pair: &FramePair) -> f64 {
 fn cost_at(c: &CameraParams, pairs: &[FramePair], rig: &Rig, huber_k: f64) -> f64 {
     let prep = Prepared::new(c);
     let mut cost = 0.0;
+    let mut r = Vec::new();
+    let mut blocks = Vec::new();
     for pair in pairs.iter().filter(|p| !p.landmarks.is_empty()) {
         let rot = rot_z(pair.motion.dtheta);
-        if let Some(r) = whitened(&prep, &rot, pair, rig) {
-            cost += huber(r.norm(), pair_threshold(huber_k, pair)).1;
+        if whitened(&prep, &rot, pair, rig, &mut r, &mut blocks) {
+            let norm = libm::sqrt(r.iter().map(|v| v * v).sum::<f64>());
+            cost += huber(norm, pair_threshold(huber_k, pair)).1;
         }
     }
     cost
@@ -507,6 +569,7 @@ pub fn calibrate(
     };
     let mut iterations = 0;
     let mut lambda = 1e-3;
+    let mut last_lin = None;
     if status != SolveStatus::NoData && active.iter().any(|&a| a) {
         let start_changed = report.params.iter().any(|p| !p.observable);
         let mut lin = if start_changed {
@@ -569,8 +632,14 @@ pub fn calibrate(
                 }
             }
         }
+        last_lin = Some(lin);
     }
-    let lin = linearise(&c, pairs, rig, settings.huber, &estimated);
+    // The last linearisation serves for the covariance when it covers every estimated
+    // parameter (the final step, below 1 % of a sigma, does not change it measurably).
+    let lin = match last_lin {
+        Some(lin) if active == estimated => lin,
+        _ => linearise(&c, pairs, rig, settings.huber, &estimated),
+    };
     let covariance = covariance(&(lin.h + Mat10::from_diagonal(&prior)), &active);
     let dof = (3 * lin.residuals).saturating_sub(active.iter().filter(|&&a| a).count());
     #[allow(clippy::cast_precision_loss)]
