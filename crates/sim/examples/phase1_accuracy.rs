@@ -3,36 +3,11 @@
 //! `cargo run --release -p sim --example phase1_accuracy -- fixtures/scenarios/paper-calibration.toml 20`.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
-use std::collections::HashMap;
 use std::path::Path;
 use std::process::ExitCode;
 
-use calib::odometry::{OdomSample, integrate};
-use calib::selfcal::{FramePair, LandmarkPair, SolverSettings, calibrate};
-use calib::{Measurement, Param};
-
-fn measurements(frame: &sim::FrameTruth) -> HashMap<u32, Measurement> {
-    let right: HashMap<u32, &sim::SimFeature> = frame
-        .right
-        .features
-        .iter()
-        .filter_map(|f| Some((f.lamp?, f)))
-        .collect();
-    frame
-        .left
-        .features
-        .iter()
-        .filter_map(|l| {
-            let id = l.lamp?;
-            let r = right.get(&id)?;
-            let q = |v: u16| f64::from(v) / 16.0;
-            Some((
-                id,
-                Measurement::new(q(l.x_q4), q(l.y_q4), q(r.x_q4), q(r.y_q4)),
-            ))
-        })
-        .collect()
-}
+use calib::Param;
+use calib::selfcal::{SolverSettings, calibrate};
 
 fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);
@@ -60,38 +35,7 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
-        let odo: Vec<OdomSample> = run
-            .odometry
-            .iter()
-            .map(|s| OdomSample {
-                t_us: s.t_us,
-                vx: s.vx,
-                vy: s.vy,
-                vtheta: s.vtheta,
-            })
-            .collect();
-        let mut pairs = Vec::new();
-        for w in run.frames.windows(stride + 1).step_by(stride + 1) {
-            let (first, last) = (&w[0], &w[stride]);
-            let (a, b) = (measurements(first), measurements(last));
-            let Some(motion) = integrate(&odo, first.t_us, last.t_us) else {
-                continue;
-            };
-            let landmarks = a
-                .iter()
-                .filter_map(|(id, za)| {
-                    Some(LandmarkPair {
-                        first: *za,
-                        second: *b.get(id)?,
-                    })
-                })
-                .collect();
-            pairs.push(FramePair {
-                t_us: last.t_us,
-                motion,
-                landmarks,
-            });
-        }
+        let pairs = sim::phase1::frame_pairs_by_lamp(&run, stride);
         let start = std::time::Instant::now();
         let cal = calibrate(
             &pairs,

@@ -35,6 +35,7 @@ mod error;
 pub mod features;
 pub mod link;
 pub mod motion;
+pub mod phase1;
 pub mod render;
 mod rng;
 pub mod run;

@@ -1,0 +1,101 @@
+//! Phase 1 (calib::selfcal) on the simulator's paper scenarios, with features associated by
+//! the simulator's lamp ids (association is tested with the navigator).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::Path;
+
+use calib::Param;
+use calib::selfcal::{SolveStatus, SolverSettings, calibrate};
+
+fn scenario(name: &str) -> sim::Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/scenarios")
+        .join(name);
+    sim::Scenario::load(&path).unwrap()
+}
+
+/// paper-calibration (tilted head, turns): f and baseline with honest sigmas, baseline within
+/// 1 mm. (The f-within-0.2 % over 20 seeds is not met yet: see docs/benchmarks.md.)
+#[test]
+fn paper_calibration_gives_f_and_baseline_with_honest_sigmas() {
+    let mut sc = scenario("paper-calibration.toml");
+    for seed in 0..4 {
+        sc.spec.seed = seed;
+        let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
+        let pairs = sim::phase1::frame_pairs_by_lamp(&run, 40);
+        let cal = calibrate(
+            &pairs,
+            &run.rig,
+            &run.rig.nominal,
+            &SolverSettings::default(),
+        );
+        assert_eq!(cal.status, SolveStatus::Converged, "seed {seed}");
+        assert!(
+            cal.observability.unobservable().next().is_none(),
+            "seed {seed}"
+        );
+        for p in [Param::F, Param::Baseline] {
+            let err = cal.camera.get(p) - run.camera.get(p);
+            assert!(
+                err.abs() <= 3.0 * cal.sigma(p),
+                "seed {seed}: {p} error {err} sigma {}",
+                cal.sigma(p)
+            );
+        }
+        let b_err = (cal.camera.baseline - run.camera.baseline).abs();
+        assert!(b_err < 0.001, "seed {seed}: baseline error {b_err}");
+        // The nominal values were a few percent off: the estimate must be far better.
+        let f_err = (cal.camera.f - run.camera.f).abs() / run.camera.f;
+        let f_nominal = (run.rig.nominal.f - run.camera.f).abs() / run.camera.f;
+        assert!(
+            f_err < f_nominal / 5.0,
+            "seed {seed}: f error {f_err} vs nominal {f_nominal}"
+        );
+    }
+}
+
+/// paper-experiment has the head straight up on a straight path: f, the camera height and
+/// the lateral offset cannot be had, and the report says why; the baseline still can.
+#[test]
+fn upward_head_on_a_straight_path_reports_the_traps() {
+    let sc = scenario("paper-experiment.toml");
+    let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
+    let mut rig = run.rig.clone();
+    rig.estimate = vec![Param::F, Param::Baseline, Param::MountY, Param::MountZ];
+    rig.prior[Param::F.index()] = Some(30.0);
+    rig.prior[Param::MountY.index()] = Some(0.05);
+    rig.prior[Param::MountZ.index()] = Some(0.05);
+    let pairs = sim::phase1::frame_pairs_by_lamp(&run, 10);
+    let cal = calibrate(&pairs, &rig, &rig.nominal, &SolverSettings::default());
+    let report = &cal.observability;
+    let reason = |p: Param| {
+        report
+            .params
+            .iter()
+            .find(|o| o.param == p)
+            .and_then(|o| o.reason)
+    };
+    assert!(
+        reason(Param::F).unwrap().contains("straight up"),
+        "{report:?}"
+    );
+    assert!(
+        reason(Param::MountZ).unwrap().contains("height"),
+        "{report:?}"
+    );
+    assert!(
+        reason(Param::MountY).unwrap().contains("straight path"),
+        "{report:?}"
+    );
+    assert!(reason(Param::Baseline).is_none(), "{report:?}");
+    for p in [Param::F, Param::MountY, Param::MountZ] {
+        assert_eq!(cal.camera.get(p), rig.nominal.get(p), "{p} held at nominal");
+    }
+    // This scenario's odometry has a 1 % scale error, which phase 1 (scale from odometry)
+    // inherits: the baseline comes out about 1 % off, not more.
+    let b_err = (cal.camera.baseline - run.camera.baseline).abs();
+    assert!(
+        b_err < 0.012 * run.camera.baseline,
+        "baseline error {b_err}"
+    );
+}
