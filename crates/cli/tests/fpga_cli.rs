@@ -2,23 +2,18 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
 
+mod common;
+
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{assert_one_line_error, stereonav};
 
 use fpga_link::{Encoder, Feature};
 use serde_json::{Value, json};
 
-fn stereonav(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_stereonav"))
-        .args(args)
-        .output()
-        .expect("stereonav runs")
-}
-
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stereonav-fpga-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir.join(name)
+    common::scratch("fpga-cli", name)
 }
 
 fn lines(out: &Output) -> Vec<Value> {
@@ -104,11 +99,8 @@ fn unreadable_input_is_one_line_and_non_zero() {
         (vec!["fpga", "encode"], "encode"),
     ] {
         let out = stereonav(&args);
-        assert!(!out.status.success(), "{args:?}");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
-        assert!(stderr.contains(needle), "{stderr:?} lacks {needle:?}");
-        assert!(out.stdout.is_empty());
+        assert_one_line_error(&out, needle);
+        assert!(out.stdout.is_empty(), "{args:?}");
     }
 }
 
@@ -199,10 +191,6 @@ fn emulated_board_stream_decodes_to_the_detector_output() {
             "cannot write",
         ),
     ] {
-        let out = stereonav(&args);
-        assert!(!out.status.success(), "{args:?}");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
-        assert!(stderr.contains(needle), "{stderr:?} lacks {needle:?}");
+        assert_one_line_error(&stereonav(&args), needle);
     }
 }

@@ -2,15 +2,11 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn stereonav(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_stereonav"))
-        .args(args)
-        .output()
-        .expect("the stereonav binary runs")
-}
+use std::path::{Path, PathBuf};
+
+use common::{assert_one_line_error, stereonav};
 
 fn fixture(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -21,25 +17,9 @@ fn fixture(name: &str) -> String {
 }
 
 fn scratch_dir(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stereonav-cli-{test}-{}", std::process::id()));
+    let dir = common::scratch(&format!("cli-{test}"), "");
     std::fs::create_dir_all(&dir).expect("temp dir");
     dir
-}
-
-/// The error contract: non-zero exit, nothing on stdout, exactly one line on stderr.
-fn assert_one_line_error(out: &Output, needle: &str) {
-    assert!(!out.status.success(), "expected failure");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(
-        stderr.trim_end().lines().count(),
-        1,
-        "one line, got: {stderr}"
-    );
-    assert!(
-        stderr.contains(needle),
-        "{stderr:?} should mention {needle:?}"
-    );
-    assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
 fn parse(stdout: &[u8]) -> Vec<(u16, u16, i32)> {

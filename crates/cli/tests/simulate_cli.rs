@@ -3,23 +3,18 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::stereonav;
 
 use serde_json::Value;
 use vehicle_log::Record;
 
-fn stereonav(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_stereonav"))
-        .args(args)
-        .output()
-        .expect("stereonav runs")
-}
-
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stereonav-simulate-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir.join(name)
+    common::scratch("simulate-cli", name)
 }
 
 fn fixture(name: &str) -> PathBuf {

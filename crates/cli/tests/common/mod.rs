@@ -1,0 +1,36 @@
+//! Helpers shared by the command-line tests.
+#![allow(dead_code, unreachable_pub, clippy::expect_used)] // test helpers; not every suite uses all
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// Runs the `stereonav` binary built for these tests.
+pub fn stereonav(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_stereonav"))
+        .args(args)
+        .output()
+        .expect("stereonav runs")
+}
+
+/// A file path in a scratch directory of this test process, per suite.
+pub fn scratch(suite: &str, name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("stereonav-{suite}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir.join(name)
+}
+
+/// The error contract: non-zero exit, exactly one line on stderr naming the problem, no panic.
+pub fn assert_one_line_error(out: &Output, needle: &str) {
+    assert!(!out.status.success(), "expected failure");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "one line, got: {stderr}"
+    );
+    assert!(
+        stderr.contains(needle),
+        "{stderr:?} should mention {needle:?}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
