@@ -3,6 +3,8 @@
 //! Box-Muller) so that Monte Carlo runs need no RNG crate and are identical on every run.
 #![allow(dead_code, unreachable_pub, clippy::unwrap_used, clippy::expect_used)] // test helpers
 
+pub mod synthetic;
+
 use calib::{CameraParams, Measurement, Mount, Pose2};
 use nalgebra::{Matrix3, Vector3};
 use proptest::prelude::*;
