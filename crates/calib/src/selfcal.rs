@@ -409,6 +409,15 @@ fn cost_at(c: &CameraParams, pairs: &[FramePair], rig: &Rig, huber_k: f64) -> f6
     cost
 }
 
+/// `true` at the rig's estimated parameters.
+fn estimated_mask(rig: &Rig) -> [bool; N_PARAMS] {
+    let mut mask = [false; N_PARAMS];
+    for p in &rig.estimate {
+        mask[p.index()] = true;
+    }
+    mask
+}
+
 /// Prior precision (inverse variance) of each parameter; zero for those not estimated.
 fn prior_precision(rig: &Rig, active: &[bool; N_PARAMS]) -> ParamVector {
     ParamVector::from_fn(|i, _| match (active[i], rig.prior[i]) {
@@ -452,10 +461,7 @@ fn observability(
     c: &CameraParams,
     settings: &SolverSettings,
 ) -> ObservabilityReport {
-    let mut estimated = [false; N_PARAMS];
-    for p in &rig.estimate {
-        estimated[p.index()] = true;
-    }
+    let estimated = estimated_mask(rig);
     let prior = prior_precision(rig, &estimated);
     let posterior = covariance(&(h_data + Mat10::from_diagonal(&prior)), &estimated);
     let total_rotation: f64 = pairs.iter().map(|p| libm::fabs(p.motion.dtheta)).sum();
@@ -540,10 +546,7 @@ pub fn calibrate(
     let nominal = rig.nominal.to_vector();
     let mut c = *start;
     // Observability at the start decides what is estimated.
-    let mut estimated = [false; N_PARAMS];
-    for p in &rig.estimate {
-        estimated[p.index()] = true;
-    }
+    let estimated = estimated_mask(rig);
     let lin0 = linearise(&c, pairs, rig, settings.huber, &estimated);
     let report = observability(&lin0.h, rig, pairs, &c, settings);
     let mut active = [false; N_PARAMS];

@@ -172,20 +172,7 @@ fn example_rig() -> Rig {
     Rig {
         width: 752,
         height: 480,
-        nominal: CameraParams {
-            f: 700.0,
-            cx: 376.0,
-            cy: 240.0,
-            baseline: 0.12,
-            mount: Mount {
-                x: 0.0,
-                y: 0.0,
-                z: 1.0,
-                roll: 0.0,
-                pitch: 0.0,
-                yaw: 0.0,
-            },
-        },
+        nominal: common::nominal_camera(),
         estimate: vec![Param::F, Param::Baseline],
         prior,
         noise: Noise {
