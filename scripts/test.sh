@@ -25,8 +25,11 @@ cargo clippy -p calib --no-default-features --features alloc --locked -- -D warn
 step "cargo test"
 cargo test --workspace --locked
 
-step "no_std proof: firmware crates linked into a #![no_std] staticlib with its own panic handler"
+step "no_std proof: firmware crates linked into a #![no_std] staticlib with its own panic handler, run from C"
 cargo build --locked --manifest-path ci/nostd-proof/Cargo.toml --target-dir target/nostd-proof
+cc -Wall -Wextra -Werror ci/nostd-proof/main.c target/nostd-proof/debug/libnostd_proof.a \
+    -o target/nostd-proof/run
+target/nostd-proof/run
 
 step "Python module (maturin develop --release) and pytest"
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \

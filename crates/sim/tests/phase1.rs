@@ -14,12 +14,14 @@ fn scenario(name: &str) -> sim::Scenario {
     sim::Scenario::load(&path).unwrap()
 }
 
-/// paper-calibration (tilted head, turns): f and baseline with honest sigmas, baseline within
-/// 1 mm. (The issue's f-within-0.2 % over 20 seeds is not met yet: see docs/benchmarks.md.)
+/// paper-calibration (Fig. 4: tilted head, turns), issue 5's targets over 20 seeds: from
+/// nominal f and baseline 3 % off, f within 0.2 % and baseline within 1 mm of the truth, and the
+/// error inside 3 sigma in at least 19 of 20 runs.
 #[test]
-fn paper_calibration_gives_f_and_baseline_with_honest_sigmas() {
+fn paper_calibration_meets_the_targets_over_20_seeds() {
     let mut sc = scenario("paper-calibration.toml");
-    for seed in 0..4 {
+    let mut inside = 0;
+    for seed in 0..20 {
         sc.spec.seed = seed;
         let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
         let pairs = sim::phase1::frame_pairs_by_lamp(&run, 40);
@@ -34,24 +36,17 @@ fn paper_calibration_gives_f_and_baseline_with_honest_sigmas() {
             cal.observability.unobservable().next().is_none(),
             "seed {seed}"
         );
-        for p in [Param::F, Param::Baseline] {
-            let err = cal.camera.get(p) - run.camera.get(p);
-            assert!(
-                err.abs() <= 3.0 * cal.sigma(p),
-                "seed {seed}: {p} error {err} sigma {}",
-                cal.sigma(p)
-            );
-        }
-        let b_err = (cal.camera.baseline - run.camera.baseline).abs();
-        assert!(b_err < 0.001, "seed {seed}: baseline error {b_err}");
-        // The nominal values were a few percent off: the estimate must be far better.
         let f_err = (cal.camera.f - run.camera.f).abs() / run.camera.f;
-        let f_nominal = (run.rig.nominal.f - run.camera.f).abs() / run.camera.f;
-        assert!(
-            f_err < f_nominal / 5.0,
-            "seed {seed}: f error {f_err} vs nominal {f_nominal}"
+        assert!(f_err <= 0.002, "seed {seed}: f error {f_err}");
+        let b_err = (cal.camera.baseline - run.camera.baseline).abs();
+        assert!(b_err <= 0.001, "seed {seed}: baseline error {b_err}");
+        inside += usize::from(
+            [Param::F, Param::Baseline]
+                .iter()
+                .all(|&p| (cal.camera.get(p) - run.camera.get(p)).abs() <= 3.0 * cal.sigma(p)),
         );
     }
+    assert!(inside >= 19, "error inside 3 sigma in {inside} of 20 runs");
 }
 
 /// paper-experiment has the head straight up on a straight path: f, the camera height and
