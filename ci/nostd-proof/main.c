@@ -8,6 +8,7 @@ int stereonav_nostd_harris_features(void);
 int stereonav_nostd_stream_round_trip(void);
 int stereonav_nostd_rig_round_trip(void);
 int stereonav_nostd_selfcal(void);
+int stereonav_nostd_tracking(void);
 
 /* The precompiled `alloc` of the stable toolchain refers to the unwinding personality routine
  * although the library is built with panic = "abort", so nothing ever unwinds: an empty
@@ -25,5 +26,6 @@ int main(void) {
     failed += check("stream round trip features", stereonav_nostd_stream_round_trip(), 2);
     failed += check("rig round trip lamps", stereonav_nostd_rig_round_trip(), 4);
     failed += check("phase-1 self-calibration recovers f", stereonav_nostd_selfcal(), 1);
+    failed += check("confirmed tracks of four lamps", stereonav_nostd_tracking(), 4);
     return failed == 0 ? 0 : 1;
 }

@@ -10,11 +10,12 @@ use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicUsize, Ordering};
 
 use alloc::vec::Vec;
-use calib::odometry::Motion;
+use calib::odometry::{Motion, OdomSample};
 use calib::selfcal::{FramePair, LandmarkPair, SolverSettings, calibrate};
 use calib::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, triangulate};
 use fpga_link::{Decoder, Event, Header, MAX_PACKET_LEN, encode_packet};
 use harris_core::{Feature, HarrisStream, Registers};
+use track::{FrontEnd, FrontEndSettings, Model, Pixel};
 use nalgebra::Vector3;
 
 /// Width of the test image: the detector's line buffers are sized for it at compile time.
@@ -204,6 +205,37 @@ pub extern "C" fn stereonav_nostd_selfcal() -> i32 {
     }
     let cal = calibrate(&pairs, &rig, &rig.nominal, &SolverSettings::default());
     i32::from(libm::fabs(cal.camera.f - truth.f) <= cal.sigma(Param::F))
+}
+
+/// The navigator's association as firmware would run it: four lamps seen over five frames of a
+/// creeping robot, matched left to right and tracked with the odometry. Returns the number of
+/// confirmed tracks in the last frame (4), or -1 on an error.
+#[unsafe(no_mangle)]
+pub extern "C" fn stereonav_nostd_tracking() -> i32 {
+    let rig = rig();
+    let Ok(mut front) = FrontEnd::new(Model::from_rig(&rig), FrontEndSettings::default()) else {
+        return -1;
+    };
+    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
+        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    let mut confirmed = 0;
+    for k in 0..5u32 {
+        let t_us = u64::from(k) * 50_000;
+        // 0.2 m/s forward, sampled at the frame times.
+        front.push_odometry(OdomSample { t_us, vx: 0.2, vy: 0.0, vtheta: 0.0 });
+        let pose = Pose2::new(0.01 * f64::from(k), 0.0, 0.0);
+        let (mut left, mut right) = (Vec::new(), Vec::new());
+        for lamp in &lamps {
+            let Ok(z) = project(&rig.nominal, &pose, lamp) else {
+                return -1;
+            };
+            left.push(Pixel { u: z[0], v: z[1] });
+            right.push(Pixel { u: z[2], v: z[3] });
+        }
+        let frame = front.push_frame(t_us, &left, &right);
+        confirmed = frame.observations.iter().filter(|o| o.confirmed).count();
+    }
+    i32::try_from(confirmed).unwrap_or(-1)
 }
 
 #[panic_handler]

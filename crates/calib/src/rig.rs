@@ -310,25 +310,39 @@ impl Triangulation {
     }
 }
 
-/// Triangulates one stereo measurement `(uL, vL, uR, vR)` into the rig frame:
-/// `zs = f B / (uL - uR)`, `xs = ((uL + uR) / 2 - cx) zs / f`, `ys = ((vL + vR) / 2 - cy) zs / f`.
-pub fn triangulate(c: &CameraParams, z: &Measurement) -> Result<Triangulation, RigError> {
+/// Whether [`triangulate`] accepts `c`: `f` and the baseline positive and finite, the principal
+/// point finite.
+pub(crate) fn check_triangulation_camera(c: &CameraParams) -> Result<(), RigError> {
     check_camera(c)?;
     if !(c.cx.is_finite() && c.cy.is_finite()) {
         return Err(RigError::NonFinite {
             what: "principal point",
         });
     }
+    Ok(())
+}
+
+/// The disparity `uL - uR` of a measurement that can be triangulated: an error for a
+/// non-finite row (vL or vR) or a disparity that is not positive.
+fn checked_disparity(z: &Measurement) -> Result<f64, RigError> {
     if z[1].is_nan() || z[3].is_nan() || z[1].is_infinite() || z[3].is_infinite() {
         return Err(RigError::NonFinite {
             what: "measurement row (vL or vR)",
         });
     }
-    let (ul, vl, ur, vr) = (z[0], z[1], z[2], z[3]);
-    let d = ul - ur;
+    let d = z[0] - z[2];
     if d.is_nan() || d <= 0.0 {
         return Err(RigError::NonPositiveDisparity { disparity_px: d });
     }
+    Ok(d)
+}
+
+/// Triangulates one stereo measurement `(uL, vL, uR, vR)` into the rig frame:
+/// `zs = f B / (uL - uR)`, `xs = ((uL + uR) / 2 - cx) zs / f`, `ys = ((vL + vR) / 2 - cy) zs / f`.
+pub fn triangulate(c: &CameraParams, z: &Measurement) -> Result<Triangulation, RigError> {
+    check_triangulation_camera(c)?;
+    let d = checked_disparity(z)?;
+    let (ul, vl, ur, vr) = (z[0], z[1], z[2], z[3]);
     let (f, b) = (c.f, c.baseline);
     let zs = f * b / d;
     let um = (ul + ur) / 2.0 - c.cx;
@@ -364,4 +378,93 @@ pub fn triangulate(c: &CameraParams, z: &Measurement) -> Result<Triangulation, R
         jac_measurement,
         jac_camera,
     })
+}
+
+/// A stereo measurement reduced to what [`triangulate`] uses of it: the mean column and row of
+/// the two images and the inverse of the disparity `d = uL - uR`, checked once.
+///
+/// None of it depends on `C`, so phase 1, which triangulates the same measurements under many
+/// trial `C`, reduces them once per solve and triangulates with multiplications only. The
+/// point is [`triangulate`]'s up to rounding (a unit test checks that they agree).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ReducedMeasurement {
+    /// `(uL + uR) / 2`, pixels.
+    pub(crate) u_mean_px: f64,
+    /// `(vL + vR) / 2`, pixels.
+    pub(crate) v_mean_px: f64,
+    /// `1 / (uL - uR)`, per pixel, positive.
+    pub(crate) inv_disparity: f64,
+}
+
+impl ReducedMeasurement {
+    /// The reduction of `(uL, vL, uR, vR)`, with [`triangulate`]'s errors for a non-finite row
+    /// or a disparity that is not positive.
+    pub(crate) fn new(z: &Measurement) -> Result<Self, RigError> {
+        let d = checked_disparity(z)?;
+        Ok(Self {
+            u_mean_px: (z[0] + z[2]) / 2.0,
+            v_mean_px: (z[1] + z[3]) / 2.0,
+            inv_disparity: 1.0 / d,
+        })
+    }
+
+    /// `B / d`: metres in the rig frame per pixel of the mean image position (and `zs / f`).
+    pub(crate) fn scale(&self, c: &CameraParams) -> f64 {
+        c.baseline * self.inv_disparity
+    }
+
+    /// The point in the rig frame, `(B / d) (u_mean - cx, v_mean - cy, f)`. Does not check
+    /// `c`: callers check it once with [`check_triangulation_camera`].
+    pub(crate) fn point_in_rig(&self, c: &CameraParams) -> Vector3<f64> {
+        Vector3::new(self.u_mean_px - c.cx, self.v_mean_px - c.cy, c.f) * self.scale(c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Mount;
+
+    #[test]
+    fn reduced_measurement_triangulates_as_triangulate_does() {
+        let c = CameraParams {
+            f: 702.0,
+            cx: 376.0,
+            cy: 240.0,
+            baseline: 0.1215,
+            mount: Mount::default(),
+        };
+        for z in [
+            Measurement::new(420.5, 100.25, 390.0, 100.75),
+            Measurement::new(10.0, 470.0, 9.5, 469.0),
+            Measurement::new(700.0, -3.0, 100.0, -2.0),
+        ] {
+            let (Ok(tri), Ok(reduced)) = (triangulate(&c, &z), ReducedMeasurement::new(&z)) else {
+                panic!("valid measurement {z:?}");
+            };
+            let p = reduced.point_in_rig(&c);
+            assert!(
+                (p - tri.p_in_rig).norm() <= 1e-14 * tri.p_in_rig.norm(),
+                "{p} {}",
+                tri.p_in_rig
+            );
+            assert!((reduced.scale(&c) - tri.jac_camera[(2, Param::F.index())]).abs() < 1e-16);
+        }
+        for z in [
+            Measurement::new(400.0, 240.0, 400.0, 240.0),
+            Measurement::new(f64::NAN, 240.0, 380.0, 240.0),
+            Measurement::new(400.0, f64::INFINITY, 380.0, 240.0),
+        ] {
+            let (Err(reduced), Err(full)) = (ReducedMeasurement::new(&z), triangulate(&c, &z))
+            else {
+                panic!("invalid measurement {z:?} accepted");
+            };
+            // Compared by kind: a NaN disparity is not equal to itself.
+            assert_eq!(
+                core::mem::discriminant(&reduced),
+                core::mem::discriminant(&full),
+                "{z:?}"
+            );
+        }
+    }
 }

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod calibrate;
 mod fpga;
 mod harris;
 mod simulate;
@@ -29,6 +30,10 @@ enum Command {
     /// Simulate a scenario (seeded) and write a vehicle log, optionally the nominal rig file
     /// and the ground truth.
     Simulate(simulate::Args),
+    /// Phase 1 on a vehicle log: self-calibrate the camera parameters in batch and print a
+    /// summary (value, sigma and nominal value of each estimated parameter, the hand-over
+    /// time); `--out` writes the whole result as JSON.
+    Calibrate(calibrate::Args),
 }
 
 /// Parses the command line; a usage error becomes one line on stderr and exit status 2, while
@@ -66,6 +71,7 @@ fn main() -> ExitCode {
         Command::Harris(args) => harris::run(&args),
         Command::Fpga(args) => fpga::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -77,10 +83,50 @@ fn main() -> ExitCode {
             {
                 return ExitCode::SUCCESS;
             }
-            let mut stderr = io::stderr().lock();
-            // One line: the chain of causes joined with ": ".
-            let _ = writeln!(stderr, "stereonav: error: {err:#}");
+            let _ = writeln!(io::stderr().lock(), "stereonav: error: {}", one_line(&err));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// The chain of causes joined with ": ", on one line. A cause whose text its parent's message
+/// already holds (errors that print their source and also return it from `source()`) is
+/// skipped, so that nothing is said twice.
+fn one_line(err: &anyhow::Error) -> String {
+    let mut message = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if message.contains(&text) {
+            continue;
+        }
+        if !message.is_empty() {
+            message.push_str(": ");
+        }
+        message.push_str(&text);
+    }
+    message.lines().map(str::trim).collect::<Vec<_>>().join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug)]
+    struct Leaf;
+    impl std::fmt::Display for Leaf {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("no such file")
+        }
+    }
+    impl std::error::Error for Leaf {}
+
+    #[test]
+    fn causes_join_on_one_line_without_repeats() {
+        let err = anyhow::Error::new(Leaf).context("cannot open a.mcap");
+        assert_eq!(one_line(&err), "cannot open a.mcap: no such file");
+        let err = anyhow::Error::new(Leaf).context("cannot open a.mcap: no such file");
+        assert_eq!(one_line(&err), "cannot open a.mcap: no such file");
+        let err = anyhow::anyhow!("two\n  lines").context("outer");
+        assert_eq!(one_line(&err), "outer: two lines");
     }
 }

@@ -14,6 +14,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+mod calibration;
 mod rig;
 mod simulation;
 mod stream;
@@ -221,6 +222,15 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::SimRun>()?;
     m.add_function(wrap_pyfunction!(simulation::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(stream::encode_packet, m)?)?;
+    m.add_class::<calibration::CalibrationResult>()?;
+    m.add_class::<calibration::SelfCalibrator>()?;
+    m.add_class::<calibration::LogCalibrationResult>()?;
+    m.add_function(wrap_pyfunction!(calibration::calibrate_log, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::integrate_odometry, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::frame_pairs, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::solver_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::stable_rule_defaults, m)?)?;
     Ok(())
 }
 

@@ -1,6 +1,6 @@
 //! Phase 1 on a simulated scenario over several seeds, associating features by the simulator's
 //! lamp ids (the navigator's association is not in this experiment):
-//! `cargo run --release -p sim --example phase1_accuracy -- fixtures/scenarios/paper-calibration.toml 20`.
+//! `cargo run --release -p sim --example phase1_accuracy -- fixtures/scenarios/paper-calibration.toml 20 [STRIDE] [disjoint|interleaved]`.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::path::Path;
@@ -12,12 +12,23 @@ use calib::selfcal::{SolverSettings, calibrate};
 fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);
     let Some(path) = args.next() else {
-        eprintln!("usage: phase1_accuracy SCENARIO.toml [SEEDS]");
+        eprintln!("usage: phase1_accuracy SCENARIO.toml [SEEDS] [STRIDE] [disjoint|interleaved]");
         return ExitCode::FAILURE;
     };
     let seeds: u64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(5);
     // Frames apart in each pair: more motion, more parallax per pair.
     let stride: usize = args.next().and_then(|s| s.parse().ok()).unwrap_or(1);
+    // Which frames are paired (track::PairingScheme).
+    let scheme = match args.next() {
+        None => track::PairingScheme::Disjoint,
+        Some(name) => match track::PairingScheme::from_name(&name) {
+            Some(s) => s,
+            None => {
+                eprintln!("unknown pairing scheme {name:?}: use disjoint or interleaved");
+                return ExitCode::FAILURE;
+            }
+        },
+    };
     let mut scenario = match sim::Scenario::load(Path::new(&path)) {
         Ok(s) => s,
         Err(e) => {
@@ -35,7 +46,7 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
-        let pairs = sim::phase1::frame_pairs_by_lamp(&run, stride);
+        let pairs = sim::phase1::frame_pairs_by_lamp_with(&run, scheme, stride);
         let start = std::time::Instant::now();
         let cal = calibrate(
             &pairs,
@@ -45,8 +56,14 @@ fn main() -> ExitCode {
         );
         let took = start.elapsed();
         let mut line = format!(
-            "seed {seed}: {:?} {} it, {} residuals, chi2/dof {:.2}, {:?}:",
-            cal.status, cal.iterations, cal.residuals, cal.reduced_chi2, took
+            "seed {seed}: {} {} pairs, {:?} {} it, {} residuals, chi2/dof {:.2}, {:?}:",
+            scheme.name(),
+            pairs.len(),
+            cal.status,
+            cal.iterations,
+            cal.residuals,
+            cal.reduced_chi2,
+            took
         );
         let mut ok = true;
         for p in &run.rig.estimate {

@@ -13,6 +13,13 @@ Corner detection (the camera board's detector, ``board-icd.md`` section 2, bit f
 The board's feature stream (``board-icd.md`` section 3): :class:`StreamDecoder` takes the raw
 bytes in any chunking and returns :class:`Frame` objects; :func:`encode_packet` writes packets.
 
+Phase 1, self-calibration of the camera parameters (:mod:`stereonav.calibration`):
+:func:`calibrate` solves frame pairs given as structured arrays (:data:`OBSERVATION_DTYPE`,
+:data:`MOTION_DTYPE`), which :func:`frame_pairs` builds from measurements with landmark ids
+and the odometry; :class:`SelfCalibrator` runs it pair by pair until it hands over to phase 2;
+:func:`calibrate_log` runs all of phase 1 on a vehicle log (MCAP) and returns a
+:class:`LogCalibration`.
+
 Exceptions derive from :class:`Error`: :class:`InputError` (also a ``ValueError``) for values
 out of range, :class:`InputTypeError` (also a ``TypeError``) for arguments of the wrong type.
 """
@@ -28,6 +35,23 @@ from . import _native
 from ._errors import Error, InputError, InputTypeError
 from .board_stream import Frame, StreamDecoder, StreamStats, encode_packet
 from .simulation import ODOMETRY_DTYPE, TRAJECTORY_DTYPE, Simulation, simulate
+from .calibration import (
+    MEASUREMENT_DTYPE,
+    MOTION_DTYPE,
+    OBSERVATION_DTYPE,
+    Calibration,
+    CalibrationHistory,
+    Correlation,
+    Handover,
+    LogCalibration,
+    Observability,
+    ParamObservability,
+    SelfCalibrator,
+    calibrate,
+    calibrate_log,
+    frame_pairs,
+    integrate_odometry,
+)
 from .rig import (
     CAMERA_PARAMETERS,
     Camera,
@@ -40,6 +64,21 @@ from .rig import (
 )
 
 __all__ = [
+    "MEASUREMENT_DTYPE",
+    "MOTION_DTYPE",
+    "OBSERVATION_DTYPE",
+    "Calibration",
+    "CalibrationHistory",
+    "Correlation",
+    "Handover",
+    "LogCalibration",
+    "Observability",
+    "ParamObservability",
+    "SelfCalibrator",
+    "calibrate",
+    "calibrate_log",
+    "frame_pairs",
+    "integrate_odometry",
     "ODOMETRY_DTYPE",
     "TRAJECTORY_DTYPE",
     "Simulation",

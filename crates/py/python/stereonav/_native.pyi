@@ -10,6 +10,15 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "CalibrationResult",
+    "LogCalibrationResult",
+    "SelfCalibrator",
+    "calibrate",
+    "calibrate_log",
+    "frame_pairs",
+    "integrate_odometry",
+    "solver_defaults",
+    "stable_rule_defaults",
     "FEATURE_RECORD_BYTES",
     "SimRun",
     "StreamDecoder",
@@ -122,3 +131,119 @@ class SimRun:
 
 def simulate(scenario: str, rendered: bool, seed: int | None = None) -> SimRun:
     """Simulate a scenario file; raises ``stereonav.InputError``."""
+
+_U64 = npt.NDArray[np.uint64]
+#: ``(pair (N,), uL0 vL0 uR0 vR0 uL1 vL1 uR1 vR1 (N, 8))``.
+_Observations = tuple[_U64, _F64]
+#: ``(t_us (P,), dx dy dtheta dt_s (P, 4), samples (P,))``.
+_Motions = tuple[_U64, _F64, _U64]
+#: ``(t_us (S,), vx vy vtheta (S, 3))``.
+_Odometry = tuple[_U64, _F64]
+#: ``(huber, max_iterations, step_tolerance, observable_ratio)``.
+_Settings = tuple[float, int, float, float]
+#: ``(min_pairs, sigma_fraction, step_fraction, consecutive)``.
+_Rule = tuple[int, float, float, int]
+#: ``(name, prior_sigma, data_sigma, posterior_sigma, observable, reason, structural)``.
+_ParamRecord = tuple[str, float, float, float, bool, "str | None", bool]
+#: ``(params, max_correlation (a, b, r) or None, eigenvalues)``.
+_Observability = tuple[list[_ParamRecord], "tuple[str, str, float] | None", _F64]
+#: ``(camera (10,), covariance (10, 10), t_us, observability)``.
+_Handover = tuple[_F64, _F64, int, _Observability]
+#: ``(t_us (K,), values (K, 10), sigmas (K, 10))``.
+_History = tuple[_U64, _F64, _F64]
+
+def solver_defaults() -> _Settings:
+    """The default solver settings ``(huber, max_iterations, step_tolerance, observable_ratio)``."""
+
+def stable_rule_defaults() -> _Rule:
+    """The default stability rule ``(min_pairs, sigma_fraction, step_fraction, consecutive)``."""
+
+@final
+class CalibrationResult:
+    """The result of a phase-1 solve (see ``stereonav.Calibration``)."""
+
+    @property
+    def camera(self) -> _F64: ...
+    @property
+    def covariance(self) -> _F64: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def residuals(self) -> int: ...
+    @property
+    def outliers(self) -> int: ...
+    @property
+    def reduced_chi2(self) -> float: ...
+    @property
+    def observability(self) -> _Observability: ...
+    @property
+    def history(self) -> _F64: ...
+
+def calibrate(
+    rig_json: str,
+    rig_source: str,
+    observations: _Observations,
+    motions: _Motions,
+    start: _F64 | None,
+    settings: _Settings,
+) -> CalibrationResult:
+    """Phase-1 batch solve of frame pairs as tables; raises ``stereonav.InputError``."""
+
+def integrate_odometry(odometry: _Odometry, t0_us: _U64, t1_us: _U64) -> tuple[_F64, _U64]:
+    """``(dx dy dtheta dt_s (P, 4), samples (P,))`` of each span; raises ``stereonav.InputError``."""
+
+def frame_pairs(
+    measurements: tuple[_U64, _U64, _F64], odometry: _Odometry, stride: int
+) -> tuple[_Observations, _Motions]:
+    """Frame pairs by landmark id from ``(t_us, id, uL vL uR vR (N, 4))``; raises
+    ``stereonav.InputError``."""
+
+@final
+class SelfCalibrator:
+    """Phase 1 fed pair by pair (see ``stereonav.SelfCalibrator``)."""
+
+    def __new__(
+        cls, rig_json: str, rig_source: str, settings: _Settings, rule: _Rule, solve_every: int
+    ) -> SelfCalibrator: ...
+    def add_pairs(self, observations: _Observations, motions: _Motions) -> int:
+        """Add frame pairs; return the number of solves they triggered."""
+    @property
+    def latest(self) -> CalibrationResult | None: ...
+    @property
+    def handover(self) -> _Handover | None: ...
+    @property
+    def history(self) -> _History: ...
+    @property
+    def pairs(self) -> int: ...
+
+@final
+class LogCalibrationResult:
+    """Phase 1 on a whole vehicle log (see ``stereonav.LogCalibration``)."""
+
+    @property
+    def calibration(self) -> CalibrationResult: ...
+    @property
+    def handover(self) -> _Handover | None: ...
+    @property
+    def history(self) -> _History: ...
+    @property
+    def counts(self) -> list[tuple[str, int]]: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def rig_source(self) -> str: ...
+
+def calibrate_log(
+    log_path: str,
+    rig_json: str | None,
+    rig_source: str,
+    stride: int,
+    pairing: str,
+    settings: _Settings,
+    rule: _Rule,
+    solve_every: int,
+) -> LogCalibrationResult:
+    """Phase 1 on a vehicle log (read, decode, associate, solve); raises
+    ``stereonav.InputError`` naming the file or the setting."""

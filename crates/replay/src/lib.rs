@@ -1,0 +1,343 @@
+//! Runs the navigation stack on a vehicle log (vehicle-interfaces.md section 4). For now one
+//! job: phase 1, self-calibration of the camera parameters, in batch over a whole log
+//! ([`calibrate_log`]).
+//!
+//! The steps, each a crate of its own:
+//!
+//! 1. **Read** the MCAP log (`vehicle-log`): `/fpga/features` chunks, `/odom` samples and the
+//!    optional `/rig`. A log cut short is read as far as it goes, with a warning.
+//! 2. **Decode** the board's byte stream (`fpga-link`): the chunks are concatenated in log
+//!    order and decoded; corrupt packets and lost frames are counted, never fatal.
+//! 3. **Order by data time.** A frame reaches the log tens of milliseconds after the odometry of
+//!    the same instant (exposure, read-out, the detector, the link), so log order is not
+//!    time order. Frames and odometry are each sorted by their own timestamp (`t_us`, one
+//!    clock) and merged, odometry first on a tie, so that every frame sees the odometry up to
+//!    its instant.
+//! 4. **Associate** (`track`): left-right matching, tracking with odometry prediction, and
+//!    phase 1's frame pairs from the confirmed tracks. The association uses the rig's nominal
+//!    parameters with their priors as uncertainty.
+//! 5. **Calibrate** (`calib::selfcal`): once in batch over every pair (the result), and fed pair
+//!    by pair to a [`SelfCalibrator`] to find when the estimate became stable: the hand-over
+//!    time at which the vehicle would have switched to phase 2. The incremental solver stops at
+//!    the hand-over.
+//!
+//! Errors are one line naming the file and the problem ([`Error`]); nothing here panics on any
+//! input.
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+mod error;
+
+use std::path::{Path, PathBuf};
+
+use calib::camera::ParamVector;
+use calib::config::Rig;
+use calib::odometry::OdomSample;
+use calib::selfcal::{
+    Calibration, FramePair, Handover, SelfCalibrator, SolveStatus, SolverSettings, StableRule,
+    calibrate,
+};
+use fpga_link::{Decoder, Event};
+use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel};
+use vehicle_log::Record;
+
+pub use error::Error;
+
+/// How the replay associates and calibrates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// Stereo matching and tracking.
+    pub front_end: FrontEndSettings,
+    /// Phase 1's frame pairs.
+    pub pairs: PairSettings,
+    /// The phase-1 solver.
+    pub solver: SolverSettings,
+    /// When the incremental calibration counts as stable (hand-over to phase 2).
+    pub stable: StableRule,
+    /// The incremental calibrator re-solves every this many pairs.
+    pub solve_every: usize,
+}
+
+impl Default for Options {
+    /// The crates' defaults; the incremental calibrator re-solves every 10 pairs (20 s of
+    /// driving at the default 40 frames between the frames of a pair).
+    fn default() -> Self {
+        Self {
+            front_end: FrontEndSettings::default(),
+            pairs: PairSettings::default(),
+            solver: SolverSettings::default(),
+            stable: StableRule::default(),
+            solve_every: 10,
+        }
+    }
+}
+
+/// Where the rig came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RigSource {
+    /// Given by the caller (a rig file).
+    Given,
+    /// The log's `/rig` message.
+    Log,
+}
+
+/// What the replay counted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+pub struct Counts {
+    /// Good packets (stereo frames) decoded.
+    pub frames: u64,
+    /// Packets rejected by the decoder.
+    pub corrupt: u64,
+    /// Frames lost (gaps in the board's frame counter).
+    pub lost: u64,
+    /// Bytes of the stream that were not part of a good packet.
+    pub bytes_skipped: u64,
+    /// Frames whose timestamp was earlier than the frame before it in the stream (sorted).
+    pub frames_out_of_order: u64,
+    /// Odometry samples.
+    pub odometry: u64,
+    /// Stereo measurements (left-right matches) over all frames.
+    pub stereo_matches: u64,
+    /// Tracks started.
+    pub tracks: u64,
+    /// Tracks confirmed.
+    pub confirmed_tracks: u64,
+    /// Frame pairs built for phase 1.
+    pub pairs: u64,
+    /// Landmark pairs in them.
+    pub landmark_pairs: u64,
+    /// Frames at which the odometry was missing, so that every track was restarted.
+    pub tracker_resets: u64,
+}
+
+/// Phase 1 on a whole log.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogCalibration {
+    /// The rig used: nominal parameters, what is estimated, priors, noise.
+    pub rig: Rig,
+    /// Where it came from.
+    pub rig_source: RigSource,
+    /// The batch calibration over every frame pair of the log.
+    pub calibration: Calibration,
+    /// The incremental calibration's hand-over to phase 2, when it became stable.
+    pub handover: Option<Handover>,
+    /// `(t_us, parameters, sigmas)` after each incremental solve, up to the hand-over.
+    pub history: Vec<(u64, ParamVector, ParamVector)>,
+    /// What was read, decoded, associated and paired.
+    pub counts: Counts,
+    /// Things that did not stop the replay but limit what it says (a truncated log, no
+    /// odometry, a solve that did not converge), one line each.
+    pub warnings: Vec<String>,
+}
+
+/// One decoded stereo frame.
+#[derive(Debug, Clone)]
+struct DecodedFrame {
+    t_us: u64,
+    left: Vec<Pixel>,
+    right: Vec<Pixel>,
+}
+
+/// Decodes the concatenated chunks; returns the frames in stream order and the counters.
+fn decode(chunks: &[&[u8]], counts: &mut Counts) -> Vec<DecodedFrame> {
+    let mut decoder = Decoder::new();
+    let mut frames = Vec::new();
+    let mut take = |event: Option<Event<'_>>| -> bool {
+        match event {
+            Some(Event::Frame(f)) => {
+                let px = |x: fpga_link::Feature| Pixel::from_q4(x.x_q4, x.y_q4);
+                frames.push(DecodedFrame {
+                    t_us: f.t_us(),
+                    left: f.left().map(px).collect(),
+                    right: f.right().map(px).collect(),
+                });
+                true
+            }
+            Some(Event::Corrupt(_)) => true,
+            None => false,
+        }
+    };
+    for chunk in chunks {
+        let mut rest: &[u8] = chunk;
+        loop {
+            let (used, event) = decoder.decode(rest);
+            rest = rest.get(used..).unwrap_or_default();
+            if !take(event) {
+                break;
+            }
+        }
+    }
+    while take(decoder.decode_end()) {}
+    let stats = decoder.stats();
+    counts.frames = stats.packets;
+    counts.corrupt = stats.corrupt;
+    counts.lost = stats.lost;
+    counts.bytes_skipped = stats.bytes_skipped;
+    frames
+}
+
+/// Phase 1 in batch on the vehicle log at `path`.
+///
+/// `rig` is the rig file's content; without it the log's `/rig` message is used. Errors: the
+/// file cannot be read or is not MCAP, it is an MCAP file without the vehicle topics, a
+/// vehicle message is malformed, there is no rig, or `options` are out of range. A log cut
+/// short, a stream with corrupt packets, or a log with too little data for a calibration are
+/// not errors: the result says so in its counts, warnings and [`Calibration::status`].
+pub fn calibrate_log(
+    path: impl AsRef<Path>,
+    rig: Option<Rig>,
+    options: &Options,
+) -> Result<LogCalibration, Error> {
+    let path = path.as_ref();
+    let log = vehicle_log::read_log(path)?;
+    if !log.has_vehicle_topics() {
+        return Err(Error::NotVehicleLog {
+            path: path.to_path_buf(),
+            topics: log.ignored_topics.clone(),
+        });
+    }
+    let mut warnings = Vec::new();
+    if let Some(why) = &log.truncated {
+        warnings.push(format!(
+            "the log ends early ({why}): calibrated on what could be read"
+        ));
+    }
+    warnings.extend(log.warnings.iter().cloned());
+
+    let mut chunks: Vec<&[u8]> = Vec::new();
+    let mut odometry: Vec<OdomSample> = Vec::new();
+    let mut logged_rig: Option<&str> = None;
+    for record in &log.records {
+        match record {
+            Record::Features { bytes, .. } => chunks.push(bytes),
+            Record::Odom(s) => odometry.push(OdomSample {
+                t_us: s.t_us,
+                vx: s.vx,
+                vy: s.vy,
+                vtheta: s.vtheta,
+            }),
+            // The first /rig counts (the rig is logged once, at the start).
+            Record::Rig(text) if logged_rig.is_none() => logged_rig = Some(text),
+            _ => {}
+        }
+    }
+    let (rig, rig_source) = choose_rig(path, rig, logged_rig, &mut warnings)?;
+
+    let mut counts = Counts::default();
+    let mut frames = decode(&chunks, &mut counts);
+    counts.frames_out_of_order = frames
+        .windows(2)
+        .filter(|w| matches!(w, [a, b] if b.t_us < a.t_us))
+        .count() as u64;
+    // Data time, not arrival: both sorts are stable, so equal timestamps keep log order.
+    frames.sort_by_key(|f| f.t_us);
+    odometry.sort_by_key(|s| s.t_us);
+    counts.odometry = odometry.len() as u64;
+
+    let mut front_end = FrontEnd::new(Model::from_rig(&rig), options.front_end)?;
+    let mut builder = PairBuilder::new(options.pairs)?;
+    let mut incremental = SelfCalibrator::new(
+        rig.clone(),
+        options.solver,
+        options.stable,
+        options.solve_every,
+    );
+    let mut pairs: Vec<FramePair> = Vec::new();
+    let mut next_odom = odometry.iter().peekable();
+    for frame in &frames {
+        while let Some(s) = next_odom.next_if(|s| s.t_us <= frame.t_us) {
+            front_end.push_odometry(*s);
+            builder.push_odometry(*s);
+        }
+        let tracked = front_end.push_frame(frame.t_us, &frame.left, &frame.right);
+        if let Some(pair) = builder.push_frame(&tracked) {
+            if incremental.handover().is_none() {
+                incremental.add_pair(pair.clone());
+            }
+            pairs.push(pair);
+        }
+    }
+    let tracker = front_end.tracker().stats();
+    counts.stereo_matches = front_end.stereo_stats().matches;
+    counts.tracks = tracker.started;
+    counts.confirmed_tracks = tracker.confirmed;
+    counts.tracker_resets = tracker.resets;
+    counts.pairs = pairs.len() as u64;
+    counts.landmark_pairs = pairs.iter().map(|p| p.landmarks.len() as u64).sum();
+
+    let calibration = calibrate(&pairs, &rig, &rig.nominal, &options.solver);
+    add_warnings(&counts, &calibration, &mut warnings);
+    Ok(LogCalibration {
+        handover: incremental.handover().cloned(),
+        history: incremental.history().to_vec(),
+        rig,
+        rig_source,
+        calibration,
+        counts,
+        warnings,
+    })
+}
+
+/// The given rig, or else the log's; a warning when both exist and differ.
+fn choose_rig(
+    path: &Path,
+    given: Option<Rig>,
+    logged: Option<&str>,
+    warnings: &mut Vec<String>,
+) -> Result<(Rig, RigSource), Error> {
+    let source_name = format!("{} /rig", path.display());
+    match (given, logged) {
+        (Some(rig), logged) => {
+            if let Some(text) = logged
+                && Rig::from_json_str(text, &source_name).is_ok_and(|l| l != rig)
+            {
+                warnings.push(format!(
+                    "{}: the rig given differs from the log's /rig message; using the one given",
+                    path.display()
+                ));
+            }
+            Ok((rig, RigSource::Given))
+        }
+        (None, Some(text)) => Ok((Rig::from_json_str(text, &source_name)?, RigSource::Log)),
+        (None, None) => Err(Error::NoRig {
+            path: PathBuf::from(path),
+        }),
+    }
+}
+
+fn add_warnings(counts: &Counts, calibration: &Calibration, warnings: &mut Vec<String>) {
+    if counts.frames == 0 {
+        warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
+    }
+    if counts.odometry == 0 {
+        warnings.push("no odometry on /odom: phase 1 has nothing to compare with".to_string());
+    }
+    if counts.tracker_resets > 0 {
+        warnings.push(format!(
+            "the odometry was missing at {} frames: tracks were restarted there",
+            counts.tracker_resets
+        ));
+    }
+    match calibration.status {
+        SolveStatus::Converged => {}
+        SolveStatus::NoData => warnings.push(format!(
+            "no usable frame pair ({} pairs): the camera parameters are the nominal ones",
+            counts.pairs
+        )),
+        SolveStatus::MaxIterations => warnings.push(format!(
+            "the phase-1 solver stopped at its iteration limit ({} iterations): best estimate returned",
+            calibration.iterations
+        )),
+        SolveStatus::Stalled => warnings.push(
+            "the phase-1 solver stalled (no step lowered the cost): best estimate returned"
+                .to_string(),
+        ),
+    }
+    for p in calibration.observability.unobservable() {
+        warnings.push(format!(
+            "{} is held at its nominal value: {}",
+            p.param,
+            p.reason.unwrap_or("the data do not constrain it")
+        ));
+    }
+}
