@@ -9,6 +9,7 @@ int stereonav_nostd_stream_round_trip(void);
 int stereonav_nostd_rig_round_trip(void);
 int stereonav_nostd_selfcal(void);
 int stereonav_nostd_tracking(void);
+int stereonav_nostd_ekf(void);
 
 /* The precompiled `alloc` of the stable toolchain refers to the unwinding personality routine
  * although the library is built with panic = "abort", so nothing ever unwinds: an empty
@@ -16,7 +17,7 @@ int stereonav_nostd_tracking(void);
 void rust_eh_personality(void) {}
 
 static int check(const char *name, int got, int want) {
-    printf("%-36s %d (want %d)\n", name, got, want);
+    printf("%-44s %d (want %d)\n", name, got, want);
     return got == want ? 0 : 1;
 }
 
@@ -27,5 +28,6 @@ int main(void) {
     failed += check("rig round trip lamps", stereonav_nostd_rig_round_trip(), 4);
     failed += check("phase-1 self-calibration recovers f", stereonav_nostd_selfcal(), 1);
     failed += check("confirmed tracks of four lamps", stereonav_nostd_tracking(), 4);
+    failed += check("EKF maps four lamps and learns the baseline", stereonav_nostd_ekf(), 1);
     return failed == 0 ? 0 : 1;
 }

@@ -16,6 +16,7 @@ use calib::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, tr
 use fpga_link::{Decoder, Event, Header, MAX_PACKET_LEN, encode_packet};
 use harris_core::{Feature, HarrisStream, Registers};
 use track::{FrontEnd, FrontEndSettings, Model, Pixel};
+use vslam_ekf::{Ekf, Settings};
 use nalgebra::Vector3;
 
 /// Width of the test image: the detector's line buffers are sized for it at compile time.
@@ -236,6 +237,53 @@ pub extern "C" fn stereonav_nostd_tracking() -> i32 {
         confirmed = frame.observations.iter().filter(|o| o.confirmed).count();
     }
     i32::try_from(confirmed).unwrap_or(-1)
+}
+
+/// Phase 2 as the vehicle controller would run it: the EKF maps four lamps from the first
+/// frame, then predicts with the odometry and updates with the lamps seen from the new pose,
+/// ten times. Returns 1 when every landmark stays within a millimetre of its lamp and the
+/// baseline's variance shrank, 0 when not, -1 on an error.
+#[unsafe(no_mangle)]
+pub extern "C" fn stereonav_nostd_ekf() -> i32 {
+    let rig = rig();
+    let Ok(mut ekf) = Ekf::from_prior(&rig, Settings::default()) else {
+        return -1;
+    };
+    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
+        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    let mut ids = Vec::new();
+    for lamp in &lamps {
+        let Ok(z) = project(&rig.nominal, &Pose2::default(), lamp) else {
+            return -1;
+        };
+        match ekf.add_landmark(&z) {
+            Ok(id) => ids.push(id),
+            Err(_) => return -1,
+        }
+    }
+    let variance = |ekf: &Ekf| ekf.camera_covariance()[(Param::Baseline.index(), Param::Baseline.index())];
+    let before = variance(&ekf);
+    for k in 1..=10u32 {
+        if ekf.predict(0.2, 0.0, 0.0, 0.05).is_err() {
+            return -1;
+        }
+        let pose = Pose2::new(0.01 * f64::from(k), 0.0, 0.0);
+        let mut batch = Vec::new();
+        for (id, lamp) in ids.iter().zip(&lamps) {
+            let Ok(z) = project(&rig.nominal, &pose, lamp) else {
+                return -1;
+            };
+            batch.push((*id, z));
+        }
+        if ekf.update(&batch).is_err() {
+            return -1;
+        }
+    }
+    let close = ekf
+        .landmarks()
+        .zip(&lamps)
+        .all(|(l, lamp)| (l.position - lamp).norm() < 1e-3);
+    i32::from(close && variance(&ekf) < before)
 }
 
 #[panic_handler]

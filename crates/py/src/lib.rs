@@ -15,6 +15,8 @@
 #![deny(missing_docs)]
 
 mod calibration;
+mod filter;
+mod montecarlo;
 mod rig;
 mod simulation;
 mod stream;
@@ -231,6 +233,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibration::frame_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(calibration::solver_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(calibration::stable_rule_defaults, m)?)?;
+    m.add_class::<filter::Filter>()?;
+    m.add_function(wrap_pyfunction!(filter::filter_defaults, m)?)?;
+    m.add_class::<montecarlo::MonteCarloResult>()?;
+    m.add_function(wrap_pyfunction!(montecarlo::monte_carlo, m)?)?;
     Ok(())
 }
 

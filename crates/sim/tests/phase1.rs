@@ -102,7 +102,12 @@ fn an_odometry_scale_error_maps_onto_the_baseline() {
     sc.spec.noise.yaw_rate_bias_radps = 0.002;
     let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
     let pairs = sim::phase1::frame_pairs_by_lamp(&run, 10);
-    let cal = calibrate(&pairs, &run.rig, &run.rig.nominal, &SolverSettings::default());
+    let cal = calibrate(
+        &pairs,
+        &run.rig,
+        &run.rig.nominal,
+        &SolverSettings::default(),
+    );
     let rel = cal.camera.baseline / run.camera.baseline - 1.0;
     assert!((0.005..0.015).contains(&rel), "baseline off by {rel}");
 }

@@ -20,6 +20,14 @@ and the odometry; :class:`SelfCalibrator` runs it pair by pair until it hands ov
 :func:`calibrate_log` runs all of phase 1 on a vehicle log (MCAP) and returns a
 :class:`LogCalibration`.
 
+Phase 2, EKF SLAM with the camera parameters in the state (:mod:`stereonav.filter`):
+:class:`Filter` starts from phase 1's :class:`Handover` (or the rig's priors) and is stepped
+frame by frame with the odometry (:meth:`Filter.predict_odometry`) and the stereo
+measurements keyed by track (:meth:`Filter.observe`, which confirms new landmarks) or by
+landmark (:meth:`Filter.update`); its map comes back as a :data:`LANDMARK_DTYPE` array and its
+:class:`Health` says whether it stays consistent. :func:`monte_carlo` evaluates it over seeded
+simulations (:mod:`stereonav.montecarlo`) against the truth: errors, sigmas, NEES and NIS.
+
 Exceptions derive from :class:`Error`: :class:`InputError` (also a ``ValueError``) for values
 out of range, :class:`InputTypeError` (also a ``TypeError``) for arguments of the wrong type.
 """
@@ -52,6 +60,18 @@ from .calibration import (
     frame_pairs,
     integrate_odometry,
 )
+from .filter import (
+    BINDING_DTYPE,
+    COVARIANCE_UPDATES,
+    GATE_DTYPE,
+    LANDMARK_DTYPE,
+    Filter,
+    FrameReport,
+    Health,
+    PredictedMeasurement,
+    UpdateReport,
+)
+from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
     CAMERA_PARAMETERS,
     Camera,
@@ -64,6 +84,19 @@ from .rig import (
 )
 
 __all__ = [
+    "BINDING_DTYPE",
+    "COVARIANCE_UPDATES",
+    "GATE_DTYPE",
+    "LANDMARK_DTYPE",
+    "Filter",
+    "FrameReport",
+    "Health",
+    "PredictedMeasurement",
+    "UpdateReport",
+    "Banded",
+    "MonteCarloRuns",
+    "MonteCarloSummary",
+    "monte_carlo",
     "MEASUREMENT_DTYPE",
     "MOTION_DTYPE",
     "OBSERVATION_DTYPE",

@@ -10,6 +10,10 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "Filter",
+    "MonteCarloResult",
+    "filter_defaults",
+    "monte_carlo",
     "CalibrationResult",
     "LogCalibrationResult",
     "SelfCalibrator",
@@ -247,3 +251,155 @@ def calibrate_log(
 ) -> LogCalibrationResult:
     """Phase 1 on a vehicle log (read, decode, associate, solve); raises
     ``stereonav.InputError`` naming the file or the setting."""
+
+#: ``(accepted ids (A,), accepted NIS (A,), rejected ids (R,), rejected NIS (R,), removed (D,))``.
+_UpdateTuple = tuple[_U64, _F64, _U64, _F64, _U64]
+#: ``(update, added (K, 2), removed (K, 2), ignored, pending)``; pairs are ``(track, landmark)``.
+_FrameTuple = tuple[_UpdateTuple, _U64, _U64, int, int]
+#: ``(gate_probability, nis_window, max_consecutive_rejections, covariance_update)``.
+_FilterSettings = tuple[float, int, int, str]
+#: ``(frames_to_confirm, consistency_probability)``.
+_CandidateSettings = tuple[int, float]
+#: ``(updates, refused_updates, accepted, rejected, landmarks_added, landmarks_removed,
+#: window_observations, window_rejected, window_mean_nis_per_dof, window_nis_bound,
+#: nis_too_high, diverged)``.
+_HealthTuple = tuple[int, int, int, int, int, int, int, int, "float | None", "float | None", bool, bool]
+
+def filter_defaults() -> tuple[float, int, int, str, int, float]:
+    """The defaults ``(gate_probability, nis_window, max_consecutive_rejections,
+    covariance_update, frames_to_confirm, consistency_probability)``."""
+
+@final
+class Filter:
+    """Phase 2, the EKF with the camera in the state (see ``stereonav.Filter``)."""
+
+    def __new__(
+        cls,
+        rig_json: str,
+        rig_source: str,
+        start: tuple[_F64, _F64] | None,
+        settings: _FilterSettings,
+        candidates: _CandidateSettings,
+    ) -> Filter: ...
+    def copy(self) -> Filter:
+        """An independent copy."""
+    def predict(self, vx: float, vy: float, vtheta: float, dt_s: float) -> None:
+        """Eq. 3-4 with velocities held for ``dt_s``."""
+    def predict_odometry(self, odometry: _Odometry, t0_us: int, t1_us: int) -> None:
+        """Eq. 3-4 over ``[t0_us, t1_us]``."""
+    def update(self, ids: _U64, z: _F64) -> _UpdateTuple:
+        """Eq. 5-8 by landmark id."""
+    def observe(self, tracks: _U64, z: _F64) -> _FrameTuple:
+        """One frame keyed by track id."""
+    def add_landmark(self, z: _F64) -> int:
+        """A new landmark from one measurement; its id."""
+    def remove_landmark(self, id: int) -> None:
+        """Removes a landmark."""
+    def predict_measurement(self, id: int) -> tuple[_F64, _F64]:
+        """``(z (4,), S (4, 4))``."""
+    def measurement_jacobian(self, id: int) -> tuple[_F64, _F64]:
+        """``(z (4,), H (4, n))``."""
+    @property
+    def state(self) -> _F64: ...
+    @property
+    def covariance(self) -> _F64: ...
+    @property
+    def pose(self) -> _F64: ...
+    @property
+    def pose_covariance(self) -> _F64: ...
+    @property
+    def camera(self) -> _F64: ...
+    @property
+    def camera_covariance(self) -> _F64: ...
+    @property
+    def estimated_parameters(self) -> list[str]: ...
+    @property
+    def landmarks(self) -> tuple[_U64, _F64, _F64, _U64]:
+        """``(ids (N,), positions (N, 3), covariances (N, 3, 3), observations (N,))``."""
+    def landmark_covariance(self, id: int) -> _F64:
+        """``(3, 3)``."""
+    def landmark_state_index(self, id: int) -> int:
+        """Index of the landmark's ``x`` in the state."""
+    def camera_state_index(self, name: str) -> int:
+        """Index of an estimated camera parameter in the state."""
+    @property
+    def health(self) -> _HealthTuple: ...
+    @property
+    def bindings(self) -> _U64:
+        """``(K, 2)``: ``(track, landmark)``."""
+    @property
+    def pending(self) -> int: ...
+    @property
+    def gate_bound(self) -> float: ...
+    @property
+    def covariance_update(self) -> str: ...
+    @covariance_update.setter
+    def covariance_update(self, form: str) -> None: ...
+
+_Banded = tuple[float, float, float]
+
+@final
+class MonteCarloResult:
+    """Phase-2 Monte Carlo runs (see ``stereonav.MonteCarloSummary``)."""
+
+    @property
+    def seeds(self) -> _U64: ...
+    @property
+    def frames(self) -> _U64: ...
+    @property
+    def landmark_rms(self) -> _F64: ...
+    @property
+    def landmarks(self) -> _U64: ...
+    @property
+    def lamps_missing(self) -> _U64: ...
+    @property
+    def camera_parameters(self) -> list[str]: ...
+    @property
+    def camera_value(self) -> _F64: ...
+    @property
+    def camera_truth(self) -> _F64: ...
+    @property
+    def camera_sigma(self) -> _F64: ...
+    @property
+    def within_3_sigma(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def healthy(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def pose_nees(self) -> _F64: ...
+    @property
+    def state_nees(self) -> _F64: ...
+    @property
+    def state_nees_dof(self) -> _U64: ...
+    @property
+    def mean_nis(self) -> _F64: ...
+    @property
+    def accepted(self) -> _U64: ...
+    @property
+    def rejected(self) -> _U64: ...
+    @property
+    def outliers(self) -> _U64: ...
+    @property
+    def outliers_accepted(self) -> _U64: ...
+    @property
+    def refused_updates(self) -> _U64: ...
+    @property
+    def pose_error(self) -> _F64: ...
+    @property
+    def pose_nees_band(self) -> _Banded: ...
+    @property
+    def pose_nees_frames_inside(self) -> float: ...
+    @property
+    def state_nees_per_dof_band(self) -> _Banded: ...
+    @property
+    def state_nees_frames_inside(self) -> float: ...
+    @property
+    def nis_band(self) -> _Banded: ...
+    @property
+    def within_3_sigma_count(self) -> int: ...
+    @property
+    def healthy_count(self) -> int: ...
+
+def monte_carlo(
+    scenario: str, runs: int, first_seed: int, outlier_fraction: float, max_frames: int | None
+) -> MonteCarloResult:
+    """Phase-2 Monte Carlo on a scenario file; raises ``stereonav.InputError``."""

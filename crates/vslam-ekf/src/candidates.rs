@@ -1,0 +1,277 @@
+//! Landmark confirmation and the track-to-landmark map: the per-frame entry point.
+//!
+//! The association (crate `track`) hands over measurements keyed by its own persistent track
+//! ids. A track bound to a landmark is an observation for the update; an unbound one is a
+//! *candidate*, and becomes a landmark only after it was seen in `frames_to_confirm`
+//! consecutive frames with consistent triangulations: each frame's world point must lie
+//! within a Mahalanobis gate (3 dof) of the previous frame's, under the covariance of their
+//! difference. That covariance is the pixel noise of both triangulations plus the odometry
+//! noise accumulated between the two frames, carried to the point by the pose Jacobian; the
+//! absolute pose and camera errors are shared by the two points and cancel to first order, so
+//! they are left out, which keeps the gate tight (millimetres across, where a clutter feature
+//! jumps by metres). A candidate missing from a frame starts again.
+//!
+//! A landmark the filter removes as false (too many gate rejections in a row) takes its track
+//! with it: the track is *retired* and never re-confirmed, so a wrong association cannot
+//! re-enter the map under the same track. A landmark the caller removes
+//! ([`Candidates::remove_landmark`]) only unbinds its track, which may then confirm again.
+
+use alloc::collections::{BTreeMap, BTreeSet};
+use alloc::vec::Vec;
+
+use calib::Measurement;
+use nalgebra::{Matrix3, Vector3};
+
+use crate::chi2::chi2_quantile;
+use crate::error::Error;
+use crate::filter::{Ekf, LandmarkId, UpdateReport};
+
+/// Confirmation settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CandidateSettings {
+    /// Consecutive frames, with consistent triangulations, before a track becomes a landmark.
+    pub frames_to_confirm: u32,
+    /// Probability mass inside the consistency gate between successive world points (3 dof):
+    /// 0.999 gives 16.27.
+    pub consistency_probability: f64,
+}
+
+impl Default for CandidateSettings {
+    fn default() -> Self {
+        Self {
+            frames_to_confirm: 3,
+            consistency_probability: 0.999,
+        }
+    }
+}
+
+/// A candidate's last sighting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Pending {
+    hits: u32,
+    last_frame: u64,
+    point: Vector3<f64>,
+    /// Covariance of `point` from the pixel noise.
+    covariance: Matrix3<f64>,
+}
+
+/// What one frame did.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameReport {
+    /// The filter's update with the bound tracks.
+    pub update: UpdateReport,
+    /// Tracks confirmed this frame and the landmarks made of them.
+    pub added: Vec<(u64, LandmarkId)>,
+    /// Landmarks removed as false this frame, with their (now retired) tracks.
+    pub removed: Vec<(u64, LandmarkId)>,
+    /// Measurements of retired tracks, ignored.
+    pub ignored: usize,
+    /// Candidates still waiting for confirmation.
+    pub pending: usize,
+}
+
+/// Track-keyed front door of the filter: binds tracks to landmarks, confirms new ones.
+#[derive(Debug, Clone)]
+pub struct Candidates {
+    settings: CandidateSettings,
+    gate: f64,
+    frame: u64,
+    pending: BTreeMap<u64, Pending>,
+    landmark_of: BTreeMap<u64, LandmarkId>,
+    track_of: BTreeMap<LandmarkId, u64>,
+    retired: BTreeSet<u64>,
+}
+
+impl Candidates {
+    /// Empty bookkeeping.
+    pub fn new(settings: CandidateSettings) -> Result<Self, Error> {
+        if settings.frames_to_confirm == 0 {
+            return Err(Error::BadValue {
+                name: "CandidateSettings.frames_to_confirm",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        let p = settings.consistency_probability;
+        if !(p.is_finite() && p > 0.0 && p < 1.0) {
+            return Err(Error::BadValue {
+                name: "CandidateSettings.consistency_probability",
+                value: p,
+                expected: "strictly between 0 and 1",
+            });
+        }
+        Ok(Self {
+            settings,
+            gate: chi2_quantile(p, 3.0),
+            frame: 0,
+            pending: BTreeMap::new(),
+            landmark_of: BTreeMap::new(),
+            track_of: BTreeMap::new(),
+            retired: BTreeSet::new(),
+        })
+    }
+
+    /// The landmark a track is bound to.
+    pub fn landmark_of(&self, track: u64) -> Option<LandmarkId> {
+        self.landmark_of.get(&track).copied()
+    }
+
+    /// The track a landmark is bound to.
+    pub fn track_of(&self, id: LandmarkId) -> Option<u64> {
+        self.track_of.get(&id).copied()
+    }
+
+    /// Every binding, `(track, landmark)`, by track.
+    pub fn bindings(&self) -> impl Iterator<Item = (u64, LandmarkId)> + '_ {
+        self.landmark_of.iter().map(|(&t, &l)| (t, l))
+    }
+
+    /// Whether a track was retired with a false landmark.
+    pub fn is_retired(&self, track: u64) -> bool {
+        self.retired.contains(&track)
+    }
+
+    /// Candidates waiting for confirmation.
+    pub fn pending_count(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// The consistency gate's bound (3 dof).
+    pub fn gate_bound(&self) -> f64 {
+        self.gate
+    }
+
+    /// Binds a track to an existing landmark (map matching found it again under a new track).
+    /// A track already bound elsewhere, or a landmark bound to another track, is rebound.
+    pub fn bind(&mut self, ekf: &Ekf, track: u64, id: LandmarkId) -> Result<(), Error> {
+        if !ekf.contains(id) {
+            return Err(Error::UnknownLandmark { id });
+        }
+        self.forget_track(track);
+        if let Some(old) = self.track_of.remove(&id) {
+            self.landmark_of.remove(&old);
+        }
+        self.landmark_of.insert(track, id);
+        self.track_of.insert(id, track);
+        Ok(())
+    }
+
+    /// Forgets everything about a track: binding, candidacy, retirement.
+    pub fn forget_track(&mut self, track: u64) {
+        self.pending.remove(&track);
+        self.retired.remove(&track);
+        if let Some(id) = self.landmark_of.remove(&track) {
+            self.track_of.remove(&id);
+        }
+    }
+
+    /// Removes a landmark from the filter and unbinds its track (which may confirm again).
+    pub fn remove_landmark(&mut self, ekf: &mut Ekf, id: LandmarkId) -> Result<(), Error> {
+        ekf.remove_landmark(id)?;
+        if let Some(track) = self.track_of.remove(&id) {
+            self.landmark_of.remove(&track);
+        }
+        Ok(())
+    }
+
+    /// One stereo frame: updates the filter with the bound tracks, removes false landmarks,
+    /// advances the candidates and adds the confirmed ones. Call after predicting to the
+    /// frame's time. On an error from the update nothing changes.
+    pub fn observe(
+        &mut self,
+        ekf: &mut Ekf,
+        frame: &[(u64, Measurement)],
+    ) -> Result<FrameReport, Error> {
+        let mut seen: Vec<u64> = Vec::with_capacity(frame.len());
+        for (track, z) in frame {
+            if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
+                return Err(Error::NonFiniteTrackMeasurement {
+                    track: *track,
+                    value,
+                });
+            }
+            if seen.contains(track) {
+                return Err(Error::DuplicateTrack { track: *track });
+            }
+            seen.push(*track);
+        }
+        let mut report = FrameReport::default();
+        let mut batch = Vec::new();
+        let mut unbound: Vec<(u64, Measurement)> = Vec::new();
+        for &(track, z) in frame {
+            if self.retired.contains(&track) {
+                report.ignored += 1;
+                continue;
+            }
+            match self.landmark_of.get(&track) {
+                Some(&id) if ekf.contains(id) => batch.push((id, z)),
+                _ => unbound.push((track, z)),
+            }
+        }
+        report.update = ekf.update(&batch)?;
+        // Bindings to landmarks the caller removed from the filter directly.
+        let stale: Vec<u64> = self
+            .landmark_of
+            .iter()
+            .filter(|(_, id)| !ekf.contains(**id))
+            .map(|(&t, _)| t)
+            .collect();
+        for track in stale {
+            if let Some(id) = self.landmark_of.remove(&track) {
+                self.track_of.remove(&id);
+                if report.update.removed.contains(&id) {
+                    self.retired.insert(track);
+                    report.removed.push((track, id));
+                }
+            }
+        }
+        self.frame += 1;
+        let motion = ekf.take_motion_covariance();
+        let camera = ekf.camera();
+        let pose = ekf.pose();
+        let sigma = ekf.noise().pixel;
+        for (track, z) in unbound {
+            let Ok(tri) = calib::triangulate(&camera, &z) else {
+                self.pending.remove(&track);
+                continue;
+            };
+            let point = tri.p_in_world(&camera, &pose);
+            let covariance = tri.covariance_in_world(&camera, &pose, sigma, None, None);
+            let gp = tri.jac_pose(&camera, &pose);
+            let hits = match self.pending.get(&track) {
+                Some(prev) if prev.last_frame + 1 == self.frame => {
+                    let joint = prev.covariance + covariance + gp * motion * gp.transpose();
+                    let delta = point - prev.point;
+                    let consistent = joint
+                        .cholesky()
+                        .map(|c| delta.dot(&c.solve(&delta)))
+                        .is_some_and(|d2| d2 <= self.gate);
+                    if consistent { prev.hits + 1 } else { 1 }
+                }
+                _ => 1,
+            };
+            if hits >= self.settings.frames_to_confirm {
+                self.pending.remove(&track);
+                if let Ok(id) = ekf.add_landmark(&z) {
+                    self.landmark_of.insert(track, id);
+                    self.track_of.insert(id, track);
+                    report.added.push((track, id));
+                }
+            } else {
+                self.pending.insert(
+                    track,
+                    Pending {
+                        hits,
+                        last_frame: self.frame,
+                        point,
+                        covariance,
+                    },
+                );
+            }
+        }
+        let now = self.frame;
+        self.pending.retain(|_, p| p.last_frame == now);
+        report.pending = self.pending.len();
+        Ok(report)
+    }
+}

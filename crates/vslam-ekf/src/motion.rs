@@ -1,0 +1,290 @@
+//! The prediction's motion model (eq. 3-4): the planar arc of constant robot-frame velocities
+//! (vehicle-interfaces.md section 2), its Jacobians, and its noise.
+//!
+//! Noise model, the one phase 1 uses (`calib::selfcal`): each odometry sample's velocities
+//! carry white noise (`velocity` m/s on `vx` and `vy`, `yaw_rate` rad/s on `vtheta`) that is
+//! *held* with the sample, so one sample held for `dt` contributes `G diag(sv^2, sv^2, sw^2) G^T`
+//! with `G` the exact Jacobian of the arc with respect to the velocities; for short steps
+//! `G ~ dt I`, the `(sigma dt)^2` of phase 1. Splitting one sample across two predictions (a
+//! frame time between two odometry samples) treats the two pieces as independent, which
+//! under-counts that sample's variance by the factor `(dt1^2 + dt2^2) / (dt1 + dt2)^2`; with
+//! odometry several times faster than the camera this is a small effect, and the integration
+//! over a whole frame interval ([`Increment::from_odometry`]) splits at most the first and
+//! last samples.
+
+use calib::odometry::{Motion, OdomSample, constant_velocity_motion};
+use calib::{Noise, Pose2};
+use nalgebra::Matrix3;
+
+use crate::error::Error;
+
+/// A motion in the robot frame at its start with the covariance of its error: what the
+/// prediction adds to the pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Increment {
+    /// The motion `(dx, dy, dtheta)` in the robot frame at its start.
+    pub motion: Motion,
+    /// Covariance of `(dx, dy, dtheta)`.
+    pub covariance: Matrix3<f64>,
+}
+
+impl Default for Increment {
+    fn default() -> Self {
+        Self {
+            motion: Motion::default(),
+            covariance: Matrix3::zeros(),
+        }
+    }
+}
+
+/// `d(dx, dy, dtheta) / d(vx, vy, vtheta)` of [`constant_velocity_motion`], exact.
+pub fn arc_velocity_jacobian(vx: f64, vy: f64, w: f64, dt: f64) -> Matrix3<f64> {
+    let a = w * dt;
+    // sa = sin(a)/w, ca = (1 - cos a)/w and their derivatives in w; by series near w = 0,
+    // where the closed forms cancel (the series are exact to rounding below |a| = 1e-2).
+    let (sa, ca, dsa, dca) = if libm::fabs(a) < 1e-2 {
+        let a2 = a * a;
+        let dt2 = dt * dt;
+        (
+            dt * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0))),
+            dt * a / 2.0 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0))),
+            dt2 * a * (-1.0 / 3.0 + a2 / 30.0 - a2 * a2 / 840.0),
+            dt2 * (0.5 - a2 / 8.0 + a2 * a2 / 144.0 - a2 * a2 * a2 / 5760.0),
+        )
+    } else {
+        let (s, c) = (libm::sin(a), libm::cos(a));
+        let sa = s / w;
+        let ca = (1.0 - c) / w;
+        (sa, ca, (dt * c - sa) / w, (dt * s - ca) / w)
+    };
+    Matrix3::new(
+        sa,
+        -ca,
+        dsa * vx - dca * vy,
+        ca,
+        sa,
+        dca * vx + dsa * vy,
+        0.0,
+        0.0,
+        dt,
+    )
+}
+
+/// `d(a (+) b) / d a` for motions (or a pose `a` and a motion `b`): the Jacobian of the
+/// composition with respect to the first.
+pub fn compose_jacobian_first(theta_a: f64, b: &Motion) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(theta_a), libm::cos(theta_a));
+    Matrix3::new(
+        1.0,
+        0.0,
+        -s * b.dx - c * b.dy,
+        0.0,
+        1.0,
+        c * b.dx - s * b.dy,
+        0.0,
+        0.0,
+        1.0,
+    )
+}
+
+/// `d(a (+) b) / d b`: the rotation of `a` in the plane, identity on the angle.
+pub fn compose_jacobian_second(theta_a: f64) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(theta_a), libm::cos(theta_a));
+    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
+}
+
+/// Checks a noise model's odometry sigmas.
+pub(crate) fn check_noise(noise: &Noise) -> Result<(), Error> {
+    for (name, value) in [
+        ("noise.velocity", noise.velocity),
+        ("noise.yaw_rate", noise.yaw_rate),
+    ] {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(Error::BadValue {
+                name,
+                value,
+                expected: "finite and non-negative",
+            });
+        }
+    }
+    if !(noise.pixel.is_finite() && noise.pixel > 0.0) {
+        return Err(Error::BadValue {
+            name: "noise.pixel",
+            value: noise.pixel,
+            expected: "finite and positive",
+        });
+    }
+    Ok(())
+}
+
+impl Increment {
+    /// Velocities `(vx, vy, vtheta)` held for `dt_s` seconds, with the held-noise covariance.
+    pub fn from_velocities(
+        vx: f64,
+        vy: f64,
+        vtheta: f64,
+        dt_s: f64,
+        noise: &Noise,
+    ) -> Result<Self, Error> {
+        for (what, value) in [
+            ("odometry vx", vx),
+            ("odometry vy", vy),
+            ("odometry vtheta", vtheta),
+            ("time step", dt_s),
+        ] {
+            if !value.is_finite() {
+                return Err(Error::NonFinite { what, value });
+            }
+        }
+        if dt_s < 0.0 {
+            return Err(Error::NegativeTimeStep { dt_s });
+        }
+        check_noise(noise)?;
+        Ok(Self::piece(vx, vy, vtheta, dt_s, noise))
+    }
+
+    /// One held sample, inputs checked.
+    fn piece(vx: f64, vy: f64, vtheta: f64, dt_s: f64, noise: &Noise) -> Self {
+        let motion = constant_velocity_motion(vx, vy, vtheta, dt_s);
+        let g = arc_velocity_jacobian(vx, vy, vtheta, dt_s);
+        let sv2 = noise.velocity * noise.velocity;
+        let sw2 = noise.yaw_rate * noise.yaw_rate;
+        let d = Matrix3::from_diagonal(&nalgebra::Vector3::new(sv2, sv2, sw2));
+        Self {
+            motion,
+            covariance: g * d * g.transpose(),
+        }
+    }
+
+    /// This increment followed by `next`: the motions composed, the covariances propagated.
+    pub fn then(&self, next: &Self) -> Self {
+        let ja = compose_jacobian_first(self.motion.dtheta, &next.motion);
+        let jb = compose_jacobian_second(self.motion.dtheta);
+        Self {
+            motion: self.motion.then(&next.motion),
+            covariance: ja * self.covariance * ja.transpose()
+                + jb * next.covariance * jb.transpose(),
+        }
+    }
+
+    /// The odometry samples (sorted by time) integrated from `t0_us` to `t1_us`, each held from
+    /// its timestamp until the next, exactly as [`calib::odometry::integrate`] does, with the
+    /// covariance of every held piece propagated.
+    pub fn from_odometry(
+        samples: &[OdomSample],
+        t0_us: u64,
+        t1_us: u64,
+        noise: &Noise,
+    ) -> Result<Self, Error> {
+        if t1_us < t0_us {
+            return Err(Error::BackwardInterval { t0_us, t1_us });
+        }
+        check_noise(noise)?;
+        let start = samples
+            .partition_point(|s| s.t_us <= t0_us)
+            .checked_sub(1)
+            .ok_or(Error::NoOdometry {
+                t0_us,
+                first_us: samples.first().map(|s| s.t_us),
+            })?;
+        let mut total = Self::default();
+        let mut t = t0_us;
+        for (i, s) in samples.iter().enumerate().skip(start) {
+            if t >= t1_us {
+                break;
+            }
+            let end = samples.get(i + 1).map_or(t1_us, |n| n.t_us.min(t1_us));
+            if end <= t {
+                continue;
+            }
+            for (what, value) in [
+                ("odometry vx", s.vx),
+                ("odometry vy", s.vy),
+                ("odometry vtheta", s.vtheta),
+            ] {
+                if !value.is_finite() {
+                    return Err(Error::NonFinite { what, value });
+                }
+            }
+            #[allow(clippy::cast_precision_loss)] // microsecond spans far below 2^53
+            let dt = (end - t) as f64 * 1e-6;
+            // A frame's time usually falls inside an odometry sample, which two predictions
+            // then share. The sample's noise is one draw held over its whole period, so the two
+            // pieces' errors are fully correlated; a filter that treats them as independent
+            // (variance (sigma dt)^2 each) loses part of the sample's variance (half of it for a
+            // sample cut in the middle) and turns overconfident. Variance linear in time within
+            // a sample, sigma^2 * period * dt, keeps the variance of a whole sample exact
+            // however it is cut (only the small correlation between the pieces is dropped).
+            let period = samples
+                .get(i + 1)
+                .map_or(0, |n| n.t_us.saturating_sub(s.t_us));
+            #[allow(clippy::cast_precision_loss)]
+            let period = period as f64 * 1e-6;
+            let piece_noise = if period > dt && dt > 0.0 {
+                let k = libm::sqrt(period / dt);
+                Noise {
+                    velocity: noise.velocity * k,
+                    yaw_rate: noise.yaw_rate * k,
+                    ..*noise
+                }
+            } else {
+                *noise
+            };
+            total = total.then(&Self::piece(s.vx, s.vy, s.vtheta, dt, &piece_noise));
+            t = end;
+        }
+        Ok(total)
+    }
+
+    /// The pose reached from `pose`, the Jacobian `F` of that pose with respect to `pose`, and
+    /// the process noise `Q` it adds (eq. 3-4): `pose' = pose (+) motion`,
+    /// `F = d pose' / d pose`, `Q = Rz(theta) Cov(motion) Rz(theta)^T` (the angle untouched).
+    pub fn apply(&self, pose: &Pose2) -> (Pose2, Matrix3<f64>, Matrix3<f64>) {
+        let f = compose_jacobian_first(pose.theta, &self.motion);
+        let g = compose_jacobian_second(pose.theta);
+        (
+            self.motion.apply(pose),
+            f,
+            g * self.covariance * g.transpose(),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn motion_vector(vx: f64, vy: f64, w: f64, dt: f64) -> nalgebra::Vector3<f64> {
+        let m = constant_velocity_motion(vx, vy, w, dt);
+        nalgebra::Vector3::new(m.dx, m.dy, m.dtheta)
+    }
+
+    #[test]
+    fn arc_jacobian_matches_central_differences_across_the_series_switch() {
+        for &(vx, vy, w, dt) in &[
+            (0.3, 0.05, 0.0, 0.01),
+            (0.3, -0.1, 1e-7, 0.01),
+            (0.25, 0.0, 0.3, 0.05),
+            (-0.2, 0.1, 0.99, 0.01), // a just below 1e-2
+            (0.2, 0.1, 1.01, 0.01),  // a just above 1e-2
+            (1.0, -0.5, -2.0, 0.4),
+        ] {
+            let j = arc_velocity_jacobian(vx, vy, w, dt);
+            let h = 1e-6;
+            for k in 0..3 {
+                let mut plus = [vx, vy, w];
+                let mut minus = plus;
+                plus[k] += h;
+                minus[k] -= h;
+                let d = (motion_vector(plus[0], plus[1], plus[2], dt)
+                    - motion_vector(minus[0], minus[1], minus[2], dt))
+                    / (2.0 * h);
+                let err = (d - j.column(k)).norm();
+                assert!(
+                    err < 1e-9 * (1.0 + d.norm()),
+                    "{vx} {vy} {w} {dt} col {k}: {err}"
+                );
+            }
+        }
+    }
+}
