@@ -5,12 +5,12 @@
 //! carry white noise (`velocity` m/s on `vx` and `vy`, `yaw_rate` rad/s on `vtheta`) that is
 //! *held* with the sample, so one sample held for `dt` contributes `G diag(sv^2, sv^2, sw^2) G^T`
 //! with `G` the exact Jacobian of the arc with respect to the velocities; for short steps
-//! `G ~ dt I`, the `(sigma dt)^2` of phase 1. Splitting one sample across two predictions (a
-//! frame time between two odometry samples) treats the two pieces as independent, which
-//! under-counts that sample's variance by the factor `(dt1^2 + dt2^2) / (dt1 + dt2)^2`; with
-//! odometry several times faster than the camera this is a small effect, and the integration
-//! over a whole frame interval ([`Increment::from_odometry`]) splits at most the first and
-//! last samples.
+//! `G ~ dt I`, the `(sigma dt)^2` of phase 1. A frame time usually falls inside an odometry
+//! sample, which two predictions then share; treating its two pieces as independent would
+//! under-count its variance by the factor `(dt1^2 + dt2^2) / (dt1 + dt2)^2`, so
+//! [`Increment::from_odometry`] gives a piece of a sample the variance `sigma^2 period dt`
+//! (linear in time within the sample): a whole sample keeps its variance however it is cut,
+//! and only the small correlation between the pieces is dropped.
 
 use calib::odometry::{Motion, OdomSample, constant_velocity_motion};
 use calib::{Noise, Pose2};
@@ -257,6 +257,37 @@ mod tests {
     fn motion_vector(vx: f64, vy: f64, w: f64, dt: f64) -> nalgebra::Vector3<f64> {
         let m = constant_velocity_motion(vx, vy, w, dt);
         nalgebra::Vector3::new(m.dx, m.dy, m.dtheta)
+    }
+
+    /// A frame time in the middle of an odometry sample: the two predictions that share the
+    /// sample add up to the variance of the whole sample, not half of it.
+    #[test]
+    fn a_sample_cut_by_a_frame_keeps_its_variance() {
+        let noise = Noise {
+            pixel: 0.3,
+            velocity: 0.02,
+            yaw_rate: 0.01,
+        };
+        let samples = [
+            OdomSample {
+                t_us: 0,
+                vx: 0.0,
+                vy: 0.0,
+                vtheta: 0.0,
+            },
+            OdomSample {
+                t_us: 10_000,
+                vx: 0.0,
+                vy: 0.0,
+                vtheta: 0.0,
+            },
+        ];
+        let whole = Increment::from_odometry(&samples, 0, 10_000, &noise).unwrap();
+        let first = Increment::from_odometry(&samples, 0, 4_000, &noise).unwrap();
+        let second = Increment::from_odometry(&samples, 4_000, 10_000, &noise).unwrap();
+        let cut = first.covariance + second.covariance;
+        assert!((cut - whole.covariance).norm() <= 1e-12 * whole.covariance.norm());
+        assert!((whole.covariance[(0, 0)] - (0.02_f64 * 0.01).powi(2)).abs() < 1e-15);
     }
 
     #[test]
