@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import stereonav
+from sim_labels import lamp_measurements
 from stereonav import (
     CAMERA_PARAMETERS,
     MEASUREMENT_DTYPE,
@@ -29,37 +30,6 @@ PAPER = SCENARIOS / "paper-calibration.toml"
 #: Frames from the first frame of a pair to its second (2 s at 20 Hz), as in the sim crate's
 #: phase-1 tests: long pairs see much motion per pixel of noise.
 STRIDE = 40
-#: How far a board feature may lie from a lamp's true projection to be that lamp, pixels
-#: (the simulated pixel noise is 0.3 px, 1 sigma).
-MATCH_PX = 2.0
-
-
-def lamp_measurements(sim: stereonav.Simulation) -> np.ndarray:
-    """Board features labelled with the lamp they show, as MEASUREMENT_DTYPE rows.
-
-    The board's stream carries no lamp ids; like the simulator's own phase-1 analysis, the
-    truth supplies them: a feature is lamp ``i`` when it is the nearest one, within
-    ``MATCH_PX``, to lamp ``i``'s true projection, in both images.
-    """
-    decoder = stereonav.StreamDecoder()
-    frames = decoder.push(sim.stream) + decoder.finish()
-    poses = {int(row["t_us"]): (row["x"], row["y"], row["theta"]) for row in sim.trajectory}
-    rows = []
-    for frame in frames:
-        z = stereonav.project(sim.landmarks, pose=poses[frame.t_us], camera=sim.camera).z
-        left = np.column_stack([frame.left["x_q4"], frame.left["y_q4"]]) / 16.0
-        right = np.column_stack([frame.right["x_q4"], frame.right["y_q4"]]) / 16.0
-        if len(left) == 0 or len(right) == 0:
-            continue
-        for lamp, (ul, vl, ur, vr) in enumerate(z):
-            if not np.isfinite(ul):
-                continue
-            dl = np.hypot(left[:, 0] - ul, left[:, 1] - vl)
-            dr = np.hypot(right[:, 0] - ur, right[:, 1] - vr)
-            if dl.min() <= MATCH_PX and dr.min() <= MATCH_PX:
-                (ul_, vl_), (ur_, vr_) = left[dl.argmin()], right[dr.argmin()]
-                rows.append((frame.t_us, lamp, ul_, vl_, ur_, vr_))
-    return np.array(rows, dtype=MEASUREMENT_DTYPE)
 
 
 def pairs_by_lamp(
