@@ -19,7 +19,6 @@
 use std::collections::BTreeMap;
 
 use calib::camera::{CameraParams, Param};
-use calib::odometry::OdomSample;
 use nalgebra::{DMatrix, DVector, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -204,16 +203,7 @@ pub fn run(
     };
     let mut ekf = Ekf::new(rig, &start, settings.ekf)?;
     let mut candidates = Candidates::new(settings.candidates)?;
-    let odometry: Vec<OdomSample> = sim_run
-        .odometry
-        .iter()
-        .map(|s| OdomSample {
-            t_us: s.t_us,
-            vx: s.vx,
-            vy: s.vy,
-            vtheta: s.vtheta,
-        })
-        .collect();
+    let odometry = sim_run.odometry_samples();
     let truth: BTreeMap<u32, Vector3<f64>> = sim_run
         .landmarks
         .iter()

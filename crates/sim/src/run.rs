@@ -327,6 +327,19 @@ pub fn truth_camera(c: &CameraParams) -> TruthCamera {
 }
 
 impl SimRun {
+    /// The logged (noisy) odometry as the estimators take it (`calib::odometry::OdomSample`).
+    pub fn odometry_samples(&self) -> Vec<calib::odometry::OdomSample> {
+        self.odometry
+            .iter()
+            .map(|s| calib::odometry::OdomSample {
+                t_us: s.t_us,
+                vx: s.vx,
+                vy: s.vy,
+                vtheta: s.vtheta,
+            })
+            .collect()
+    }
+
     /// The byte stream as received: the chunks concatenated in arrival order.
     pub fn stream_bytes(&self) -> Vec<u8> {
         self.chunks

@@ -6,7 +6,6 @@
 use std::path::Path;
 
 use calib::Param;
-use calib::odometry::OdomSample;
 use vslam_ekf::{CandidateSettings, Candidates, Ekf, Settings};
 
 fn scenario(name: &str) -> sim::Scenario {
@@ -26,16 +25,7 @@ struct Outcome {
 
 fn run_filter(sc: &sim::Scenario) -> Outcome {
     let run = sim::simulate(sc, sim::Mode::Fast).unwrap();
-    let odometry: Vec<OdomSample> = run
-        .odometry
-        .iter()
-        .map(|s| OdomSample {
-            t_us: s.t_us,
-            vx: s.vx,
-            vy: s.vy,
-            vtheta: s.vtheta,
-        })
-        .collect();
+    let odometry = run.odometry_samples();
     let mut ekf = Ekf::from_prior(&run.rig, Settings::default()).unwrap();
     let mut candidates = Candidates::new(CandidateSettings::default()).unwrap();
     let mut last_t = None;
