@@ -72,31 +72,38 @@ fn paper_experiment_meets_the_targets_over_50_seeds() {
     assert!((s.nis.value - 4.0).abs() < 0.2, "{summary}");
 }
 
-/// paper-square with f and the baseline in the state: both converge far inside their priors.
-/// (Their sigmas are not yet honest on this path with turns: the errors run about twice the
-/// sigmas, the classic over-confidence of EKF SLAM linearised at drifting headings; see
-/// docs/benchmarks.md. This test holds what is met.)
+/// paper-square with f and the baseline in the state, started from the rig's nominal values
+/// (f 2.5 % low, baseline 2.5 % long): both converge far inside their priors, with honest
+/// sigmas (the error inside 3 sigma in at least 95 % of the runs, the pose NEES inside its
+/// 95 % band, NIS near 4). The full-state NEES is not held here: started 2.5 % off, the first
+/// landmarks are triangulated with the wrong f and the linearisation leaves the joint
+/// state over-confident (per dof about 1.4; from the true values 1.09, inside its band):
+/// docs/phase2.md.
 #[test]
-fn paper_square_converges_on_f_and_baseline() {
+fn paper_square_converges_on_f_and_baseline_with_honest_sigmas() {
     let sc = scenario("paper-square.toml");
     let s = monte_carlo(&sc, 0..20, &RunSettings::default()).unwrap();
     let summary = report(&s);
     assert_eq!(s.healthy, 20, "{summary}");
     for r in &s.runs {
+        assert_eq!(r.landmarks.len(), 5, "seed {}: {:?}", r.seed, r.lamps_missing);
         let f = r.camera_result(Param::F).unwrap();
         let b = r.camera_result(Param::Baseline).unwrap();
         // Priors (fixtures/scenarios/paper-square.rig.toml): 30 px and 6 mm.
         assert!(
-            f.sigma < 30.0 / 20.0 && f.error().abs() < 1.0,
+            f.sigma < 30.0 / 100.0 && f.error().abs() < 4.0 * f.sigma,
             "seed {}: {f:?}",
             r.seed
         );
         assert!(
-            b.sigma < 0.006 / 20.0 && b.error().abs() < 0.001,
+            b.sigma < 0.006 / 100.0 && b.error().abs() < 4.0 * b.sigma,
             "seed {}: {b:?}",
             r.seed
         );
     }
+    assert!(s.within_3_sigma >= 19, "{summary}");
+    assert!(s.pose_nees.inside(), "{summary}");
+    assert!((s.nis.value - 4.0).abs() < 0.2, "{summary}");
 }
 
 /// Gross outliers in 5 % of the measurements: the gate rejects them, nothing goes NaN or
