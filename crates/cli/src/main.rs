@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 mod calibrate;
 mod fpga;
 mod harris;
+mod replay;
 mod simulate;
 
 /// Ceiling-lamp stereo navigation for autonomous forklifts.
@@ -34,6 +35,10 @@ enum Command {
     /// summary (value, sigma and nominal value of each estimated parameter, the hand-over
     /// time); `--out` writes the whole result as JSON.
     Calibrate(calibrate::Args),
+    /// The whole stack on a vehicle log: phase 1 self-calibration, the switch, phase 2 EKF
+    /// SLAM; prints a short summary and writes the estimates (MCAP), the summary (JSON) and the
+    /// trajectory (CSV) on request.
+    Replay(replay::Args),
 }
 
 /// Parses the command line; a usage error becomes one line on stderr and exit status 2, while
@@ -72,6 +77,7 @@ fn main() -> ExitCode {
         Command::Fpga(args) => fpga::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Calibrate(args) => calibrate::run(&args),
+        Command::Replay(args) => replay::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

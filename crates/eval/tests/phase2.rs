@@ -86,7 +86,13 @@ fn paper_square_converges_on_f_and_baseline_with_honest_sigmas() {
     let summary = report(&s);
     assert_eq!(s.healthy, 20, "{summary}");
     for r in &s.runs {
-        assert_eq!(r.landmarks.len(), 5, "seed {}: {:?}", r.seed, r.lamps_missing);
+        assert_eq!(
+            r.landmarks.len(),
+            5,
+            "seed {}: {:?}",
+            r.seed,
+            r.lamps_missing
+        );
         let f = r.camera_result(Param::F).unwrap();
         let b = r.camera_result(Param::Baseline).unwrap();
         // Priors (fixtures/scenarios/paper-square.rig.toml): 30 px and 6 mm.

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-/// Errors of [`crate::calibrate_log`].
+/// Errors of [`crate::calibrate_log`], the replay and the writers of its outputs.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
@@ -37,4 +37,43 @@ pub enum Error {
     /// A setting of the replay is out of range.
     #[error("replay settings: {0}")]
     Settings(#[from] track::SettingsError),
+    /// The navigator refused its settings or the rig.
+    #[error("navigator: {0}")]
+    Navigator(#[from] nav::Error),
+    /// An output file (`EST.mcap`, `SUMMARY.json`, `TRAJ.csv`) could not be created or
+    /// written.
+    #[error("cannot write {file}: {}: {source}", path.display())]
+    Output {
+        /// Which output.
+        file: &'static str,
+        /// The path given for it.
+        path: PathBuf,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The MCAP writer refused a record of `EST.mcap` (not an I/O error).
+    #[error("cannot write EST.mcap: {}: the MCAP writer failed: {detail}", path.display())]
+    Mcap {
+        /// The path given for it.
+        path: PathBuf,
+        /// What the writer said.
+        detail: String,
+    },
+    /// A timestamp too late for `EST.mcap` (a Foxglove timestamp holds whole seconds in a
+    /// `u32`).
+    #[error(
+        "cannot write EST.mcap: {}: {topic} at t_us {t_us} is later than the largest time a Foxglove timestamp holds ({max} us)",
+        path.display()
+    )]
+    TimeOutOfRange {
+        /// The path given for it.
+        path: PathBuf,
+        /// The topic of the message.
+        topic: &'static str,
+        /// Its time, microseconds.
+        t_us: u64,
+        /// The largest time allowed, microseconds.
+        max: u64,
+    },
 }

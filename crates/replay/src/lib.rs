@@ -27,6 +27,9 @@
 #![deny(missing_docs)]
 
 mod error;
+mod navigate;
+mod output;
+mod types;
 
 use std::path::{Path, PathBuf};
 
@@ -42,6 +45,13 @@ use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel}
 use vehicle_log::Record;
 
 pub use error::Error;
+pub use nav::{NavSettings, Navigator};
+pub use navigate::{LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, replay_log};
+pub use output::{summary_json, write_estimates, write_summary, write_trajectory};
+pub use types::{
+    CameraSample, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, Replay,
+    TruthErrors,
+};
 
 /// How the replay associates and calibrates.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -132,10 +142,87 @@ pub struct LogCalibration {
 
 /// One decoded stereo frame.
 #[derive(Debug, Clone)]
-struct DecodedFrame {
-    t_us: u64,
-    left: Vec<Pixel>,
-    right: Vec<Pixel>,
+pub(crate) struct DecodedFrame {
+    pub(crate) t_us: u64,
+    pub(crate) left: Vec<Pixel>,
+    pub(crate) right: Vec<Pixel>,
+}
+
+/// A vehicle log read, decoded and ordered by data time.
+#[derive(Debug, Clone)]
+pub(crate) struct LogInput {
+    pub(crate) rig: Rig,
+    pub(crate) rig_source: RigSource,
+    /// Stereo frames sorted by timestamp.
+    pub(crate) frames: Vec<DecodedFrame>,
+    /// Odometry sorted by timestamp.
+    pub(crate) odometry: Vec<OdomSample>,
+    pub(crate) counts: Counts,
+    pub(crate) warnings: Vec<String>,
+    pub(crate) truth: Option<navigate::Truth>,
+}
+
+/// Steps 1-3 of the crate docs: read, decode, order by data time.
+pub(crate) fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput, Error> {
+    let log = vehicle_log::read_log(path)?;
+    if !log.has_vehicle_topics() {
+        return Err(Error::NotVehicleLog {
+            path: path.to_path_buf(),
+            topics: log.ignored_topics.clone(),
+        });
+    }
+    let mut warnings = Vec::new();
+    if let Some(why) = &log.truncated {
+        warnings.push(format!(
+            "the log ends early ({why}): replayed as far as it goes"
+        ));
+    }
+    warnings.extend(log.warnings.iter().cloned());
+
+    let mut chunks: Vec<&[u8]> = Vec::new();
+    let mut odometry: Vec<OdomSample> = Vec::new();
+    let mut logged_rig: Option<&str> = None;
+    for record in &log.records {
+        match record {
+            Record::Features { bytes, .. } => chunks.push(bytes),
+            Record::Odom(s) => odometry.push(OdomSample {
+                t_us: s.t_us,
+                vx: s.vx,
+                vy: s.vy,
+                vtheta: s.vtheta,
+            }),
+            // The first /rig counts (the rig is logged once, at the start).
+            Record::Rig(text) if logged_rig.is_none() => logged_rig = Some(text),
+            _ => {}
+        }
+    }
+    let (rig, rig_source) = choose_rig(path, rig, logged_rig, &mut warnings)?;
+
+    let mut counts = Counts::default();
+    let mut frames = decode(&chunks, &mut counts);
+    counts.frames_out_of_order = frames
+        .windows(2)
+        .filter(|w| matches!(w, [a, b] if b.t_us < a.t_us))
+        .count() as u64;
+    // Data time, not arrival: both sorts are stable, so equal timestamps keep log order.
+    frames.sort_by_key(|f| f.t_us);
+    odometry.sort_by_key(|s| s.t_us);
+    counts.odometry = odometry.len() as u64;
+    if counts.frames == 0 {
+        warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
+    }
+    if counts.odometry == 0 {
+        warnings.push("no odometry on /odom: the vehicle's motion is unknown".to_string());
+    }
+    Ok(LogInput {
+        rig,
+        rig_source,
+        frames,
+        odometry,
+        counts,
+        warnings,
+        truth: navigate::Truth::from_records(&log.records),
+    })
 }
 
 /// Decodes the concatenated chunks; returns the frames in stream order and the counters.
@@ -189,50 +276,16 @@ pub fn calibrate_log(
     options: &Options,
 ) -> Result<LogCalibration, Error> {
     let path = path.as_ref();
-    let log = vehicle_log::read_log(path)?;
-    if !log.has_vehicle_topics() {
-        return Err(Error::NotVehicleLog {
-            path: path.to_path_buf(),
-            topics: log.ignored_topics.clone(),
-        });
-    }
-    let mut warnings = Vec::new();
-    if let Some(why) = &log.truncated {
-        warnings.push(format!(
-            "the log ends early ({why}): calibrated on what could be read"
-        ));
-    }
-    warnings.extend(log.warnings.iter().cloned());
-
-    let mut chunks: Vec<&[u8]> = Vec::new();
-    let mut odometry: Vec<OdomSample> = Vec::new();
-    let mut logged_rig: Option<&str> = None;
-    for record in &log.records {
-        match record {
-            Record::Features { bytes, .. } => chunks.push(bytes),
-            Record::Odom(s) => odometry.push(OdomSample {
-                t_us: s.t_us,
-                vx: s.vx,
-                vy: s.vy,
-                vtheta: s.vtheta,
-            }),
-            // The first /rig counts (the rig is logged once, at the start).
-            Record::Rig(text) if logged_rig.is_none() => logged_rig = Some(text),
-            _ => {}
-        }
-    }
-    let (rig, rig_source) = choose_rig(path, rig, logged_rig, &mut warnings)?;
-
-    let mut counts = Counts::default();
-    let mut frames = decode(&chunks, &mut counts);
-    counts.frames_out_of_order = frames
-        .windows(2)
-        .filter(|w| matches!(w, [a, b] if b.t_us < a.t_us))
-        .count() as u64;
-    // Data time, not arrival: both sorts are stable, so equal timestamps keep log order.
-    frames.sort_by_key(|f| f.t_us);
-    odometry.sort_by_key(|s| s.t_us);
-    counts.odometry = odometry.len() as u64;
+    let input = read_vehicle_log(path, rig)?;
+    let LogInput {
+        rig,
+        rig_source,
+        frames,
+        odometry,
+        mut counts,
+        mut warnings,
+        truth: _,
+    } = input;
 
     let mut front_end = FrontEnd::new(Model::from_rig(&rig), options.front_end)?;
     let mut builder = PairBuilder::new(options.pairs)?;
@@ -306,12 +359,6 @@ fn choose_rig(
 }
 
 fn add_warnings(counts: &Counts, calibration: &Calibration, warnings: &mut Vec<String>) {
-    if counts.frames == 0 {
-        warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
-    }
-    if counts.odometry == 0 {
-        warnings.push("no odometry on /odom: phase 1 has nothing to compare with".to_string());
-    }
     if counts.tracker_resets > 0 {
         warnings.push(format!(
             "the odometry was missing at {} frames: tracks were restarted there",

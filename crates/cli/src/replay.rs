@@ -1,0 +1,188 @@
+//! `stereonav replay LOG.mcap [--rig RIG.toml] [--out EST.mcap] [--summary SUMMARY.json]
+//! [--trajectory TRAJ.csv] [--skip-phase1]`: the whole stack on a vehicle log
+//! (vehicle-interfaces.md section 5; `replay::replay_log`).
+//!
+//! Prints a short human summary on stdout (frames, the phase switch, the map, the camera
+//! parameters, the final pose and, when the log has simulator truth, the errors); warnings
+//! (a log cut short, phase 1 never stable) go to stderr, one line each. A progress bar is drawn
+//! on stderr when it is a terminal, nothing otherwise.
+
+use std::fmt::Write as _;
+use std::io::{self, IsTerminal, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use calib::Rig;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use replay::{NavSettings, Phase, Replay};
+use track::PairSettings;
+
+/// Arguments of `stereonav replay`.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
+    #[arg(value_name = "LOG.mcap")]
+    log: PathBuf,
+    /// The rig file (TOML, section 3); without it, the log's /rig message.
+    #[arg(long, value_name = "RIG.toml")]
+    rig: Option<PathBuf>,
+    /// Write the estimates (trajectory, landmarks with their uncertainty, camera parameters over
+    /// time) as MCAP, in Foxglove's well-known schemas where one fits.
+    #[arg(long, value_name = "EST.mcap")]
+    out: Option<PathBuf>,
+    /// Write the summary as JSON.
+    #[arg(long, value_name = "SUMMARY.json")]
+    summary: Option<PathBuf>,
+    /// Write the trajectory as CSV (`t_us,x,y,theta`, a row per stereo frame).
+    #[arg(long, value_name = "TRAJ.csv")]
+    trajectory: Option<PathBuf>,
+    /// Skip phase 1: start phase 2 at the first frame from the rig's nominal values and priors
+    /// (as in the paper's experiment).
+    #[arg(long)]
+    skip_phase1: bool,
+    /// Frames between the two frames of a phase-1 pair; lamps must stay in view across a pair,
+    /// so a fast vehicle needs fewer (at 20 Hz, 40 frames are 2 s).
+    #[arg(long, value_name = "N", default_value_t = PairSettings::default().stride)]
+    stride: usize,
+}
+
+/// Frames below which no progress bar is drawn (a short log is done before it would show).
+const PROGRESS_MIN_FRAMES: u64 = 2000;
+
+pub(crate) fn run(args: &Args) -> Result<()> {
+    let defaults = NavSettings::default();
+    let settings = NavSettings {
+        skip_phase1: args.skip_phase1,
+        pairs: PairSettings {
+            stride: args.stride,
+            ..defaults.pairs
+        },
+        ..defaults
+    };
+    // Before the log is read: a bad setting should not wait for a long log.
+    settings
+        .pairs
+        .validate()
+        .with_context(|| format!("--stride {}", args.stride))?;
+    let rig = args.rig.as_deref().map(Rig::load).transpose()?;
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
+    let terminal = io::stderr().is_terminal();
+    let mut shown = false;
+    let mut progress = |done: u64, total: u64| {
+        if !shown && terminal && total >= PROGRESS_MIN_FRAMES {
+            shown = true;
+            bar.set_length(total);
+            bar.set_style(
+                ProgressStyle::with_template("replaying [{bar:30}] {pos}/{len} frames, {eta} left")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar())
+                    .progress_chars("=> "),
+            );
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+            bar.enable_steady_tick(Duration::from_millis(200));
+        }
+        if shown {
+            bar.set_position(done);
+        }
+    };
+    let started = Instant::now();
+    let result = replay::replay_log(&args.log, rig, &settings, &mut progress);
+    bar.finish_and_clear();
+    let replay = result?;
+    let took = started.elapsed();
+    {
+        let mut stderr = io::stderr().lock();
+        for w in &replay.warnings {
+            writeln!(stderr, "stereonav: warning: {w}")?;
+        }
+    }
+    if let Some(path) = &args.out {
+        replay::write_estimates(path, &replay)?;
+    }
+    if let Some(path) = &args.summary {
+        replay::write_summary(path, &replay)?;
+    }
+    if let Some(path) = &args.trajectory {
+        replay::write_trajectory(path, &replay)?;
+    }
+    let text = human_summary(&args.log, &replay, took);
+    io::stdout().lock().write_all(text.as_bytes())?;
+    Ok(())
+}
+
+/// The few lines a person reads after a replay.
+fn human_summary(log: &std::path::Path, r: &Replay, took: Duration) -> String {
+    let mut s = String::new();
+    let span_s = match (r.frames.first(), r.frames.last()) {
+        (Some(a), Some(b)) => (b.t_us.saturating_sub(a.t_us)) as f64 * 1e-6,
+        _ => 0.0,
+    };
+    let speed = if took.as_secs_f64() > 0.0 {
+        span_s / took.as_secs_f64()
+    } else {
+        f64::INFINITY
+    };
+    let _ = writeln!(
+        s,
+        "{}: {} stereo frames ({span_s:.1} s of data) replayed in {:.2} s ({speed:.0}x real time); {} corrupt packets, {} frames lost",
+        log.display(),
+        r.frames.len(),
+        took.as_secs_f64(),
+        r.counts.corrupt,
+        r.counts.lost
+    );
+    let phase2 = r
+        .frames
+        .iter()
+        .filter(|f| f.phase == Phase::Navigating)
+        .count();
+    let phases = match (r.phase1_skipped, r.phase_switch_t_us) {
+        (true, _) => "phase 1 skipped: phase 2 from the rig's priors".to_string(),
+        (false, Some(t)) => format!(
+            "phase 1 stable at t = {:.2} s: phase 2 for {phase2} frames",
+            t as f64 * 1e-6
+        ),
+        (false, None) => "phase 1 never became stable: no phase 2".to_string(),
+    };
+    let _ = writeln!(s, "{phases}");
+    let _ = writeln!(s, "map: {} landmarks", r.landmarks.len());
+    for p in r.final_camera.iter().filter(|p| p.sigma > 0.0) {
+        let name = p.param.name();
+        if matches!(name, "baseline" | "mount_x" | "mount_y" | "mount_z") {
+            let _ = writeln!(s, "{name}: {:.2} +- {:.2} mm", p.value * 1e3, p.sigma * 1e3);
+        } else {
+            let _ = writeln!(s, "{name}: {:.3} +- {:.3}", p.value, p.sigma);
+        }
+    }
+    if let Some(f) = r.frames.last() {
+        let _ = writeln!(
+            s,
+            "final pose: x {:.3} m, y {:.3} m, theta {:.2} deg",
+            f.pose[0],
+            f.pose[1],
+            f.pose[2].to_degrees()
+        );
+    }
+    if let Some(t) = &r.truth {
+        let _ = writeln!(
+            s,
+            "against the log's truth: landmark RMS {:.2} mm ({} matched, {} unmatched, {} lamps missed), trajectory error RMS {:.2} mm (max {:.2} mm), heading RMS {:.3} deg",
+            t.landmark_rms * 1e3,
+            t.landmarks_matched,
+            t.landmarks_unmatched,
+            t.lamps_missed,
+            t.ate_rms * 1e3,
+            t.ate_max * 1e3,
+            t.heading_rms.to_degrees()
+        );
+        for (p, e) in &t.camera {
+            if r.final_camera
+                .iter()
+                .any(|c| c.param == *p && c.sigma > 0.0)
+            {
+                let _ = writeln!(s, "  {} error {e:+.3e}", p.name());
+            }
+        }
+    }
+    s
+}

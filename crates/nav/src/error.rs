@@ -1,0 +1,53 @@
+//! Why the navigator refused an input; the message is one line naming the problem.
+
+/// A refused input, setting or operation. The navigator is left as it was.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A setting is out of its range.
+    #[error("navigator setting {name} = {value} must be {expected}")]
+    Settings {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What it must be.
+        expected: &'static str,
+    },
+    /// The association's settings are out of range.
+    #[error("association settings: {0}")]
+    Association(#[from] track::SettingsError),
+    /// The filter refused (settings, rig, an update that would lose positive definiteness).
+    #[error("phase 2 filter: {0}")]
+    Filter(#[from] vslam_ekf::Error),
+    /// An input value is NaN or infinite.
+    #[error("{what} at t = {t_us} us is not finite ({value})")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+        /// Its timestamp, microseconds.
+        t_us: u64,
+        /// The value.
+        value: f64,
+    },
+    /// An odometry sample older than the previous one.
+    #[error(
+        "odometry sample at t = {t_us} us is older than the previous one ({last_us} us): feed odometry in time order"
+    )]
+    OdometryOutOfOrder {
+        /// The sample's timestamp.
+        t_us: u64,
+        /// The previous sample's.
+        last_us: u64,
+    },
+    /// A frame older than the previous one.
+    #[error(
+        "stereo frame at t = {t_us} us is older than the previous one ({last_us} us): feed frames in time order"
+    )]
+    FrameOutOfOrder {
+        /// The frame's timestamp.
+        t_us: u64,
+        /// The previous frame's.
+        last_us: u64,
+    },
+}

@@ -1,0 +1,530 @@
+//! The navigator: the method's two phases in one object, fed with the board's stereo frames
+//! and the odometry in time order, from any source (a log, a live link, Python arrays).
+//!
+//! 1. **Phase 1, self-calibration.** Every frame goes through the association
+//!    ([`track::FrontEnd`]: left-right matching on the rectified rig, frame-to-frame tracking
+//!    predicted by the odometry); frame pairs of confirmed tracks feed an incremental
+//!    [`calib::selfcal::SelfCalibrator`]. The pose is dead reckoning from the odometry, with its
+//!    covariance growing by the rig's odometry noise.
+//! 2. **The switch**, at the frame where the calibration became stable
+//!    ([`calib::selfcal::StableRule`]; its time is [`Navigator::phase_switch_t_us`]): the EKF
+//!    starts from the hand-over (camera parameters and covariance) at the dead-reckoned pose
+//!    with its covariance, and the association continues with the calibrated camera.
+//! 3. **Phase 2, EKF SLAM** ([`vslam_ekf::Ekf`]): predict with the odometry between frames,
+//!    update with the tracks bound to landmarks, confirm new landmarks
+//!    ([`vslam_ekf::Candidates`]). A track not bound to a landmark is first matched against
+//!    the map: each landmark predicted inside both images and not observed under another
+//!    track this frame is a candidate, scored by its innovation's Mahalanobis distance
+//!    (`S = H P H^T + R`, 4 dof); the best is taken if it is inside the gate and no other is
+//!    (a lamp seen again after leaving the view keeps its landmark). A track that matches no
+//!    landmark is a candidate for a new one once the tracker has confirmed it; clutter never
+//!    passes both confirmations (the tracker's, and the consistency of its triangulations).
+//!
+//! Phase 1 can be skipped ([`NavSettings::skip_phase1`]): phase 2 then starts at the first
+//! frame from the rig's nominal values and priors, as in the paper's experiment.
+//!
+//! Feed the odometry up to a frame's timestamp before the frame ([`Navigator::push_odometry`],
+//! [`Navigator::push_frame`]); both must come in time order (a log's board frames arrive later
+//! than the odometry of the same instant: sort by the data's timestamps, as `replay` does).
+//! Every input is checked; a refusal is an [`Error`] and leaves the navigator as it was.
+//!
+//! `#![no_std]` with `alloc`, like the filter, so that the vehicle controller can run it.
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+#![warn(clippy::indexing_slicing)]
+
+#[cfg(not(feature = "alloc"))]
+compile_error!("the nav crate needs the `alloc` feature (or `std`)");
+
+extern crate alloc;
+#[cfg(feature = "std")]
+extern crate std;
+
+mod error;
+
+use alloc::vec::Vec;
+
+use calib::camera::{CameraParams, Pose2};
+use calib::config::Rig;
+use calib::odometry::OdomSample;
+use calib::selfcal::{Calibration, Handover, SelfCalibrator, SolverSettings, StableRule};
+use nalgebra::{Matrix3, Matrix4, Vector4};
+use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel, TrackedFrame};
+use vslam_ekf::chi2::chi2_quantile;
+use vslam_ekf::{
+    CameraCovariance, CandidateSettings, Candidates, Ekf, Increment, LandmarkId, Settings,
+};
+
+pub use error::Error;
+
+/// The navigator's tuning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavSettings {
+    /// Stereo matching and tracking.
+    pub front_end: FrontEndSettings,
+    /// Phase 1's frame pairs.
+    pub pairs: PairSettings,
+    /// The phase-1 solver.
+    pub solver: SolverSettings,
+    /// When phase 1's calibration counts as stable (the switch).
+    pub stable: StableRule,
+    /// Phase 1 re-solves every this many frame pairs.
+    pub solve_every: usize,
+    /// The filter.
+    pub ekf: Settings,
+    /// Landmark confirmation.
+    pub candidates: CandidateSettings,
+    /// Probability mass inside the map-matching gate (4 dof): 0.999 gives 18.47.
+    pub map_match_probability: f64,
+    /// Start phase 2 at the first frame from the rig's nominal values and priors.
+    pub skip_phase1: bool,
+}
+
+impl Default for NavSettings {
+    /// The crates' defaults; phase 1 re-solves every 10 pairs, phase 1 not skipped.
+    fn default() -> Self {
+        Self {
+            front_end: FrontEndSettings::default(),
+            pairs: PairSettings::default(),
+            solver: SolverSettings::default(),
+            stable: StableRule::default(),
+            solve_every: 10,
+            ekf: Settings::default(),
+            candidates: CandidateSettings::default(),
+            map_match_probability: 0.999,
+            skip_phase1: false,
+        }
+    }
+}
+
+/// Which phase the navigator is in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Phase {
+    /// Phase 1: self-calibration, dead reckoning.
+    Calibrating,
+    /// Phase 2: EKF SLAM.
+    Navigating,
+}
+
+/// What one frame did.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameOutcome {
+    /// Landmarks updated at this frame, with their NIS (4 dof).
+    pub accepted: Vec<(LandmarkId, f64)>,
+    /// Landmarks whose observation the gate rejected.
+    pub rejected: Vec<LandmarkId>,
+    /// Landmarks added (confirmed tracks).
+    pub added: Vec<LandmarkId>,
+    /// Landmarks removed as false.
+    pub removed: Vec<LandmarkId>,
+    /// Tracks bound to an existing landmark by map matching at this frame.
+    pub rematched: Vec<(u64, LandmarkId)>,
+    /// Phase 1 solved at this frame (a new calibration estimate).
+    pub solved: bool,
+    /// The switch to phase 2 happened at this frame.
+    pub switched: bool,
+    /// The odometry did not cover the interval since the previous frame: the pose was held.
+    pub no_odometry: bool,
+}
+
+/// Counters over the navigator's life.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+pub struct NavStats {
+    /// Frames processed.
+    pub frames: u64,
+    /// Odometry samples accepted.
+    pub odometry: u64,
+    /// Frames at which the odometry did not reach back to the previous frame.
+    pub frames_without_odometry: u64,
+    /// Phase-1 frame pairs.
+    pub pairs: u64,
+    /// Tracks bound to an existing landmark by map matching.
+    pub rematched: u64,
+    /// Observations the filter's gate rejected.
+    pub rejected: u64,
+    /// Updates the filter refused (state left as it was).
+    pub refused_updates: u64,
+}
+
+/// The two phases of the method in one object (see the crate docs).
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    rig: Rig,
+    settings: NavSettings,
+    front_end: FrontEnd,
+    pairs: PairBuilder,
+    calibrator: SelfCalibrator,
+    ekf: Option<Ekf>,
+    candidates: Candidates,
+    /// Odometry since (and including the last sample before) the previous frame.
+    odometry: Vec<OdomSample>,
+    last_odometry_t: Option<u64>,
+    last_frame_t: Option<u64>,
+    /// Dead reckoning (phase 1).
+    pose: Pose2,
+    pose_covariance: Matrix3<f64>,
+    phase_switch_t_us: Option<u64>,
+    match_gate: f64,
+    stats: NavStats,
+}
+
+impl Navigator {
+    /// A navigator for this rig, at the world origin (the robot at the first frame).
+    pub fn new(rig: Rig, settings: NavSettings) -> Result<Self, Error> {
+        let p = settings.map_match_probability;
+        if !(p.is_finite() && p > 0.0 && p < 1.0) {
+            return Err(Error::Settings {
+                name: "map_match_probability",
+                value: p,
+                expected: "strictly between 0 and 1",
+            });
+        }
+        if settings.solve_every == 0 {
+            return Err(Error::Settings {
+                name: "solve_every",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        let front_end = FrontEnd::new(Model::from_rig(&rig), settings.front_end)?;
+        let pairs = PairBuilder::new(settings.pairs)?;
+        let candidates = Candidates::new(settings.candidates)?;
+        let ekf = if settings.skip_phase1 {
+            Some(Ekf::from_prior(&rig, settings.ekf)?)
+        } else {
+            // Checks the filter's settings and the rig now, not at the switch.
+            Ekf::from_prior(&rig, settings.ekf)?;
+            None
+        };
+        let calibrator = SelfCalibrator::new(
+            rig.clone(),
+            settings.solver,
+            settings.stable,
+            settings.solve_every,
+        );
+        Ok(Self {
+            rig,
+            settings,
+            front_end,
+            pairs,
+            calibrator,
+            ekf,
+            candidates,
+            odometry: Vec::new(),
+            last_odometry_t: None,
+            last_frame_t: None,
+            pose: Pose2::default(),
+            pose_covariance: Matrix3::zeros(),
+            phase_switch_t_us: None,
+            match_gate: chi2_quantile(p, 4.0),
+            stats: NavStats::default(),
+        })
+    }
+
+    /// The rig.
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &NavSettings {
+        &self.settings
+    }
+
+    /// The current phase.
+    pub fn phase(&self) -> Phase {
+        if self.ekf.is_some() {
+            Phase::Navigating
+        } else {
+            Phase::Calibrating
+        }
+    }
+
+    /// When phase 2 started (the frame at which phase 1 became stable); `None` before, or
+    /// when phase 1 was skipped.
+    pub fn phase_switch_t_us(&self) -> Option<u64> {
+        self.phase_switch_t_us
+    }
+
+    /// The filter (phase 2).
+    pub fn ekf(&self) -> Option<&Ekf> {
+        self.ekf.as_ref()
+    }
+
+    /// The track-to-landmark bookkeeping (phase 2).
+    pub fn candidates(&self) -> &Candidates {
+        &self.candidates
+    }
+
+    /// The association.
+    pub fn front_end(&self) -> &FrontEnd {
+        &self.front_end
+    }
+
+    /// Phase 1's calibrator (its latest solve, history and hand-over).
+    pub fn calibrator(&self) -> &SelfCalibrator {
+        &self.calibrator
+    }
+
+    /// Phase 1's latest calibration, if any solve ran.
+    pub fn calibration(&self) -> Option<&Calibration> {
+        self.calibrator.latest()
+    }
+
+    /// The hand-over to phase 2, once phase 1 is stable.
+    pub fn handover(&self) -> Option<&Handover> {
+        self.calibrator.handover()
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> NavStats {
+        self.stats
+    }
+
+    /// Timestamp of the last frame processed.
+    pub fn last_frame_t_us(&self) -> Option<u64> {
+        self.last_frame_t
+    }
+
+    /// The robot's pose and its covariance: the filter's in phase 2, dead reckoning before.
+    pub fn pose(&self) -> (Pose2, Matrix3<f64>) {
+        match &self.ekf {
+            Some(ekf) => (ekf.pose(), ekf.pose_covariance()),
+            None => (self.pose, self.pose_covariance),
+        }
+    }
+
+    /// The camera parameters (every one of C) and their covariance: the filter's in phase 2,
+    /// phase 1's latest solve before (the rig's nominal values and prior variances before the
+    /// first solve).
+    pub fn camera(&self) -> (CameraParams, CameraCovariance) {
+        if let Some(ekf) = &self.ekf {
+            return (ekf.camera(), ekf.camera_covariance());
+        }
+        if let Some(c) = self.calibrator.latest() {
+            return (c.camera, c.covariance);
+        }
+        let model = Model::from_rig(&self.rig);
+        (model.camera, model.camera_covariance)
+    }
+
+    /// Adds an odometry sample (robot-frame velocities held from `t_us` until the next one).
+    /// Samples must come in time order; one older than the previous is refused.
+    pub fn push_odometry(&mut self, sample: OdomSample) -> Result<(), Error> {
+        for (what, value) in [
+            ("odometry vx", sample.vx),
+            ("odometry vy", sample.vy),
+            ("odometry vtheta", sample.vtheta),
+        ] {
+            if !value.is_finite() {
+                return Err(Error::NonFinite {
+                    what,
+                    t_us: sample.t_us,
+                    value,
+                });
+            }
+        }
+        if let Some(last) = self.last_odometry_t
+            && sample.t_us < last
+        {
+            return Err(Error::OdometryOutOfOrder {
+                t_us: sample.t_us,
+                last_us: last,
+            });
+        }
+        self.last_odometry_t = Some(sample.t_us);
+        self.front_end.push_odometry(sample);
+        if self.ekf.is_none() {
+            self.pairs.push_odometry(sample);
+        }
+        self.odometry.push(sample);
+        self.stats.odometry += 1;
+        Ok(())
+    }
+
+    /// Processes one stereo frame: the board's left and right features (pixels, see
+    /// [`Pixel::from_q4`]) at `t_us`, after the odometry up to `t_us`. Frames must come in time
+    /// order.
+    pub fn push_frame(
+        &mut self,
+        t_us: u64,
+        left: &[Pixel],
+        right: &[Pixel],
+    ) -> Result<FrameOutcome, Error> {
+        if let Some(last) = self.last_frame_t
+            && t_us < last
+        {
+            return Err(Error::FrameOutOfOrder {
+                t_us,
+                last_us: last,
+            });
+        }
+        for p in left.iter().chain(right) {
+            if !(p.u.is_finite() && p.v.is_finite()) {
+                return Err(Error::NonFinite {
+                    what: "feature pixel coordinate",
+                    t_us,
+                    value: if p.u.is_finite() { p.v } else { p.u },
+                });
+            }
+        }
+        let mut outcome = FrameOutcome::default();
+        // Motion since the previous frame.
+        if let Some(t0) = self.last_frame_t {
+            let moved = match &mut self.ekf {
+                Some(ekf) => match ekf.predict_odometry(&self.odometry, t0, t_us) {
+                    Ok(()) => true,
+                    Err(vslam_ekf::Error::NoOdometry { .. }) => false,
+                    Err(e) => return Err(e.into()),
+                },
+                None => match Increment::from_odometry(&self.odometry, t0, t_us, &self.rig.noise) {
+                    Ok(inc) => {
+                        let (pose, f, q) = inc.apply(&self.pose);
+                        self.pose = pose;
+                        let p = f * self.pose_covariance * f.transpose() + q;
+                        self.pose_covariance = 0.5 * (p + p.transpose());
+                        true
+                    }
+                    Err(vslam_ekf::Error::NoOdometry { .. }) => false,
+                    Err(e) => return Err(e.into()),
+                },
+            };
+            if !moved {
+                outcome.no_odometry = true;
+                self.stats.frames_without_odometry += 1;
+            }
+        }
+        self.last_frame_t = Some(t_us);
+        // Keep the last sample at or before this frame: it is held into the next interval.
+        let keep_from = self
+            .odometry
+            .partition_point(|s| s.t_us <= t_us)
+            .saturating_sub(1);
+        self.odometry.drain(..keep_from);
+        self.stats.frames += 1;
+
+        let tracked = self.front_end.push_frame(t_us, left, right);
+        if self.ekf.is_none() {
+            self.phase1(&tracked, &mut outcome)?;
+        }
+        if self.ekf.is_some() {
+            self.phase2(&tracked, &mut outcome)?;
+        }
+        Ok(outcome)
+    }
+
+    /// Phase 1: frame pairs into the calibrator; the switch when it is stable.
+    fn phase1(&mut self, tracked: &TrackedFrame, outcome: &mut FrameOutcome) -> Result<(), Error> {
+        let Some(pair) = self.pairs.push_frame(tracked) else {
+            return Ok(());
+        };
+        self.stats.pairs += 1;
+        outcome.solved = self.calibrator.add_pair(pair).is_some();
+        let Some(handover) = self.calibrator.handover().cloned() else {
+            return Ok(());
+        };
+        let mut ekf = Ekf::from_handover(&self.rig, &handover, self.settings.ekf)?;
+        ekf.set_start_pose(self.pose, &self.pose_covariance)?;
+        let model = self
+            .front_end
+            .model()
+            .with_camera(handover.camera, handover.covariance);
+        self.front_end.set_model(model);
+        self.ekf = Some(ekf);
+        self.phase_switch_t_us = Some(tracked.t_us);
+        outcome.switched = true;
+        Ok(())
+    }
+
+    /// Phase 2: map matching of unbound tracks, then the filter's update and confirmation.
+    fn phase2(&mut self, tracked: &TrackedFrame, outcome: &mut FrameOutcome) -> Result<(), Error> {
+        let Some(ekf) = self.ekf.as_mut() else {
+            return Ok(());
+        };
+        // Landmarks observed under a track of this frame.
+        let observed: Vec<LandmarkId> = tracked
+            .observations
+            .iter()
+            .filter_map(|o| self.candidates.landmark_of(o.track.0))
+            .collect();
+        // Map matching: unbound tracks against the landmarks predicted in view and not
+        // observed under another track.
+        let unbound: Vec<usize> = tracked
+            .observations
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| {
+                self.candidates.landmark_of(o.track.0).is_none()
+                    && !self.candidates.is_retired(o.track.0)
+            })
+            .map(|(i, _)| i)
+            .collect();
+        if !unbound.is_empty() {
+            let predicted: Vec<(LandmarkId, Vector4<f64>, Matrix4<f64>)> = ekf
+                .visible_landmarks()
+                .into_iter()
+                .filter(|(id, _)| !observed.contains(id))
+                .filter_map(|(id, _)| {
+                    let (z, s) = ekf.predict_measurement(id).ok()?;
+                    let s_inv = s.try_inverse()?;
+                    Some((id, z, s_inv))
+                })
+                .collect();
+            let mut taken: Vec<LandmarkId> = Vec::new();
+            for &i in &unbound {
+                let Some(o) = tracked.observations.get(i) else {
+                    continue;
+                };
+                let mut best: Option<(LandmarkId, f64)> = None;
+                let mut inside = 0usize;
+                for (id, z, s_inv) in &predicted {
+                    let nu = o.measurement - z;
+                    let d2 = nu.dot(&(s_inv * nu));
+                    if !(d2.is_finite() && d2 <= self.match_gate) {
+                        continue;
+                    }
+                    inside += 1;
+                    if best.is_none_or(|(_, b)| d2 < b) {
+                        best = Some((*id, d2));
+                    }
+                }
+                if let Some((id, _)) = best
+                    && inside == 1
+                    && !taken.contains(&id)
+                {
+                    self.candidates.bind(ekf, o.track.0, id)?;
+                    taken.push(id);
+                    outcome.rematched.push((o.track.0, id));
+                    self.stats.rematched += 1;
+                }
+            }
+        }
+        // Bound tracks are observations; unbound ones become candidates once the tracker has
+        // confirmed them.
+        let frame: Vec<(u64, calib::Measurement)> = tracked
+            .observations
+            .iter()
+            .filter(|o| o.confirmed || self.candidates.landmark_of(o.track.0).is_some())
+            .map(|o| (o.track.0, o.measurement))
+            .collect();
+        let report = match self.candidates.observe(ekf, &frame) {
+            Ok(r) => r,
+            Err(e) => {
+                self.stats.refused_updates += 1;
+                return Err(e.into());
+            }
+        };
+        outcome.accepted = report
+            .update
+            .accepted
+            .iter()
+            .map(|g| (g.id, g.nis))
+            .collect();
+        outcome.rejected = report.update.rejected.iter().map(|g| g.id).collect();
+        self.stats.rejected += outcome.rejected.len() as u64;
+        outcome.added = report.added.iter().map(|(_, id)| *id).collect();
+        outcome.removed = report.removed.iter().map(|(_, id)| *id).collect();
+        Ok(())
+    }
+}

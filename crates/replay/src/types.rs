@@ -1,0 +1,160 @@
+//! What a replay of a whole log produces ([`Replay`]): the estimates at every stereo frame, the
+//! map, the camera parameters over time, the phase switch, the counters and, when the log
+//! carries simulator truth, the errors. The writers (`output`) turn it into `EST.mcap`,
+//! `SUMMARY.json` and `TRAJ.csv` (vehicle-interfaces.md section 5).
+
+use calib::camera::Param;
+
+use crate::Counts;
+
+/// The navigator's phase at a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Phase {
+    /// Phase 1: self-calibration; the pose is dead reckoning from the odometry.
+    Calibrating,
+    /// Phase 2: EKF SLAM with the camera parameters in the state.
+    Navigating,
+}
+
+impl Phase {
+    /// `"calibrating"` or `"navigating"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Calibrating => "calibrating",
+            Self::Navigating => "navigating",
+        }
+    }
+}
+
+/// One camera parameter's estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamEstimate {
+    /// The parameter.
+    pub param: Param,
+    /// Its value (the nominal one when it is not estimated).
+    pub value: f64,
+    /// Its 1-sigma (0 when it is held fixed).
+    pub sigma: f64,
+}
+
+/// One landmark of the map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LandmarkEstimate {
+    /// The landmark's id (stable for its life).
+    pub id: u64,
+    /// World position, metres.
+    pub position: [f64; 3],
+    /// Its 3x3 covariance, row-major, square metres.
+    pub covariance: [[f64; 3]; 3],
+    /// Updates it took part in.
+    pub observations: u64,
+}
+
+impl LandmarkEstimate {
+    /// Per-axis 1-sigma, metres (NaN stays NaN: a broken covariance must not look exact).
+    pub fn sigma(&self) -> [f64; 3] {
+        core::array::from_fn(|i| {
+            let v = self.covariance[i][i];
+            if v.is_nan() {
+                f64::NAN
+            } else {
+                v.max(0.0).sqrt()
+            }
+        })
+    }
+}
+
+/// The estimate at one stereo frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameEstimate {
+    /// The frame's timestamp (board clock), microseconds.
+    pub t_us: u64,
+    /// The phase the frame was processed in.
+    pub phase: Phase,
+    /// Robot pose `(X, Y, theta)` in the world frame (metres, radians).
+    pub pose: [f64; 3],
+    /// Its 3x3 covariance, row-major.
+    pub pose_covariance: [[f64; 3]; 3],
+    /// Landmarks observed (updated) at this frame, by id.
+    pub observed: Vec<u64>,
+    /// Each accepted observation's NIS (4 dof) at this frame, by landmark id.
+    pub nis: Vec<(u64, f64)>,
+    /// Observations rejected by the gate at this frame.
+    pub rejected: u32,
+    /// Landmarks in the map after the frame.
+    pub landmarks: usize,
+}
+
+/// The camera parameters after a phase-1 solve or a phase-2 frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraSample {
+    /// Timestamp, microseconds.
+    pub t_us: u64,
+    /// The phase that produced it.
+    pub phase: Phase,
+    /// Every parameter of C, [`Param::ALL`] order.
+    pub params: Vec<ParamEstimate>,
+}
+
+/// The map at one instant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapSnapshot {
+    /// Timestamp, microseconds.
+    pub t_us: u64,
+    /// Every landmark, by id.
+    pub landmarks: Vec<LandmarkEstimate>,
+}
+
+/// Errors against the simulator's truth, when the log carries it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthErrors {
+    /// Root mean square of the 3-D position error of the landmarks matched to a lamp, metres.
+    pub landmark_rms: f64,
+    /// The same after the best planar rigid motion (x, y, heading) of the map onto the lamps,
+    /// metres: the map's own error, without the uncertainty of where phase 2 started (the
+    /// robot's dead-reckoned pose at the switch anchors the map).
+    pub landmark_rms_aligned: f64,
+    /// Landmarks matched to a lamp (the nearest lamp within `match_radius`, one-to-one).
+    pub landmarks_matched: usize,
+    /// Landmarks not within the match radius of any lamp (clutter or duplicates).
+    pub landmarks_unmatched: usize,
+    /// Lamps seen by both cameras at some frame with no landmark matched to them.
+    pub lamps_missed: usize,
+    /// The radius used to match landmarks to lamps, metres.
+    pub match_radius: f64,
+    /// Absolute trajectory error: RMS of the position error over the frames with a true pose,
+    /// metres (no alignment: the world frame is the robot at the first frame, as in the truth).
+    pub ate_rms: f64,
+    /// Largest position error over those frames, metres.
+    pub ate_max: f64,
+    /// RMS heading error over those frames, radians.
+    pub heading_rms: f64,
+    /// Final camera parameter errors (estimate minus truth), [`Param::ALL`] order.
+    pub camera: Vec<(Param, f64)>,
+}
+
+/// A whole log replayed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Replay {
+    /// One per stereo frame processed, in time order.
+    pub frames: Vec<FrameEstimate>,
+    /// The camera parameters over time (every phase-1 solve, then every phase-2 frame).
+    pub camera: Vec<CameraSample>,
+    /// The map about once a second of data time, and at the end.
+    pub maps: Vec<MapSnapshot>,
+    /// The final map.
+    pub landmarks: Vec<LandmarkEstimate>,
+    /// The final camera parameters (every one of C).
+    pub final_camera: Vec<ParamEstimate>,
+    /// When phase 2 started (`None`: phase 1 never became stable, or was skipped: then
+    /// [`Replay::phase1_skipped`]).
+    pub phase_switch_t_us: Option<u64>,
+    /// Phase 1 was skipped: phase 2 ran from the rig's nominal values and priors.
+    pub phase1_skipped: bool,
+    /// What was read, decoded and associated.
+    pub counts: Counts,
+    /// Errors against the truth, when the log has it.
+    pub truth: Option<TruthErrors>,
+    /// Things that did not stop the replay but limit what it says, one line each.
+    pub warnings: Vec<String>,
+}
