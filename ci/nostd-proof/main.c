@@ -10,6 +10,7 @@ int stereonav_nostd_rig_round_trip(void);
 int stereonav_nostd_selfcal(void);
 int stereonav_nostd_tracking(void);
 int stereonav_nostd_ekf(void);
+int stereonav_nostd_navigator(void);
 
 /* The precompiled `alloc` of the stable toolchain refers to the unwinding personality routine
  * although the library is built with panic = "abort", so nothing ever unwinds: an empty
@@ -29,5 +30,6 @@ int main(void) {
     failed += check("phase-1 self-calibration recovers f", stereonav_nostd_selfcal(), 1);
     failed += check("confirmed tracks of four lamps", stereonav_nostd_tracking(), 4);
     failed += check("EKF maps four lamps and learns the baseline", stereonav_nostd_ekf(), 1);
+    failed += check("navigator maps four lamps", stereonav_nostd_navigator(), 4);
     return failed == 0 ? 0 : 1;
 }

@@ -286,6 +286,42 @@ pub extern "C" fn stereonav_nostd_ekf() -> i32 {
     i32::from(close && variance(&ekf) < before)
 }
 
+/// The navigator as the vehicle controller would run it, phase 1 skipped: odometry at 100 Hz
+/// and stereo frames at 20 Hz of four lamps over a creeping robot, pushed in time order for
+/// two seconds. Returns the number of landmarks mapped (4), or -1 on an error.
+#[unsafe(no_mangle)]
+pub extern "C" fn stereonav_nostd_navigator() -> i32 {
+    let rig = rig();
+    let settings = nav::NavSettings { skip_phase1: true, ..nav::NavSettings::default() };
+    let Ok(mut navigator) = nav::Navigator::new(rig.clone(), settings) else {
+        return -1;
+    };
+    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
+        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    for k in 0..=200u64 {
+        let t_us = k * 10_000;
+        if navigator.push_odometry(OdomSample { t_us, vx: 0.1, vy: 0.0, vtheta: 0.0 }).is_err() {
+            return -1;
+        }
+        if k % 5 != 0 {
+            continue;
+        }
+        let pose = Pose2::new(0.1 * t_us as f64 * 1e-6, 0.0, 0.0);
+        let (mut left, mut right) = (Vec::new(), Vec::new());
+        for lamp in &lamps {
+            let Ok(z) = project(&rig.nominal, &pose, lamp) else {
+                return -1;
+            };
+            left.push(Pixel { u: z[0], v: z[1] });
+            right.push(Pixel { u: z[2], v: z[3] });
+        }
+        if navigator.push_frame(t_us, &left, &right).is_err() {
+            return -1;
+        }
+    }
+    navigator.ekf().map_or(-1, |e| i32::try_from(e.landmark_count()).unwrap_or(-1))
+}
+
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo<'_>) -> ! {
     loop {}
