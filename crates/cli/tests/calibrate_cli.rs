@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::{assert_one_line_error, stereonav};
+use common::{PARAMETERS, assert_one_line_error, fixture, s, stereonav};
 
 use serde_json::Value;
 
@@ -16,34 +16,8 @@ use serde_json::Value;
 const TRUE_F: f64 = 721.0;
 const TRUE_BASELINE_M: f64 = 0.1164;
 
-/// The camera parameters, in the order of the JSON's history rows.
-const PARAMETERS: [&str; 10] = [
-    "f",
-    "cx",
-    "cy",
-    "baseline",
-    "mount_x",
-    "mount_y",
-    "mount_z",
-    "mount_roll",
-    "mount_pitch",
-    "mount_yaw",
-];
-
 fn scratch(name: &str) -> PathBuf {
     common::scratch("calibrate-cli", name)
-}
-
-fn fixture(name: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/logs")
-        .join(name);
-    assert!(path.exists(), "{} is missing", path.display());
-    path
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// Success with nothing on stderr (no warning), and the stdout text.

@@ -8,36 +8,11 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::{assert_one_line_error, stereonav};
+use common::{PARAMETERS, assert_one_line_error, fixture, s, stereonav};
 use serde_json::Value;
-
-const PARAMETERS: [&str; 10] = [
-    "f",
-    "cx",
-    "cy",
-    "baseline",
-    "mount_x",
-    "mount_y",
-    "mount_z",
-    "mount_roll",
-    "mount_pitch",
-    "mount_yaw",
-];
 
 fn scratch(name: &str) -> PathBuf {
     common::scratch("replay-cli", name)
-}
-
-fn fixture(name: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/logs")
-        .join(name);
-    assert!(path.exists(), "{} is missing", path.display());
-    path
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 fn ok(out: &Output) -> String {
@@ -99,7 +74,11 @@ fn paper_experiment_writes_the_three_files_and_a_human_summary() {
         s(&traj),
     ]);
     let text = ok(&out);
-    assert!(out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(text.contains("map: 5 landmarks"), "{text}");
     assert!(text.contains("baseline:"), "{text}");
     assert!(text.contains("landmark RMS"), "{text}");
@@ -158,7 +137,10 @@ fn a_log_cut_short_is_replayed_with_a_warning() {
     ]);
     ok(&out);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("warning") && stderr.contains("ends early"), "{stderr}");
+    assert!(
+        stderr.contains("warning") && stderr.contains("ends early"),
+        "{stderr}"
+    );
     assert!(!stderr.contains("panicked"));
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
     let frames = doc["frames"].as_u64().unwrap();
@@ -193,32 +175,29 @@ fn a_foreign_mcap_file_is_not_a_vehicle_log() {
 #[test]
 fn bad_rig_files_are_one_line_naming_the_problem() {
     let text = std::fs::read_to_string(fixture("paper-experiment.rig.toml")).unwrap();
-    let cases: [(&str, Box<dyn Fn(&str) -> String>, &str); 3] = [
+    let without_baseline: String = text
+        .lines()
+        .filter(|l| !l.starts_with("baseline ="))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let cases = [
         (
             "missing",
-            Box::new(|t: &str| {
-                t.lines()
-                    .filter(|l| !l.starts_with("baseline ="))
-                    .map(|l| format!("{l}\n"))
-                    .collect()
-            }),
+            without_baseline,
             "[camera] baseline: missing key",
         ),
         (
             "type",
-            Box::new(|t: &str| t.replacen("f = 700.0", "f = \"seven hundred\"", 1)),
+            text.replacen("f = 700.0", "f = \"seven hundred\"", 1),
             "f",
         ),
         (
             "unknown",
-            Box::new(|t: &str| {
-                t.replacen("parameters = [\"baseline\"]", "parameters = [\"zoom\"]", 1)
-            }),
+            text.replacen("parameters = [\"baseline\"]", "parameters = [\"zoom\"]", 1),
             "zoom",
         ),
     ];
-    for (tag, edit, needle) in cases {
-        let edited = edit(&text);
+    for (tag, edited, needle) in cases {
         assert_ne!(edited, text, "{tag}");
         let rig = scratch(&format!("{tag}.rig.toml"));
         std::fs::write(&rig, edited).unwrap();
@@ -250,6 +229,11 @@ fn an_unwritable_output_is_one_line() {
 
 #[test]
 fn stride_zero_is_one_line() {
-    let out = stereonav(&["replay", s(&fixture("paper-experiment.mcap")), "--stride", "0"]);
+    let out = stereonav(&[
+        "replay",
+        s(&fixture("paper-experiment.mcap")),
+        "--stride",
+        "0",
+    ]);
     assert_one_line_error(&out, "stride");
 }

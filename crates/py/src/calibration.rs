@@ -968,10 +968,11 @@ fn pair_settings(stride: usize, pairing: &str) -> Result<PairSettings, CalibInpu
     Ok(settings)
 }
 
-/// `stereonav.InputError` for a log that could not be calibrated; its message names the file
-/// and the problem. When the operating system refused the file, its `OSError` (with the
-/// errno: `FileNotFoundError`, `PermissionError`, ...) is the exception's `__cause__`.
-fn replay_error(py: Python<'_>, err: &replay::Error) -> PyErr {
+/// `stereonav.InputError` for a log that could not be calibrated or replayed, or an output that
+/// could not be written; its message names the file and the problem. When the operating system
+/// refused the file, its `OSError` (with the errno: `FileNotFoundError`, `PermissionError`,
+/// ...) is the exception's `__cause__`.
+pub(crate) fn replay_error(py: Python<'_>, err: &replay::Error) -> PyErr {
     let py_err = input_error(py, err.to_string());
     let mut source: Option<&(dyn std::error::Error + 'static)> = Some(err);
     while let Some(e) = source {
@@ -1036,8 +1037,8 @@ pub(crate) fn calibrate_log(
     Ok(LogCalibrationResult { result })
 }
 
-/// Every counter of a log's calibration by name, in the order of `replay::Counts`.
-fn counts_list(c: &Counts) -> Vec<(&'static str, u64)> {
+/// Every counter of a log's calibration or replay by name, in the order of `replay::Counts`.
+pub(crate) fn counts_list(c: &Counts) -> Vec<(&'static str, u64)> {
     vec![
         ("frames", c.frames),
         ("corrupt", c.corrupt),

@@ -17,6 +17,7 @@
 mod calibration;
 mod filter;
 mod montecarlo;
+mod navigator;
 mod rig;
 mod simulation;
 mod stream;
@@ -237,6 +238,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(filter::filter_defaults, m)?)?;
     m.add_class::<montecarlo::MonteCarloResult>()?;
     m.add_function(wrap_pyfunction!(montecarlo::monte_carlo, m)?)?;
+    m.add_class::<navigator::Navigator>()?;
+    m.add_class::<navigator::ReplayResult>()?;
+    m.add_function(wrap_pyfunction!(navigator::replay_log, m)?)?;
+    m.add_function(wrap_pyfunction!(navigator::phase_names, m)?)?;
     Ok(())
 }
 

@@ -20,8 +20,8 @@ fn fixture(name: &str) -> PathBuf {
 
 /// The warehouse log, simulated once (fast mode, seed of the scenario file).
 fn warehouse_log() -> PathBuf {
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/scenarios/warehouse.toml");
+    let scenario =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/warehouse.toml");
     let sc = sim::Scenario::load(&scenario).unwrap();
     let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
     let path = std::env::temp_dir().join(format!("bench-warehouse-{}.mcap", std::process::id()));

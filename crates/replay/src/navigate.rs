@@ -9,7 +9,6 @@ use calib::camera::{CameraParams, Param, Pose2};
 use calib::config::Rig;
 use nav::{NavSettings, Navigator};
 use vehicle_log::{Record, TruthCamera, TruthLandmark, TruthPose};
-use vslam_ekf::CameraCovariance;
 
 use crate::{
     CameraSample, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
@@ -34,22 +33,6 @@ fn phase_of(p: nav::Phase) -> Phase {
         nav::Phase::Calibrating => Phase::Calibrating,
         nav::Phase::Navigating => Phase::Navigating,
     }
-}
-
-fn params_of(camera: &CameraParams, covariance: &CameraCovariance) -> Vec<ParamEstimate> {
-    Param::ALL
-        .iter()
-        .map(|&param| ParamEstimate {
-            param,
-            value: camera.get(param),
-            sigma: covariance
-                .get((param.index(), param.index()))
-                .copied()
-                .unwrap_or(0.0)
-                .max(0.0)
-                .sqrt(),
-        })
-        .collect()
 }
 
 fn matrix3(m: &nalgebra::Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -132,7 +115,7 @@ pub fn replay_log(
             camera.push(CameraSample {
                 t_us: frame.t_us,
                 phase,
-                params: params_of(&c, &cov),
+                params: ParamEstimate::all(&c, &cov),
             });
         }
         if phase == Phase::Navigating {
@@ -159,7 +142,7 @@ pub fn replay_log(
         });
     }
     let (final_c, final_cov) = navigator.camera();
-    let final_camera = params_of(&final_c, &final_cov);
+    let final_camera = ParamEstimate::all(&final_c, &final_cov);
     let stats = navigator.stats();
     let tracker = navigator.front_end().tracker().stats();
     counts.stereo_matches = navigator.front_end().stereo_stats().matches;

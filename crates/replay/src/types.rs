@@ -37,6 +37,34 @@ pub struct ParamEstimate {
     pub sigma: f64,
 }
 
+impl ParamEstimate {
+    /// Every parameter of C with its 1-sigma from a covariance in [`Param::ALL`] order (0 for
+    /// a parameter held fixed; NaN stays NaN), [`Param::ALL`] order.
+    pub fn all(
+        camera: &calib::CameraParams,
+        covariance: &nalgebra::SMatrix<f64, { calib::N_PARAMS }, { calib::N_PARAMS }>,
+    ) -> Vec<Self> {
+        Param::ALL
+            .iter()
+            .map(|&param| {
+                let v = covariance
+                    .get((param.index(), param.index()))
+                    .copied()
+                    .unwrap_or(0.0);
+                Self {
+                    param,
+                    value: camera.get(param),
+                    sigma: if v.is_nan() {
+                        f64::NAN
+                    } else {
+                        v.max(0.0).sqrt()
+                    },
+                }
+            })
+            .collect()
+    }
+}
+
 /// One landmark of the map.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LandmarkEstimate {

@@ -119,11 +119,10 @@ fn paper_square_with_phase_1_skipped() {
 
 /// paper-calibration, the whole method: phase 1 until stable, the switch, phase 2. The map is
 /// anchored at the dead-reckoned pose of the switch (165 s of odometry), so its absolute error
-/// is that pose's. The camera parameters have phase 1's accuracy (phase 2 runs only 17 s): f
-/// within 0.15 %, the baseline within 0.75 mm (the phase-1 bounds, docs/phase1.md). The map's
-/// scale follows the baseline (z = f B / d): phase 1's baseline sigma of 0.39 mm is 0.33 % of
-/// the 2.5-3 m to the lamps, 9 mm, so the map's shape (after a planar rigid alignment) is held
-/// to 20 mm here, not to phase 2's 2 mm.
+/// is that pose's. The camera parameters are held to phase 1's bounds (f within 0.15 %, the
+/// baseline within 0.75 mm, docs/phase1.md) and the map's shape to 20 mm. This seed meets
+/// them; over 20 seeds phase 2 does not (the baseline's median error grows to 1.2 mm after the
+/// switch, a known weakness of the EKF on this drive: docs/navigator.md and docs/phase2.md).
 #[test]
 fn paper_calibration_hands_over_from_phase_1() {
     let r = run("paper-calibration.mcap", false);

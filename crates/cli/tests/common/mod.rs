@@ -1,7 +1,7 @@
 //! Helpers shared by the command-line tests.
 #![allow(dead_code, unreachable_pub, clippy::expect_used)] // test helpers; not every suite uses all
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// Runs the `stereonav` binary built for these tests.
@@ -33,4 +33,32 @@ pub fn assert_one_line_error(out: &Output, needle: &str) {
         "{stderr:?} should mention {needle:?}"
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// The camera parameters of C in `Param::ALL` order, as the JSON documents name them.
+pub const PARAMETERS: [&str; 10] = [
+    "f",
+    "cx",
+    "cy",
+    "baseline",
+    "mount_x",
+    "mount_y",
+    "mount_z",
+    "mount_roll",
+    "mount_pitch",
+    "mount_yaw",
+];
+
+/// A committed log or rig file of `fixtures/logs`.
+pub fn fixture(name: &str) -> PathBuf {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/logs")
+        .join(name);
+    assert!(path.exists(), "{} is missing", path.display());
+    path
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("UTF-8 test path")
 }

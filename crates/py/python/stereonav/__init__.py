@@ -28,6 +28,13 @@ landmark (:meth:`Filter.update`); its map comes back as a :data:`LANDMARK_DTYPE`
 :class:`Health` says whether it stays consistent. :func:`monte_carlo` evaluates it over seeded
 simulations (:mod:`stereonav.montecarlo`) against the truth: errors, sigmas, NEES and NIS.
 
+The whole stack (:mod:`stereonav.navigation`): :class:`Navigator` runs both phases -- phase 1
+until the calibration is stable, the switch, phase 2 -- fed by hand with the odometry and the
+board's frames (:meth:`Navigator.push_odometry`, :meth:`Navigator.push_frame`);
+:func:`replay` runs it on a whole vehicle log, as ``stereonav replay`` does, and returns a
+:class:`Replay` with the summary (``SUMMARY.json``), the trajectory, the map, the camera
+parameters over time and the writers of ``EST.mcap``, ``SUMMARY.json`` and ``TRAJ.csv``.
+
 Exceptions derive from :class:`Error`: :class:`InputError` (also a ``ValueError``) for values
 out of range, :class:`InputTypeError` (also a ``TypeError``) for arguments of the wrong type.
 """
@@ -71,6 +78,19 @@ from .filter import (
     PredictedMeasurement,
     UpdateReport,
 )
+from .navigation import (
+    FRAME_INFO_DTYPE,
+    MAP_LANDMARK_DTYPE,
+    NIS_DTYPE,
+    PHASES,
+    CameraHistory,
+    FrameOutcome,
+    MapSnapshot,
+    Navigator,
+    ParamEstimate,
+    Replay,
+    replay,
+)
 from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
     CAMERA_PARAMETERS,
@@ -84,6 +104,17 @@ from .rig import (
 )
 
 __all__ = [
+    "FRAME_INFO_DTYPE",
+    "MAP_LANDMARK_DTYPE",
+    "NIS_DTYPE",
+    "PHASES",
+    "CameraHistory",
+    "FrameOutcome",
+    "MapSnapshot",
+    "Navigator",
+    "ParamEstimate",
+    "Replay",
+    "replay",
     "BINDING_DTYPE",
     "COVARIANCE_UPDATES",
     "GATE_DTYPE",

@@ -10,6 +10,10 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "Navigator",
+    "ReplayResult",
+    "phase_names",
+    "replay",
     "Filter",
     "MonteCarloResult",
     "filter_defaults",
@@ -403,3 +407,92 @@ def monte_carlo(
     scenario: str, runs: int, first_seed: int, outlier_fraction: float, max_frames: int | None
 ) -> MonteCarloResult:
     """Phase-2 Monte Carlo on a scenario file; raises ``stereonav.InputError``."""
+
+#: ``(ids (N,), positions (N, 3), covariances (N, 3, 3), observations (N,))``.
+_LandmarkTuple = tuple[_U64, _F64, _F64, _U64]
+#: ``(values (10,), sigmas (10,))`` in ``CAMERA_PARAMETERS`` order.
+_CameraTuple = tuple[_F64, _F64]
+#: ``(t_us (F,), phase (F,), pose (F, 3), pose_covariance (F, 3, 3), accepted (F,),
+#: rejected (F,), landmarks (F,))``.
+_FramesTuple = tuple[_U64, npt.NDArray[np.uint8], _F64, _F64, _U64, _U64, _U64]
+#: ``(accepted ids, accepted NIS, rejected ids, added ids, removed ids, rematched (K, 2),
+#: solved, switched, no_odometry)``.
+_OutcomeTuple = tuple[_U64, _F64, _U64, _U64, _U64, _U64, bool, bool, bool]
+
+def phase_names() -> list[str]:
+    """The phase names, in the order of the per-frame phase codes."""
+
+@final
+class ReplayResult:
+    """A whole log replayed (see ``stereonav.Replay``)."""
+
+    def summary_json(self) -> str:
+        """``SUMMARY.json`` as JSON text."""
+    @property
+    def frames(self) -> _FramesTuple: ...
+    @property
+    def nis(self) -> tuple[_U64, _U64, _F64]:
+        """``(t_us (K,), landmark id (K,), NIS (K,))``."""
+    @property
+    def camera_history(self) -> tuple[_U64, npt.NDArray[np.uint8], _F64, _F64]:
+        """``(t_us (K,), phase (K,), values (K, 10), sigmas (K, 10))``."""
+    @property
+    def camera(self) -> _CameraTuple: ...
+    @property
+    def landmarks(self) -> _LandmarkTuple: ...
+    @property
+    def maps(self) -> list[tuple[int, _LandmarkTuple]]: ...
+    @property
+    def phase_switch_t_us(self) -> int | None: ...
+    @property
+    def phase1_skipped(self) -> bool: ...
+    @property
+    def counts(self) -> list[tuple[str, int]]: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    def write_estimates(self, path: str) -> None:
+        """Write ``EST.mcap``; raises ``stereonav.InputError``."""
+    def write_summary(self, path: str) -> None:
+        """Write ``SUMMARY.json``; raises ``stereonav.InputError``."""
+    def write_trajectory(self, path: str) -> None:
+        """Write ``TRAJ.csv``; raises ``stereonav.InputError``."""
+
+def replay(
+    log_path: str,
+    rig_json: str | None,
+    rig_source: str,
+    skip_phase1: bool,
+    stride: int | None,
+) -> ReplayResult:
+    """The whole stack on a vehicle log; raises ``stereonav.InputError`` naming the file or
+    the setting."""
+
+@final
+class Navigator:
+    """Both phases of the method fed frame by frame (see ``stereonav.Navigator``)."""
+
+    def __new__(
+        cls, rig_json: str, rig_source: str, skip_phase1: bool, stride: int | None
+    ) -> Navigator: ...
+    def push_odometry(self, t_us: _U64, values: _F64) -> None:
+        """Odometry ``(t_us (S,), vx vy vtheta (S, 3))``, sorted, none older than before."""
+    def push_frame(self, t_us: int, left: _F64, right: _F64) -> _OutcomeTuple:
+        """One stereo frame, features ``(N, 2)`` pixels ``u, v`` a side."""
+    @property
+    def phase(self) -> str: ...
+    @property
+    def phase_switch_t_us(self) -> int | None: ...
+    @property
+    def last_frame_t_us(self) -> int | None: ...
+    @property
+    def pose(self) -> _F64: ...
+    @property
+    def pose_covariance(self) -> _F64: ...
+    @property
+    def camera(self) -> _CameraTuple: ...
+    @property
+    def camera_covariance(self) -> _F64: ...
+    @property
+    def landmarks(self) -> _LandmarkTuple: ...
+    @property
+    def stats(self) -> list[tuple[str, int]]: ...
