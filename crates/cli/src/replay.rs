@@ -1,5 +1,5 @@
 //! `stereonav replay LOG.mcap [--rig RIG.toml] [--out EST.mcap] [--summary SUMMARY.json]
-//! [--trajectory TRAJ.csv] [--skip-phase1]`: the whole stack on a vehicle log
+//! [--trajectory TRAJ.csv] [--skip-phase1] [--stride N] [--consider-camera]`: the whole stack on a vehicle log
 //! (vehicle-interfaces.md section 5; `replay::replay_log`).
 //!
 //! Prints a short human summary on stdout (frames, the phase switch, the map, the camera
@@ -45,6 +45,11 @@ pub(crate) struct Args {
     /// so a fast vehicle needs fewer (at 20 Hz, 40 frames are 2 s).
     #[arg(long, value_name = "N", default_value_t = PairSettings::default().stride)]
     stride: usize,
+    /// Keep phase 2 from refining the camera parameters: their covariance is carried into the
+    /// pose and landmark sigmas, their values stay phase 1's (Schmidt-Kalman; for drives on
+    /// which refining them is over-confident, docs/phase2.md).
+    #[arg(long)]
+    consider_camera: bool,
 }
 
 /// Frames below which no progress bar is drawn (a short log is done before it would show).
@@ -54,6 +59,14 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     let defaults = NavSettings::default();
     let settings = NavSettings {
         skip_phase1: args.skip_phase1,
+        ekf: vslam_ekf::Settings {
+            camera_update: if args.consider_camera {
+                vslam_ekf::CameraUpdate::Consider
+            } else {
+                vslam_ekf::CameraUpdate::Refine
+            },
+            ..defaults.ekf
+        },
         pairs: PairSettings {
             stride: args.stride,
             ..defaults.pairs

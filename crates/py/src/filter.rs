@@ -264,6 +264,7 @@ fn settings(
         nis_window,
         max_consecutive_rejections,
         covariance_update,
+        ..Settings::default()
     })
 }
 

@@ -113,10 +113,22 @@ fn phase_of(phase: nav::Phase) -> Phase {
 
 /// The navigator's settings: the defaults, with phase 1 skipped or not and phase 1's pairs
 /// `stride` frames apart (default when None), checked.
-fn nav_settings(skip_phase1: bool, stride: Option<usize>) -> Result<NavSettings, SettingsError> {
+fn nav_settings(
+    skip_phase1: bool,
+    stride: Option<usize>,
+    consider_camera: bool,
+) -> Result<NavSettings, SettingsError> {
     let defaults = NavSettings::default();
     let settings = NavSettings {
         skip_phase1,
+        ekf: vslam_ekf::Settings {
+            camera_update: if consider_camera {
+                vslam_ekf::CameraUpdate::Consider
+            } else {
+                vslam_ekf::CameraUpdate::Refine
+            },
+            ..defaults.ekf
+        },
         pairs: PairSettings {
             stride: stride.unwrap_or(defaults.pairs.stride),
             ..defaults.pairs
@@ -254,11 +266,12 @@ pub(crate) fn phase_names() -> Vec<&'static str> {
 /// `rig_json` is a rig file's tables as JSON (`rig_source` names it in errors); None uses the
 /// log's `/rig` message. `skip_phase1` starts phase 2 at the first frame from the rig's
 /// nominal values and priors; `stride` sets the frames between the two of a phase-1 pair
-/// (default when None). Raises `stereonav.InputError` for a log that cannot be read or is not
+/// (default when None); `consider_camera` keeps phase 2 from refining the camera parameters
+/// (`vslam_ekf::CameraUpdate::Consider`). Raises `stereonav.InputError` for a log that cannot be read or is not
 /// a vehicle log, a bad rig or a setting out of range; a log cut short is replayed as far as
 /// it goes, with a warning. The GIL is released during the run.
 #[pyfunction]
-#[pyo3(name = "replay", signature = (log_path, rig_json, rig_source, skip_phase1, stride))]
+#[pyo3(name = "replay", signature = (log_path, rig_json, rig_source, skip_phase1, stride, consider_camera))]
 pub(crate) fn replay_log(
     py: Python<'_>,
     log_path: PathBuf,
@@ -266,8 +279,10 @@ pub(crate) fn replay_log(
     rig_source: &str,
     skip_phase1: bool,
     stride: Option<usize>,
+    consider_camera: bool,
 ) -> PyResult<ReplayResult> {
-    let settings = nav_settings(skip_phase1, stride).map_err(|e| input_error(py, e.to_string()))?;
+    let settings = nav_settings(skip_phase1, stride, consider_camera)
+        .map_err(|e| input_error(py, e.to_string()))?;
     let rig = rig_json
         .map(|text| Rig::from_json_str(text, rig_source))
         .transpose()
@@ -544,20 +559,22 @@ impl Navigator {
     /// A navigator for the rig (its file's tables as JSON; `rig_source` names it in errors),
     /// at the world origin. `skip_phase1` starts phase 2 at the first frame from the rig's
     /// nominal values and priors; `stride` sets the frames between the two of a phase-1 pair
-    /// (default when None). Raises `stereonav.InputError` for a bad rig or setting.
+    /// (default when None); `consider_camera` keeps phase 2 from refining the camera
+    /// parameters. Raises `stereonav.InputError` for a bad rig or setting.
     #[new]
-    #[pyo3(signature = (rig_json, rig_source, skip_phase1, stride))]
+    #[pyo3(signature = (rig_json, rig_source, skip_phase1, stride, consider_camera))]
     fn new(
         py: Python<'_>,
         rig_json: &str,
         rig_source: &str,
         skip_phase1: bool,
         stride: Option<usize>,
+        consider_camera: bool,
     ) -> PyResult<Self> {
         let rig =
             Rig::from_json_str(rig_json, rig_source).map_err(|e| input_error(py, e.to_string()))?;
-        let settings =
-            nav_settings(skip_phase1, stride).map_err(|e| input_error(py, e.to_string()))?;
+        let settings = nav_settings(skip_phase1, stride, consider_camera)
+            .map_err(|e| input_error(py, e.to_string()))?;
         let navigator =
             nav::Navigator::new(rig, settings).map_err(|e| input_error(py, e.to_string()))?;
         Ok(Self {
@@ -715,13 +732,22 @@ mod tests {
 
     #[test]
     fn settings_keep_the_defaults_but_the_two_given() {
-        let s = nav_settings(true, None).expect("defaults");
+        let s = nav_settings(true, None, false).expect("defaults");
+        assert_eq!(s.ekf.camera_update, vslam_ekf::CameraUpdate::Refine);
+        let c = nav_settings(false, None, true).expect("consider");
+        assert_eq!(c.ekf.camera_update, vslam_ekf::CameraUpdate::Consider);
         assert!(s.skip_phase1);
         assert_eq!(s.pairs, NavSettings::default().pairs);
-        assert_eq!(nav_settings(false, Some(20)).expect("20").pairs.stride, 20);
-        let err = nav_settings(false, Some(0)).expect_err("stride 0");
+        assert_eq!(
+            nav_settings(false, Some(20), false)
+                .expect("20")
+                .pairs
+                .stride,
+            20
+        );
+        let err = nav_settings(false, Some(0), false).expect_err("stride 0");
         assert!(err.to_string().contains("stride = 0"), "{err}");
-        let err = nav_settings(false, Some(1_000_001)).expect_err("too far");
+        let err = nav_settings(false, Some(1_000_001), false).expect_err("too far");
         assert!(err.to_string().contains("stride = 1000001"), "{err}");
     }
 

@@ -583,3 +583,19 @@ def test_bad_navigator_settings_raise(tmp_path: pathlib.Path) -> None:
     with pytest.raises(InputError, match=r"RigConfig: \[prior\] baseline: missing key"):
         Navigator(dataclasses.replace(rig, prior={}))
     assert math.isfinite(Navigator(rig).camera["baseline"].value)
+
+
+def test_the_camera_considered_in_phase_2_keeps_phase_1s_estimate() -> None:
+    refined = replay(LOGS / "paper-calibration.mcap")
+    considered = replay(LOGS / "paper-calibration.mcap", consider_camera=True)
+    switch = considered.phase_switch_t_us
+    assert switch is not None and switch == refined.phase_switch_t_us
+    history = considered.camera_history
+    first = int(np.argmax(history.t_us == switch))
+    # Phase 2 from the switch on: the camera parameters do not move.
+    assert np.array_equal(history.values[first:], np.broadcast_to(history.values[first], history.values[first:].shape))
+    assert considered.summary["camera"] != refined.summary["camera"]
+    with pytest.raises(InputTypeError):
+        replay(LOGS / "paper-calibration.mcap", consider_camera="yes")  # type: ignore[arg-type]
+    nav = Navigator(LOGS / "paper-calibration.rig.toml", consider_camera=True)
+    assert nav.phase == "calibrating"

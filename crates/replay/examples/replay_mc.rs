@@ -1,7 +1,7 @@
 //! The whole stack over many seeds of a scenario: each seed simulated to a vehicle log (the
 //! board's byte stream, link faults and all), replayed, and scored against the truth.
 //!
-//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--stride N]`
+//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--stride N] [--consider-camera]`
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::path::PathBuf;
@@ -29,7 +29,8 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--stride N]";
+    let usage =
+        "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--stride N] [--consider-camera]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -41,6 +42,9 @@ fn run() -> Result<(), String> {
     while let Some(a) = rest.next() {
         match a.as_str() {
             "--skip-phase1" => settings.skip_phase1 = true,
+            "--consider-camera" => {
+                settings.ekf.camera_update = vslam_ekf::CameraUpdate::Consider;
+            }
             "--stride" => {
                 let v = rest.next().ok_or("--stride needs a value")?;
                 settings.pairs.stride = v.parse().map_err(|_| format!("--stride {v:?}"))?;

@@ -171,3 +171,24 @@ fn warehouse_maps_every_lamp_it_passes() {
     assert!(camera_error(&r, Param::Baseline).abs() <= 0.0005, "{d}");
     assert!(r.counts.corrupt > 0 && r.counts.lost > 0, "{d}");
 }
+
+/// The same drive with the camera parameters only considered in phase 2: they stay exactly
+/// what phase 1 handed over, with its sigmas, and the map is complete.
+#[test]
+fn paper_calibration_with_the_camera_considered_keeps_the_hand_over() {
+    let mut settings = NavSettings::default();
+    settings.ekf.camera_update = vslam_ekf::CameraUpdate::Consider;
+    let r = replay_log(log("paper-calibration.mcap"), None, &settings, &mut |_, _| {}).unwrap();
+    let d = describe(&r);
+    assert_map_complete(&r, 5);
+    let switch = r.phase_switch_t_us.unwrap();
+    let at_switch = r
+        .camera
+        .iter()
+        .find(|c| c.t_us == switch && c.phase == replay::Phase::Navigating)
+        .unwrap();
+    assert_eq!(at_switch.params, r.final_camera, "{d}");
+    for p in [Param::F, Param::Baseline] {
+        assert!(camera_error(&r, p).abs() <= 3.0 * sigma(&r, p), "{p:?}: {d}");
+    }
+}

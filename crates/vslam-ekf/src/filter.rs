@@ -58,6 +58,19 @@ pub const SEQUENTIAL_MAX_STATES: usize = crate::kernels::MAX_SMALL_STATE;
 /// factored form keeps the 500-landmark update within its time budget (docs/benchmarks.md).
 pub const AUTO_JOSEPH_MAX_STATES: usize = 400;
 
+/// What the update does with the camera parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CameraUpdate {
+    /// Refined by every update, with the landmarks and the pose (the method's phase 2).
+    Refine,
+    /// Considered, not estimated (Schmidt-Kalman): their covariance and cross-covariances are
+    /// carried, so that the pose and landmark sigmas include the camera's uncertainty, but the
+    /// gain's camera rows are zero: the values and their covariance stay those phase 1 handed
+    /// over. For data on which refining them is over-confident (docs/phase2.md,
+    /// "Linearisation"). The update is then always in the Joseph form, which holds for any gain.
+    Consider,
+}
+
 /// The filter's tuning.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Settings {
@@ -70,6 +83,8 @@ pub struct Settings {
     pub max_consecutive_rejections: u32,
     /// Form of the covariance update.
     pub covariance_update: CovarianceUpdate,
+    /// Refine the camera parameters, or only consider them.
+    pub camera_update: CameraUpdate,
 }
 
 impl Default for Settings {
@@ -79,6 +94,7 @@ impl Default for Settings {
             nis_window: 100,
             max_consecutive_rejections: 5,
             covariance_update: CovarianceUpdate::Auto,
+            camera_update: CameraUpdate::Refine,
         }
     }
 }
@@ -761,6 +777,9 @@ impl Ekf {
     // ---------------------------------------------------------------- update
 
     fn joseph(&self) -> bool {
+        if self.settings.camera_update == CameraUpdate::Consider {
+            return true;
+        }
         match self.settings.covariance_update {
             CovarianceUpdate::Joseph => true,
             CovarianceUpdate::Factored => false,
@@ -938,6 +957,7 @@ impl Ekf {
             &mut ws.lhs,
             &mut ws.rhs,
         );
+        self.freeze_camera_rows(n, d, ws);
         let (lhs, rhs, alpha) = if joseph {
             (&ws.lhs, &ws.rhs, 1.0)
         } else {
@@ -962,6 +982,34 @@ impl Ekf {
         }
         self.x[2] = wrap_angle(self.x[2]);
         Ok(())
+    }
+
+    /// [`CameraUpdate::Consider`]: the camera rows of the gain set to zero in the update's
+    /// factors (Joseph form, `n` rows, `d` measurement columns): `dx_c = 0`, and in
+    /// `lhs = [K S - A, -K]`, `rhs = [K, A]` the camera rows become `[-A_c, 0]` and `[0, A_c]`,
+    /// so that `P_cc` is left as it was and `P_xc` becomes `P_xc - K_x A_c^T`.
+    fn freeze_camera_rows(&self, n: usize, d: usize, ws: &mut Workspace) {
+        if self.settings.camera_update != CameraUpdate::Consider {
+            return;
+        }
+        let c0 = self.camera_offset();
+        for i in c0..c0 + self.estimated.len() {
+            if let Some(v) = ws.dx.get_mut(i) {
+                *v = 0.0;
+            }
+            for c in 0..d {
+                let a = ws.rhs.get((d + c) * n + i).copied().unwrap_or(0.0);
+                if let Some(v) = ws.lhs.get_mut(c * n + i) {
+                    *v = -a;
+                }
+                if let Some(v) = ws.lhs.get_mut((d + c) * n + i) {
+                    *v = 0.0;
+                }
+                if let Some(v) = ws.rhs.get_mut(c * n + i) {
+                    *v = 0.0;
+                }
+            }
+        }
     }
 
     /// The accepted observations applied one landmark at a time, for small states: exactly
@@ -1015,6 +1063,7 @@ impl Ekf {
                 &mut ws.lhs,
                 &mut ws.rhs,
             );
+            self.freeze_camera_rows(np, 4, ws);
             let (lhs, rhs, alpha) = if joseph {
                 (&ws.lhs, &ws.rhs, 1.0)
             } else {

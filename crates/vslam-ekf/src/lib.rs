@@ -161,8 +161,8 @@ pub use candidates::{CandidateSettings, Candidates, FrameReport};
 pub use error::Error;
 #[cfg(feature = "alloc")]
 pub use filter::{
-    AUTO_JOSEPH_MAX_STATES, CameraCovariance, CameraStart, CovarianceUpdate, Ekf, Gated,
-    LANDMARK_DIM, LandmarkEstimate, LandmarkId, POSE_DIM, SEQUENTIAL_MAX_STATES, Settings,
+    AUTO_JOSEPH_MAX_STATES, CameraCovariance, CameraStart, CameraUpdate, CovarianceUpdate, Ekf,
+    Gated, LANDMARK_DIM, LandmarkEstimate, LandmarkId, POSE_DIM, SEQUENTIAL_MAX_STATES, Settings,
     UpdateReport,
 };
 #[cfg(feature = "alloc")]

@@ -463,6 +463,7 @@ def replay(
     rig_source: str,
     skip_phase1: bool,
     stride: int | None,
+    consider_camera: bool,
 ) -> ReplayResult:
     """The whole stack on a vehicle log; raises ``stereonav.InputError`` naming the file or
     the setting."""
@@ -472,7 +473,12 @@ class Navigator:
     """Both phases of the method fed frame by frame (see ``stereonav.Navigator``)."""
 
     def __new__(
-        cls, rig_json: str, rig_source: str, skip_phase1: bool, stride: int | None
+        cls,
+        rig_json: str,
+        rig_source: str,
+        skip_phase1: bool,
+        stride: int | None,
+        consider_camera: bool,
     ) -> Navigator: ...
     def push_odometry(self, t_us: _U64, values: _F64) -> None:
         """Odometry ``(t_us (S,), vx vy vtheta (S, 3))``, sorted, none older than before."""

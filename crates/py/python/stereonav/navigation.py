@@ -464,6 +464,7 @@ def replay(
     *,
     skip_phase1: bool = False,
     stride: Optional[int] = None,
+    consider_camera: bool = False,
 ) -> Replay:
     """Run the whole stack on a vehicle log, as ``stereonav replay`` does.
 
@@ -488,6 +489,10 @@ def replay(
         Frames from the first frame of a phase-1 pair to its second, ``1..=1000000``; lamps
         must stay in view across a pair, so a fast vehicle needs fewer. Default 40 (2 s at
         20 Hz).
+    consider_camera : bool, keyword-only
+        Keep phase 2 from refining the camera parameters: their covariance is carried into
+        the pose and landmark sigmas, their values stay phase 1's (Schmidt-Kalman; for drives
+        on which refining them is over-confident, ``docs/phase2.md``).
 
     Returns
     -------
@@ -515,7 +520,12 @@ def replay(
     path = _path("log_path", log_path)
     rig_json, rig_source = (None, "the log's /rig") if rig_path is None else _rig("rig_path", rig_path)
     native = _native.replay(
-        path, rig_json, rig_source, _flag("skip_phase1", skip_phase1), _stride(stride)
+        path,
+        rig_json,
+        rig_source,
+        _flag("skip_phase1", skip_phase1),
+        _stride(stride),
+        _flag("consider_camera", consider_camera),
     )
     return Replay._from_native(native)
 
@@ -549,6 +559,8 @@ class Navigator:
         Start phase 2 at the first frame from the rig's nominal values and priors.
     stride : int, keyword-only
         Frames between the two frames of a phase-1 pair, ``1..=1000000`` (default 40).
+    consider_camera : bool, keyword-only
+        Keep phase 2 from refining the camera parameters (see :func:`replay`).
 
     Raises
     ------
@@ -560,11 +572,20 @@ class Navigator:
     """
 
     def __init__(
-        self, rig: RigLike, *, skip_phase1: bool = False, stride: Optional[int] = None
+        self,
+        rig: RigLike,
+        *,
+        skip_phase1: bool = False,
+        stride: Optional[int] = None,
+        consider_camera: bool = False,
     ) -> None:
         rig_json, rig_source = _rig("rig", rig)
         self._native = _native.Navigator(
-            rig_json, rig_source, _flag("skip_phase1", skip_phase1), _stride(stride)
+            rig_json,
+            rig_source,
+            _flag("skip_phase1", skip_phase1),
+            _stride(stride),
+            _flag("consider_camera", consider_camera),
         )
 
     def __repr__(self) -> str:
