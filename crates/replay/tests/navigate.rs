@@ -178,7 +178,13 @@ fn warehouse_maps_every_lamp_it_passes() {
 fn paper_calibration_with_the_camera_considered_keeps_the_hand_over() {
     let mut settings = NavSettings::default();
     settings.ekf.camera_update = vslam_ekf::CameraUpdate::Consider;
-    let r = replay_log(log("paper-calibration.mcap"), None, &settings, &mut |_, _| {}).unwrap();
+    let r = replay_log(
+        log("paper-calibration.mcap"),
+        None,
+        &settings,
+        &mut |_, _| {},
+    )
+    .unwrap();
     let d = describe(&r);
     assert_map_complete(&r, 5);
     let switch = r.phase_switch_t_us.unwrap();
@@ -189,6 +195,9 @@ fn paper_calibration_with_the_camera_considered_keeps_the_hand_over() {
         .unwrap();
     assert_eq!(at_switch.params, r.final_camera, "{d}");
     for p in [Param::F, Param::Baseline] {
-        assert!(camera_error(&r, p).abs() <= 3.0 * sigma(&r, p), "{p:?}: {d}");
+        assert!(
+            camera_error(&r, p).abs() <= 3.0 * sigma(&r, p),
+            "{p:?}: {d}"
+        );
     }
 }

@@ -46,7 +46,10 @@ fn dense_schmidt(ekf: &Ekf, batch: &[(LandmarkId, Measurement)]) -> (DVector<f64
 
 fn measure(s: &Setup, rng: &mut TestRng, id: LandmarkId) -> (LandmarkId, Measurement) {
     let p = s.points.iter().find(|(i, _)| *i == id).unwrap().1;
-    (id, noisy(rng, &project(&s.truth, &s.pose, &p).unwrap(), 0.3))
+    (
+        id,
+        noisy(rng, &project(&s.truth, &s.pose, &p).unwrap(), 0.3),
+    )
 }
 
 /// One landmark at a time (the small state's sequential path) and a batch of ten on a map
