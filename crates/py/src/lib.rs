@@ -16,6 +16,7 @@
 
 mod calibration;
 mod filter;
+mod logs;
 mod montecarlo;
 mod navigator;
 mod rig;
@@ -242,6 +243,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<navigator::ReplayResult>()?;
     m.add_function(wrap_pyfunction!(navigator::replay_log, m)?)?;
     m.add_function(wrap_pyfunction!(navigator::phase_names, m)?)?;
+    m.add_class::<logs::LogContents>()?;
+    m.add_function(wrap_pyfunction!(logs::read_log, m)?)?;
     Ok(())
 }
 

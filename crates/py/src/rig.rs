@@ -194,7 +194,7 @@ pub(crate) fn load_rig(
 }
 
 #[allow(clippy::type_complexity)]
-fn rig_tuple(
+pub(crate) fn rig_tuple(
     rig: &Rig,
 ) -> (
     u32,

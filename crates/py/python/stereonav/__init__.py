@@ -35,6 +35,10 @@ board's frames (:meth:`Navigator.push_odometry`, :meth:`Navigator.push_frame`);
 :class:`Replay` with the summary (``SUMMARY.json``), the trajectory, the map, the camera
 parameters over time and the writers of ``EST.mcap``, ``SUMMARY.json`` and ``TRAJ.csv``.
 
+Vehicle logs for analysis (:mod:`stereonav.logs`): :func:`read_log` reads a log whole and
+returns a :class:`VehicleLog` with what was logged -- the board's byte stream and its decoded
+frames, the odometry, the ``/rig`` rig and, from the simulator, the truth (:class:`LogTruth`).
+
 Exceptions derive from :class:`Error`: :class:`InputError` (also a ``ValueError``) for values
 out of range, :class:`InputTypeError` (also a ``TypeError``) for arguments of the wrong type.
 """
@@ -91,6 +95,7 @@ from .navigation import (
     Replay,
     replay,
 )
+from .logs import LogTruth, VehicleLog, read_log
 from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
     CAMERA_PARAMETERS,
@@ -104,6 +109,9 @@ from .rig import (
 )
 
 __all__ = [
+    "LogTruth",
+    "VehicleLog",
+    "read_log",
     "FRAME_INFO_DTYPE",
     "MAP_LANDMARK_DTYPE",
     "NIS_DTYPE",

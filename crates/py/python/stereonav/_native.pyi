@@ -10,6 +10,8 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "LogContents",
+    "read_log",
     "Navigator",
     "ReplayResult",
     "phase_names",
@@ -502,3 +504,49 @@ class Navigator:
     def landmarks(self) -> _LandmarkTuple: ...
     @property
     def stats(self) -> list[tuple[str, int]]: ...
+
+_RigTuple = tuple[int, int, list[float], list[str], list[tuple[str, float]], tuple[float, float, float]]
+
+@final
+class LogContents:
+    """A vehicle log read whole, as logged (see ``stereonav.VehicleLog``)."""
+
+    @property
+    def stream(self) -> bytes:
+        """Every ``/fpga/features`` chunk concatenated in log order."""
+    @property
+    def chunks(self) -> int:
+        """Number of ``/fpga/features`` messages."""
+    @property
+    def odometry(self) -> tuple[_U64, _F64]:
+        """``(t_us (S,), vx vy vtheta (S, 3))`` in log order."""
+    @property
+    def rig_json(self) -> str | None:
+        """The first ``/rig`` message's text, or None."""
+    def rig(self) -> _RigTuple | None:
+        """The first ``/rig`` message as :func:`load_rig` returns a rig, or None; raises
+        ``stereonav.InputError`` for an invalid rig."""
+    @property
+    def truth_poses(self) -> tuple[_U64, _F64]:
+        """``(t_us (F,), x y theta (F, 3))`` in log order; empty without truth."""
+    @property
+    def truth_landmarks(self) -> tuple[_U64, _F64]:
+        """``(id (N,), x y z (N, 3))``; empty without truth."""
+    @property
+    def truth_camera(self) -> _F64 | None:
+        """10 values in ``CAMERA_PARAMETERS`` order, or None."""
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def truncated(self) -> str | None: ...
+    @property
+    def ignored_messages(self) -> int: ...
+    @property
+    def ignored_topics(self) -> list[str]: ...
+    @property
+    def topics(self) -> list[str]: ...
+
+def read_log(path: str) -> LogContents:
+    """Read a vehicle log whole with the GIL released; raises ``stereonav.InputError`` (the
+    ``OSError`` as ``__cause__`` when the OS refused the file, the replay's message for a file
+    without the vehicle topics)."""

@@ -208,7 +208,14 @@ def load_rig(path: Union[str, os.PathLike[str]]) -> RigConfig:
 
     Raises :class:`stereonav.InputError` naming the file, the key and the problem.
     """
-    width, height, nominal, estimate, prior, noise = _native.load_rig(os.fspath(path))
+    return _rig_config(_native.load_rig(os.fspath(path)))
+
+
+def _rig_config(
+    raw: tuple[int, int, list[float], list[str], list[tuple[str, float]], tuple[float, float, float]],
+) -> RigConfig:
+    """The :class:`RigConfig` of a native rig tuple (:func:`load_rig`, a log's ``/rig``)."""
+    width, height, nominal, estimate, prior, noise = raw
     return RigConfig(
         width=width,
         height=height,

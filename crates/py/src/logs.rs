@@ -1,0 +1,330 @@
+//! Vehicle logs (`vehicle-interfaces.md` section 4) read whole for analysis: [`read_log`].
+//!
+//! The log is read with `vehicle_log::read_log` with the GIL released and handed to Python as
+//! it was logged: the board's byte stream (every `/fpga/features` chunk concatenated in log
+//! order, undecoded), the odometry in log order, the first `/rig` message's text and the
+//! simulator's truth. Nothing is sorted, decoded or estimated here; the Python wrapper decodes
+//! the stream with `stereonav.StreamDecoder`.
+//!
+//! A file without the vehicle topics is refused as the replay refuses it, with the replay's
+//! message; a file that cannot be opened or read, is not MCAP, or has a malformed vehicle
+//! message raises `stereonav.InputError` naming it, with the `OSError` as the cause when the
+//! operating system refused the file. A log cut short is not an error: `truncated` says why it
+//! ends early.
+
+use std::path::{Path, PathBuf};
+
+use calib::{CameraParams, Mount, Rig};
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyBytes;
+use vehicle_log::{OdomSample, Record, TruthCamera, TruthLandmark, TruthPose};
+
+use crate::calibration::replay_error;
+use crate::input_error;
+use crate::rig::rig_tuple;
+
+/// A rig as `stereonav._native.load_rig` returns it: `(width, height, nominal camera (10
+/// values), estimated parameter names, prior sigmas [(name, sigma)], noise (pixel, velocity,
+/// yaw_rate))`.
+type RigTuple = (
+    u32,
+    u32,
+    Vec<f64>,
+    Vec<&'static str>,
+    Vec<(&'static str, f64)>,
+    (f64, f64, f64),
+);
+
+/// Timestamps `(K,)` and values `(K, 3)` of a time series.
+type TimeSeries<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
+
+/// Landmark ids `(N,)` and world positions `(N, 3)`.
+type Landmarks<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
+
+/// The contents of a vehicle log, as logged. Arrays are copied out on access.
+#[pyclass(module = "stereonav._native", frozen)]
+pub(crate) struct LogContents {
+    /// The file read.
+    path: PathBuf,
+    /// Every `/fpga/features` chunk concatenated in log order.
+    stream: Vec<u8>,
+    /// `/fpga/features` messages.
+    chunks: usize,
+    /// `/odom` samples in log order.
+    odometry: Vec<OdomSample>,
+    /// The first `/rig` message's text.
+    rig_json: Option<String>,
+    /// `/truth/pose` messages in log order.
+    truth_poses: Vec<TruthPose>,
+    /// The first `/truth/landmarks` message.
+    truth_landmarks: Vec<TruthLandmark>,
+    /// The first `/truth/camera` message.
+    truth_camera: Option<TruthCamera>,
+    /// The reader's warnings.
+    warnings: Vec<String>,
+    /// Why the log ends early, when it does.
+    truncated: Option<String>,
+    /// Messages on topics that are not vehicle topics.
+    ignored_messages: u64,
+    /// Those topics, each once, in the order met.
+    ignored_topics: Vec<String>,
+    /// The vehicle topics with a channel in the log, each once, in the order met.
+    topics: Vec<&'static str>,
+}
+
+impl LogContents {
+    /// Collects the records of a log read from `path`, in log order.
+    fn new(path: PathBuf, log: vehicle_log::Log) -> Self {
+        let mut contents = Self {
+            path,
+            stream: Vec::new(),
+            chunks: 0,
+            odometry: Vec::new(),
+            rig_json: None,
+            truth_poses: Vec::new(),
+            truth_landmarks: Vec::new(),
+            truth_camera: None,
+            warnings: log.warnings,
+            truncated: log.truncated,
+            ignored_messages: log.ignored_messages,
+            ignored_topics: log.ignored_topics,
+            topics: log.topics,
+        };
+        let mut landmarks_seen = false;
+        for record in log.records {
+            match record {
+                Record::Features { bytes, .. } => {
+                    contents.stream.extend_from_slice(&bytes);
+                    contents.chunks += 1;
+                }
+                Record::Odom(sample) => contents.odometry.push(sample),
+                // The rig and the truth's landmarks and camera are logged once; the first
+                // counts, as in the replay.
+                Record::Rig(text) if contents.rig_json.is_none() => {
+                    contents.rig_json = Some(text);
+                }
+                Record::TruthPose(pose) => contents.truth_poses.push(pose),
+                Record::TruthLandmarks(landmarks) if !landmarks_seen => {
+                    landmarks_seen = true;
+                    contents.truth_landmarks = landmarks;
+                }
+                Record::TruthCamera(camera) if contents.truth_camera.is_none() => {
+                    contents.truth_camera = Some(camera);
+                }
+                _ => {}
+            }
+        }
+        contents
+    }
+
+    /// The name of the `/rig` message in errors, as the replay names it.
+    fn rig_source(&self) -> String {
+        format!("{} /rig", self.path.display())
+    }
+}
+
+/// Reads the vehicle log at `path` whole; refuses a file without the vehicle topics with the
+/// replay's error.
+fn read_contents(path: &Path) -> Result<LogContents, replay::Error> {
+    let log = vehicle_log::read_log(path)?;
+    if !log.has_vehicle_topics() {
+        return Err(replay::Error::NotVehicleLog {
+            path: path.to_path_buf(),
+            topics: log.ignored_topics,
+        });
+    }
+    Ok(LogContents::new(path.to_path_buf(), log))
+}
+
+/// The ten camera parameters of the simulator's truth, in `Param::ALL` order.
+fn truth_camera_vector(t: &TruthCamera) -> Vec<f64> {
+    let camera = CameraParams {
+        f: t.f,
+        cx: t.cx,
+        cy: t.cy,
+        baseline: t.baseline,
+        mount: Mount {
+            x: t.mount_x,
+            y: t.mount_y,
+            z: t.mount_z,
+            roll: t.mount_roll,
+            pitch: t.mount_pitch,
+            yaw: t.mount_yaw,
+        },
+    };
+    camera.to_vector().iter().copied().collect()
+}
+
+/// Rows of three values as a `(K, 3)` array.
+fn rows3<'py, T>(
+    py: Python<'py>,
+    items: &[T],
+    row: impl Fn(&T) -> [f64; 3],
+) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_fn((items.len(), 3), |(i, k)| row(&items[i])[k]).into_pyarray(py)
+}
+
+#[pymethods]
+impl LogContents {
+    /// The board's byte stream: every `/fpga/features` chunk concatenated in log order.
+    #[getter]
+    fn stream<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.stream)
+    }
+
+    /// Number of `/fpga/features` messages (chunks of the stream).
+    #[getter]
+    fn chunks(&self) -> usize {
+        self.chunks
+    }
+
+    /// Odometry as logged, in log order: `(t_us (S,), vx vy vtheta (S, 3))`.
+    #[getter]
+    fn odometry<'py>(&self, py: Python<'py>) -> TimeSeries<'py> {
+        let o = &self.odometry;
+        (
+            o.iter()
+                .map(|s| s.t_us)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+            rows3(py, o, |s| [s.vx, s.vy, s.vtheta]),
+        )
+    }
+
+    /// The first `/rig` message's text (a JSON object), or None.
+    #[getter]
+    fn rig_json(&self) -> Option<&str> {
+        self.rig_json.as_deref()
+    }
+
+    /// The first `/rig` message as a rig, in the form of `load_rig`, or None when the log has
+    /// none. Raises `stereonav.InputError` naming the key and the problem when it is not a
+    /// valid rig.
+    fn rig(&self, py: Python<'_>) -> PyResult<Option<RigTuple>> {
+        self.rig_json
+            .as_deref()
+            .map(|text| {
+                Rig::from_json_str(text, &self.rig_source())
+                    .map(|rig| rig_tuple(&rig))
+                    .map_err(|e| input_error(py, e.to_string()))
+            })
+            .transpose()
+    }
+
+    /// The simulator's poses, in log order: `(t_us (F,), x y theta (F, 3))`; empty without.
+    #[getter]
+    fn truth_poses<'py>(&self, py: Python<'py>) -> TimeSeries<'py> {
+        let p = &self.truth_poses;
+        (
+            p.iter()
+                .map(|s| s.t_us)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+            rows3(py, p, |s| [s.x, s.y, s.theta]),
+        )
+    }
+
+    /// The simulator's landmarks: `(id (N,), x y z (N, 3))`; empty without.
+    #[getter]
+    fn truth_landmarks<'py>(&self, py: Python<'py>) -> Landmarks<'py> {
+        let l = &self.truth_landmarks;
+        (
+            l.iter()
+                .map(|m| u64::from(m.id))
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+            rows3(py, l, |m| [m.x, m.y, m.z]),
+        )
+    }
+
+    /// The simulator's camera parameters, 10 values in `CAMERA_PARAMETERS` order, or None.
+    #[getter]
+    fn truth_camera<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.truth_camera
+            .as_ref()
+            .map(|c| truth_camera_vector(c).into_pyarray(py))
+    }
+
+    /// What looked wrong but did not stop the reading, one line each.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
+    /// Why the log ends early (cut short or damaged), or None.
+    #[getter]
+    fn truncated(&self) -> Option<&str> {
+        self.truncated.as_deref()
+    }
+
+    /// Messages on topics that are not vehicle topics.
+    #[getter]
+    fn ignored_messages(&self) -> u64 {
+        self.ignored_messages
+    }
+
+    /// Those topics, each once, in the order met.
+    #[getter]
+    fn ignored_topics(&self) -> Vec<String> {
+        self.ignored_topics.clone()
+    }
+
+    /// The vehicle topics with a channel in the log, each once, in the order met.
+    #[getter]
+    fn topics(&self) -> Vec<&'static str> {
+        self.topics.clone()
+    }
+}
+
+/// Reads the vehicle log (MCAP) at `path` whole, with the GIL released. Raises
+/// `stereonav.InputError` for a file that cannot be opened or read (the `OSError` is the
+/// `__cause__`), is not MCAP, has a malformed vehicle message, or has no vehicle topics (the
+/// replay's message, naming the topics it has).
+#[pyfunction]
+pub(crate) fn read_log(py: Python<'_>, path: PathBuf) -> PyResult<LogContents> {
+    py.detach(|| read_contents(&path))
+        .map_err(|e| replay_error(py, &e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn truth_camera_is_in_parameter_order() {
+        let t = TruthCamera {
+            f: 1.0,
+            cx: 2.0,
+            cy: 3.0,
+            baseline: 4.0,
+            mount_x: 5.0,
+            mount_y: 6.0,
+            mount_z: 7.0,
+            mount_roll: 8.0,
+            mount_pitch: 9.0,
+            mount_yaw: 10.0,
+        };
+        let names = [
+            "f",
+            "cx",
+            "cy",
+            "baseline",
+            "mount_x",
+            "mount_y",
+            "mount_z",
+            "mount_roll",
+            "mount_pitch",
+            "mount_yaw",
+        ];
+        let values = truth_camera_vector(&t);
+        for (param, value) in calib::Param::ALL.iter().zip(values) {
+            let expected = names
+                .iter()
+                .position(|n| *n == param.name())
+                .map(|i| i as f64 + 1.0);
+            assert_eq!(Some(value), expected, "{}", param.name());
+        }
+    }
+}
