@@ -12,6 +12,7 @@ mod fpga;
 mod harris;
 mod replay;
 mod simulate;
+mod view;
 
 /// Ceiling-lamp stereo navigation for autonomous forklifts.
 #[derive(Debug, Parser)]
@@ -39,6 +40,10 @@ enum Command {
     /// SLAM; prints a short summary and writes the estimates (MCAP), the summary (JSON) and the
     /// trajectory (CSV) on request.
     Replay(replay::Args),
+    /// The viewer: a vehicle log (replayed on the fly) or an estimates file, with the image
+    /// planes, the map, the camera parameters and the NIS over time and a timeline;
+    /// `--screenshot OUT.png` renders it headless to PNG and exits.
+    View(view::Args),
 }
 
 /// Parses the command line; a usage error becomes one line on stderr and exit status 2, while
@@ -78,6 +83,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::run(&args),
         Command::Calibrate(args) => calibrate::run(&args),
         Command::Replay(args) => replay::run(&args),
+        Command::View(args) => view::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

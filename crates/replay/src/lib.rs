@@ -27,6 +27,7 @@
 #![deny(missing_docs)]
 
 mod error;
+mod estimates_reader;
 mod navigate;
 mod output;
 mod types;
@@ -45,6 +46,7 @@ use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel}
 use vehicle_log::Record;
 
 pub use error::Error;
+pub use estimates_reader::{ESTIMATES_FRAME_TOPIC, EstimatesError, read_estimates};
 pub use nav::{NavSettings, Navigator};
 pub use navigate::{LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, replay_log};
 pub use output::{summary_json, write_estimates, write_summary, write_trajectory};

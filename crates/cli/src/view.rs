@@ -1,0 +1,159 @@
+//! `stereonav view LOG.mcap [--rig RIG.toml] [--skip-phase1] [--stride N] [--screenshot OUT.png]
+//! [--time SECONDS] [--size WxH]`: the viewer (crate `viewer`) on a vehicle log, replayed on
+//! the fly, or on an estimates file written by `stereonav replay --out`.
+//!
+//! With `--screenshot` it renders the viewer headless (on the CPU: no display, GPU or driver
+//! needed) at the end of the log or at `--time`, writes the PNG and exits; otherwise it opens a
+//! window (OpenGL under X11), and says so in one line when there is no display. Warnings of
+//! the replay go to stderr, one line each.
+
+use std::io::{self, IsTerminal, Write};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use calib::Rig;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use replay::NavSettings;
+use track::PairSettings;
+
+/// Arguments of `stereonav view`.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// A vehicle log (MCAP, vehicle-interfaces.md section 4), replayed when it is opened, or an
+    /// estimates file written by `stereonav replay --out`.
+    #[arg(value_name = "LOG.mcap")]
+    log: PathBuf,
+    /// The rig file (TOML, section 3); without it, the log's /rig message.
+    #[arg(long, value_name = "RIG.toml")]
+    rig: Option<PathBuf>,
+    /// Skip phase 1: start phase 2 at the first frame from the rig's nominal values and priors.
+    #[arg(long)]
+    skip_phase1: bool,
+    /// Frames between the two frames of a phase-1 pair (as for `stereonav replay`).
+    #[arg(long, value_name = "N", default_value_t = PairSettings::default().stride)]
+    stride: usize,
+    /// Render the viewer headless and write it as PNG, then exit (no window).
+    #[arg(long, value_name = "OUT.png")]
+    screenshot: Option<PathBuf>,
+    /// Show this time, seconds from the log's first frame (default: its end).
+    #[arg(long, value_name = "SECONDS")]
+    time: Option<f64>,
+    /// The screenshot's size in pixels, at least 1280x800.
+    #[arg(long, value_name = "WxH", default_value = "1280x800", value_parser = parse_size)]
+    size: [u32; 2],
+}
+
+/// Frames below which no progress bar is drawn.
+const PROGRESS_MIN_FRAMES: u64 = 2000;
+
+/// `WxH` as two whole numbers of pixels.
+fn parse_size(text: &str) -> Result<[u32; 2], String> {
+    let parsed = text
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some([w.trim().parse().ok()?, h.trim().parse().ok()?]));
+    parsed.ok_or_else(|| format!("expected WIDTHxHEIGHT in pixels, like 1280x800, got {text:?}"))
+}
+
+pub(crate) fn run(args: &Args) -> Result<()> {
+    let defaults = NavSettings::default();
+    let settings = NavSettings {
+        skip_phase1: args.skip_phase1,
+        pairs: PairSettings {
+            stride: args.stride,
+            ..defaults.pairs
+        },
+        ..defaults
+    };
+    // Before the log is read: bad settings should not wait for a long replay.
+    settings
+        .pairs
+        .validate()
+        .with_context(|| format!("--stride {}", args.stride))?;
+    if args.screenshot.is_some() {
+        viewer::check_size(args.size).context("--size")?;
+    } else if args.size != viewer::MIN_SCREENSHOT_SIZE {
+        bail!("--size applies to --screenshot only");
+    }
+    if let Some(t) = args.time
+        && !(t.is_finite() && t >= 0.0)
+    {
+        bail!("--time {t}: expected seconds from the log's first frame, at least 0");
+    }
+    let rig = args.rig.as_deref().map(Rig::load).transpose()?;
+    if args.screenshot.is_none() {
+        // Before the replay: a missing display should not wait for a long log.
+        viewer::check_display()?;
+    }
+    let options = viewer::LoadOptions { rig, settings };
+
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
+    let terminal = io::stderr().is_terminal();
+    let mut shown = false;
+    let mut progress = |done: u64, total: u64| {
+        if !shown && terminal && total >= PROGRESS_MIN_FRAMES {
+            shown = true;
+            bar.set_length(total);
+            bar.set_style(
+                ProgressStyle::with_template("replaying [{bar:30}] {pos}/{len} frames, {eta} left")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar())
+                    .progress_chars("=> "),
+            );
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+            bar.enable_steady_tick(Duration::from_millis(200));
+        }
+        if shown {
+            bar.set_position(done);
+        }
+    };
+    let loaded = viewer::load(&args.log, &options, &mut progress);
+    bar.finish_and_clear();
+    let model = loaded?;
+    {
+        let mut stderr = io::stderr().lock();
+        for w in &model.warnings {
+            writeln!(stderr, "stereonav: warning: {w}")?;
+        }
+        if model.kind == viewer::model::SourceKind::Estimates
+            && (args.skip_phase1 || args.stride != PairSettings::default().stride)
+        {
+            writeln!(
+                stderr,
+                "stereonav: warning: {}: an estimates file is shown as it was replayed: --skip-phase1 and --stride are not used",
+                args.log.display()
+            )?;
+        }
+    }
+    if let Some(t) = args.time {
+        viewer::check_time(&model, t).context("--time")?;
+    }
+    match &args.screenshot {
+        Some(out) => {
+            let shot = viewer::screenshot(model, args.time, args.size)?;
+            viewer::write_png(out, &shot.frame)?;
+            Ok(())
+        }
+        None => {
+            let mut v = viewer::Viewer::new(model);
+            if let Some(t) = args.time {
+                v.set_time(t);
+            }
+            viewer::run_window(v)?;
+            Ok(())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse() {
+        assert_eq!(parse_size("1280x800"), Ok([1280, 800]));
+        assert_eq!(parse_size("1920X1080"), Ok([1920, 1080]));
+        assert!(parse_size("1280").is_err());
+        assert!(parse_size("ax800").is_err());
+        assert!(parse_size("-1x800").is_err());
+    }
+}

@@ -1,0 +1,770 @@
+//! Reading `EST.mcap` back ([`read_estimates`]): the estimates file that [`crate::write_estimates`]
+//! writes, turned into the [`Replay`] it came from, so that a viewer or a script can look at a
+//! replay without running it again.
+//!
+//! What comes back, from which topic (the layouts are those of the `output` module):
+//!
+//! - [`Replay::frames`]: one per `/est/frame` message (`stereonav.FrameInfo`), exactly;
+//! - [`Replay::camera`]: one per `/est/camera` message (`stereonav.CameraEstimate`), exactly;
+//! - [`Replay::maps`]: one per `/est/landmarks` message (`foxglove.SceneUpdate`): the id and
+//!   observations from each entity's metadata, the position from its marker sphere, and the
+//!   covariance rebuilt from its uncertainty ellipsoid (`R diag((d / 6)^2) R^T` for the
+//!   3-sigma diameters `d` along the axes `R`), which is the written covariance to rounding; a
+//!   landmark written without an ellipsoid (its covariance was not finite) comes back with a
+//!   NaN covariance;
+//! - everything else from `/est/summary` (`stereonav.Summary`): the final camera, the phase
+//!   switch, whether phase 1 was skipped, the counts, the truth errors and the warnings. The
+//!   final map is the last snapshot when it was taken at the last frame (the replay always
+//!   takes one there), else the summary's landmarks with a diagonal covariance from their
+//!   sigmas.
+//!
+//! `/est/pose` and `/est/trajectory` repeat what `/est/frame` holds and are not read. `null`
+//! numbers (non-finite when written) come back as NaN. A file cut short is read as far as it
+//! goes, with a warning in [`Replay::warnings`].
+
+use std::path::{Path, PathBuf};
+
+use calib::camera::Param;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde_json::Value;
+
+use crate::{
+    CameraSample, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
+    Replay, TruthErrors,
+};
+
+/// The topic whose presence makes an MCAP file an estimates file.
+pub const ESTIMATES_FRAME_TOPIC: &str = "/est/frame";
+
+const CAMERA_TOPIC: &str = "/est/camera";
+const LANDMARKS_TOPIC: &str = "/est/landmarks";
+const SUMMARY_TOPIC: &str = "/est/summary";
+
+/// The uncertainty ellipsoid's diameters are twice this many standard deviations (as
+/// written).
+const ELLIPSOID_SIGMAS: f64 = 3.0;
+
+/// The MCAP file's magic, at its start.
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
+/// Why an estimates file could not be read. Every message is one line naming the file and the
+/// problem.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum EstimatesError {
+    /// The file could not be read.
+    #[error("cannot read {}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file does not start with MCAP's magic.
+    #[error("{} is not an MCAP file (it starts with {found:02x?}, MCAP files with {MCAP_MAGIC:02x?})", path.display())]
+    NotMcap {
+        /// The file.
+        path: PathBuf,
+        /// Its first bytes (at most 8).
+        found: Vec<u8>,
+    },
+    /// The MCAP reader failed before the first message.
+    #[error("{}: unreadable MCAP: {detail}", path.display())]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// What the reader said.
+        detail: String,
+    },
+    /// An MCAP file with no `/est/frame` channel.
+    #[error(
+        "{} is not an estimates file of stereonav replay: it has no {ESTIMATES_FRAME_TOPIC} messages (its topics: {})",
+        path.display(),
+        if topics.is_empty() { "none".to_string() } else { topics.join(", ") }
+    )]
+    NotEstimates {
+        /// The file.
+        path: PathBuf,
+        /// The topics it has.
+        topics: Vec<String>,
+    },
+    /// A message is not what its topic's schema says.
+    #[error("{}: {topic} message {index}: {field}: expected {expected}, found {found}", path.display())]
+    BadMessage {
+        /// The file.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// The message's index on its topic, from 0.
+        index: usize,
+        /// The field (a JSON path).
+        field: String,
+        /// What the schema wants.
+        expected: &'static str,
+        /// What was there (shortened).
+        found: String,
+    },
+}
+
+/// Reads the estimates file `EST.mcap` at `path` (written by [`crate::write_estimates`]) back
+/// into a [`Replay`] (see the module docs for what comes back from where).
+///
+/// Errors: the file cannot be read, is not MCAP, has no `/est/frame` messages, or a message of
+/// a topic read is malformed. A file cut short is not an error: what was read is returned,
+/// with a warning.
+pub fn read_estimates(path: impl AsRef<Path>) -> Result<Replay, EstimatesError> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|source| EstimatesError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if !bytes.starts_with(MCAP_MAGIC) {
+        return Err(EstimatesError::NotMcap {
+            path: path.to_path_buf(),
+            found: bytes.iter().take(MCAP_MAGIC.len()).copied().collect(),
+        });
+    }
+    let stream = mcap::MessageStream::new(&bytes).map_err(|e| EstimatesError::Mcap {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    })?;
+    let mut reader = Reader::new(path);
+    let mut warnings = Vec::new();
+    let mut any = false;
+    for message in stream {
+        let message = match message {
+            Ok(m) => m,
+            Err(e) if any => {
+                warnings.push(format!(
+                    "{} ends early ({e}): read as far as it goes",
+                    path.display()
+                ));
+                break;
+            }
+            Err(e) => {
+                return Err(EstimatesError::Mcap {
+                    path: path.to_path_buf(),
+                    detail: e.to_string(),
+                });
+            }
+        };
+        any = true;
+        reader.message(&message.channel.topic, &message.data)?;
+    }
+    reader.finish(warnings)
+}
+
+/// Collects the messages of an estimates file.
+#[derive(Debug)]
+struct Reader<'p> {
+    path: &'p Path,
+    topics: Vec<String>,
+    frames: Vec<FrameEstimate>,
+    camera: Vec<CameraSample>,
+    maps: Vec<MapSnapshot>,
+    summary: Option<Value>,
+    seen_frame_topic: bool,
+}
+
+/// Where a value came from, for error messages.
+#[derive(Debug, Clone, Copy)]
+struct At<'a> {
+    path: &'a Path,
+    topic: &'a str,
+    index: usize,
+}
+
+impl At<'_> {
+    fn bad(&self, field: &str, expected: &'static str, found: Option<&Value>) -> EstimatesError {
+        let mut found = found.map_or_else(|| "nothing".to_string(), Value::to_string);
+        if found.len() > 60 {
+            found = found.chars().take(57).chain("...".chars()).collect();
+        }
+        EstimatesError::BadMessage {
+            path: self.path.to_path_buf(),
+            topic: self.topic.to_string(),
+            index: self.index,
+            field: field.to_string(),
+            expected,
+            found,
+        }
+    }
+
+    /// A number; `null` is NaN (a non-finite number when written).
+    fn float(&self, v: &Value, field: &str) -> Result<f64, EstimatesError> {
+        let x = v.get(field);
+        match x {
+            Some(Value::Null) => Ok(f64::NAN),
+            Some(Value::Number(n)) => n
+                .as_f64()
+                .ok_or_else(|| self.bad(field, "a number or null", x)),
+            _ => Err(self.bad(field, "a number or null", x)),
+        }
+    }
+
+    fn uint(&self, v: &Value, field: &str) -> Result<u64, EstimatesError> {
+        let x = v.get(field);
+        x.and_then(Value::as_u64)
+            .ok_or_else(|| self.bad(field, "an integer >= 0", x))
+    }
+
+    fn array<'v>(&self, v: &'v Value, field: &str) -> Result<&'v Vec<Value>, EstimatesError> {
+        let x = v.get(field);
+        x.and_then(Value::as_array)
+            .ok_or_else(|| self.bad(field, "an array", x))
+    }
+
+    fn phase(&self, v: &Value) -> Result<Phase, EstimatesError> {
+        let x = v.get("phase");
+        match x.and_then(Value::as_str) {
+            Some("calibrating") => Ok(Phase::Calibrating),
+            Some("navigating") => Ok(Phase::Navigating),
+            _ => Err(self.bad("phase", "\"calibrating\" or \"navigating\"", x)),
+        }
+    }
+
+    /// A JSON number or `null` (NaN) in an array.
+    fn element(&self, v: &Value, field: &str) -> Result<f64, EstimatesError> {
+        match v {
+            Value::Null => Ok(f64::NAN),
+            Value::Number(n) => n
+                .as_f64()
+                .ok_or_else(|| self.bad(field, "a number or null", Some(v))),
+            _ => Err(self.bad(field, "a number or null", Some(v))),
+        }
+    }
+
+    fn matrix3(&self, v: &Value, field: &str) -> Result<[[f64; 3]; 3], EstimatesError> {
+        let rows = self.array(v, field)?;
+        let mut m = [[0.0; 3]; 3];
+        if rows.len() != 3 {
+            return Err(self.bad(field, "3 rows", v.get(field)));
+        }
+        for (row, out) in rows.iter().zip(&mut m) {
+            let cells = row
+                .as_array()
+                .filter(|c| c.len() == 3)
+                .ok_or_else(|| self.bad(field, "rows of 3 numbers", Some(row)))?;
+            for (cell, o) in cells.iter().zip(out.iter_mut()) {
+                *o = self.element(cell, field)?;
+            }
+        }
+        Ok(m)
+    }
+
+    /// `{name: {value, sigma}}` for every parameter of C, in [`Param::ALL`] order.
+    fn params(&self, v: &Value, field: &str) -> Result<Vec<ParamEstimate>, EstimatesError> {
+        let object = v
+            .get(field)
+            .filter(|o| o.is_object())
+            .ok_or_else(|| self.bad(field, "an object of parameters", v.get(field)))?;
+        Param::ALL
+            .iter()
+            .map(|&param| {
+                let p = object
+                    .get(param.name())
+                    .ok_or_else(|| self.bad(param.name(), "{value, sigma}", None))?;
+                Ok(ParamEstimate {
+                    param,
+                    value: self.float(p, "value")?,
+                    sigma: self.float(p, "sigma")?,
+                })
+            })
+            .collect()
+    }
+
+    fn frame(&self, v: &Value) -> Result<FrameEstimate, EstimatesError> {
+        let pose = v
+            .get("pose")
+            .ok_or_else(|| self.bad("pose", "{x, y, theta}", None))?;
+        let observed = self
+            .array(v, "observed")?
+            .iter()
+            .map(|id| {
+                id.as_u64()
+                    .ok_or_else(|| self.bad("observed", "landmark ids", Some(id)))
+            })
+            .collect::<Result<Vec<u64>, _>>()?;
+        let nis = self
+            .array(v, "nis")?
+            .iter()
+            .map(|n| Ok((self.uint(n, "id")?, self.float(n, "nis")?)))
+            .collect::<Result<Vec<(u64, f64)>, _>>()?;
+        Ok(FrameEstimate {
+            t_us: self.uint(v, "t_us")?,
+            phase: self.phase(v)?,
+            pose: [
+                self.float(pose, "x")?,
+                self.float(pose, "y")?,
+                self.float(pose, "theta")?,
+            ],
+            pose_covariance: self.matrix3(v, "pose_covariance")?,
+            observed,
+            nis,
+            rejected: u32::try_from(self.uint(v, "rejected")?).unwrap_or(u32::MAX),
+            landmarks: usize::try_from(self.uint(v, "landmarks")?).unwrap_or(usize::MAX),
+        })
+    }
+
+    fn camera(&self, v: &Value) -> Result<CameraSample, EstimatesError> {
+        Ok(CameraSample {
+            t_us: self.uint(v, "t_us")?,
+            phase: self.phase(v)?,
+            params: self.params(v, "params")?,
+        })
+    }
+
+    fn xyz(&self, v: &Value, field: &str) -> Result<[f64; 3], EstimatesError> {
+        let p = v
+            .get(field)
+            .ok_or_else(|| self.bad(field, "{x, y, z}", None))?;
+        Ok([
+            self.float(p, "x")?,
+            self.float(p, "y")?,
+            self.float(p, "z")?,
+        ])
+    }
+
+    /// A `foxglove.SceneUpdate` of `output::scene_update_json` back into a snapshot at `t_us`.
+    fn map(&self, v: &Value, t_us: u64) -> Result<MapSnapshot, EstimatesError> {
+        let mut landmarks = Vec::new();
+        for entity in self.array(v, "entities")? {
+            let metadata = |key: &str| -> Option<u64> {
+                entity
+                    .get("metadata")?
+                    .as_array()?
+                    .iter()
+                    .find(|kv| kv.get("key").and_then(Value::as_str) == Some(key))?
+                    .get("value")?
+                    .as_str()?
+                    .parse()
+                    .ok()
+            };
+            let id = metadata("id")
+                .ok_or_else(|| self.bad("entities[].metadata.id", "a landmark id", None))?;
+            let observations = metadata("observations").unwrap_or(0);
+            let spheres = self.array(entity, "spheres")?;
+            let marker = spheres
+                .first()
+                .ok_or_else(|| self.bad("entities[].spheres", "a marker sphere", None))?;
+            let pose = marker
+                .get("pose")
+                .ok_or_else(|| self.bad("spheres[].pose", "a pose", None))?;
+            let position = self.xyz(pose, "position")?;
+            let covariance = match spheres.get(1) {
+                Some(ellipsoid) => self.covariance(ellipsoid)?,
+                None => [[f64::NAN; 3]; 3],
+            };
+            landmarks.push(LandmarkEstimate {
+                id,
+                position,
+                covariance,
+                observations,
+            });
+        }
+        landmarks.sort_by_key(|l| l.id);
+        Ok(MapSnapshot { t_us, landmarks })
+    }
+
+    /// The covariance whose 3-sigma ellipsoid the sphere primitive draws.
+    fn covariance(&self, sphere: &Value) -> Result<[[f64; 3]; 3], EstimatesError> {
+        let pose = sphere
+            .get("pose")
+            .ok_or_else(|| self.bad("spheres[].pose", "a pose", None))?;
+        let q = pose
+            .get("orientation")
+            .ok_or_else(|| self.bad("spheres[].pose.orientation", "a quaternion", None))?;
+        let [qx, qy, qz] = self.xyz(pose, "orientation")?;
+        let qw = self.float(q, "w")?;
+        let [dx, dy, dz] = self.xyz(sphere, "size")?;
+        let axes = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz))
+            .to_rotation_matrix()
+            .into_inner();
+        let variance = |d: f64| (d / (2.0 * ELLIPSOID_SIGMAS)).powi(2);
+        let m: Matrix3<f64> = axes
+            * Matrix3::from_diagonal(&Vector3::new(variance(dx), variance(dy), variance(dz)))
+            * axes.transpose();
+        Ok(core::array::from_fn(|r| {
+            core::array::from_fn(|c| m.get((r, c)).copied().unwrap_or(f64::NAN))
+        }))
+    }
+
+    fn counts(&self, summary: &Value) -> Result<Counts, EstimatesError> {
+        let c = summary
+            .get("counts")
+            .ok_or_else(|| self.bad("counts", "an object of counters", None))?;
+        Ok(Counts {
+            frames: self.uint(summary, "frames")?,
+            corrupt: self.uint(summary, "corrupt")?,
+            lost: self.uint(summary, "lost")?,
+            bytes_skipped: self.uint(c, "bytes_skipped")?,
+            frames_out_of_order: self.uint(c, "frames_out_of_order")?,
+            odometry: self.uint(c, "odometry")?,
+            stereo_matches: self.uint(c, "stereo_matches")?,
+            tracks: self.uint(c, "tracks")?,
+            confirmed_tracks: self.uint(c, "confirmed_tracks")?,
+            pairs: self.uint(c, "pairs")?,
+            landmark_pairs: self.uint(c, "landmark_pairs")?,
+            tracker_resets: self.uint(c, "tracker_resets")?,
+        })
+    }
+
+    fn truth(&self, t: &Value) -> Result<TruthErrors, EstimatesError> {
+        let camera = match t.get("camera").filter(|c| c.is_object()) {
+            Some(errors) => Param::ALL
+                .iter()
+                .filter(|p| errors.get(p.name()).is_some())
+                .map(|&p| Ok((p, self.float(errors, p.name())?)))
+                .collect::<Result<Vec<_>, EstimatesError>>()?,
+            None => Vec::new(),
+        };
+        let count = |field: &str| -> Result<usize, EstimatesError> {
+            Ok(usize::try_from(self.uint(t, field)?).unwrap_or(usize::MAX))
+        };
+        Ok(TruthErrors {
+            landmark_rms: self.float(t, "landmark_rms_m")?,
+            landmark_rms_aligned: self.float(t, "landmark_rms_aligned_m")?,
+            landmarks_matched: count("landmarks_matched")?,
+            landmarks_unmatched: count("landmarks_unmatched")?,
+            lamps_missed: count("lamps_missed")?,
+            match_radius: self.float(t, "match_radius_m")?,
+            ate_rms: self.float(t, "ate_rms_m")?,
+            ate_max: self.float(t, "ate_max_m")?,
+            heading_rms: self.float(t, "heading_rms_rad")?,
+            camera,
+        })
+    }
+
+    /// The summary's landmarks, with a diagonal covariance from their sigmas.
+    fn summary_landmarks(&self, summary: &Value) -> Result<Vec<LandmarkEstimate>, EstimatesError> {
+        self.array(summary, "landmarks")?
+            .iter()
+            .map(|l| {
+                let sigma = self.array(l, "sigma")?;
+                let s = |i: usize| -> Result<f64, EstimatesError> {
+                    let v = sigma
+                        .get(i)
+                        .ok_or_else(|| self.bad("landmarks[].sigma", "3 sigmas", None))?;
+                    self.element(v, "landmarks[].sigma")
+                };
+                let (sx, sy, sz) = (s(0)?, s(1)?, s(2)?);
+                Ok(LandmarkEstimate {
+                    id: self.uint(l, "id")?,
+                    position: [
+                        self.float(l, "x")?,
+                        self.float(l, "y")?,
+                        self.float(l, "z")?,
+                    ],
+                    covariance: [
+                        [sx * sx, 0.0, 0.0],
+                        [0.0, sy * sy, 0.0],
+                        [0.0, 0.0, sz * sz],
+                    ],
+                    observations: self.uint(l, "observations")?,
+                })
+            })
+            .collect()
+    }
+}
+
+impl<'p> Reader<'p> {
+    fn new(path: &'p Path) -> Self {
+        Self {
+            path,
+            topics: Vec::new(),
+            frames: Vec::new(),
+            camera: Vec::new(),
+            maps: Vec::new(),
+            summary: None,
+            seen_frame_topic: false,
+        }
+    }
+
+    fn at<'a>(&'a self, topic: &'a str, index: usize) -> At<'a> {
+        At {
+            path: self.path,
+            topic,
+            index,
+        }
+    }
+
+    fn parse(&self, topic: &str, index: usize, data: &[u8]) -> Result<Value, EstimatesError> {
+        serde_json::from_slice(data).map_err(|e| EstimatesError::BadMessage {
+            path: self.path.to_path_buf(),
+            topic: topic.to_string(),
+            index,
+            field: "(message)".to_string(),
+            expected: "a JSON object",
+            found: e.to_string(),
+        })
+    }
+
+    fn message(&mut self, topic: &str, data: &[u8]) -> Result<(), EstimatesError> {
+        if !self.topics.iter().any(|t| t == topic) {
+            self.topics.push(topic.to_string());
+        }
+        match topic {
+            ESTIMATES_FRAME_TOPIC => {
+                self.seen_frame_topic = true;
+                let index = self.frames.len();
+                let v = self.parse(topic, index, data)?;
+                let frame = self.at(topic, index).frame(&v)?;
+                self.frames.push(frame);
+            }
+            CAMERA_TOPIC => {
+                let index = self.camera.len();
+                let v = self.parse(topic, index, data)?;
+                let sample = self.at(topic, index).camera(&v)?;
+                self.camera.push(sample);
+            }
+            LANDMARKS_TOPIC => {
+                let index = self.maps.len();
+                let v = self.parse(topic, index, data)?;
+                let at = self.at(topic, index);
+                // The snapshot's time: the entities' timestamp, else the deletion's.
+                let stamp = v
+                    .get("deletions")
+                    .and_then(Value::as_array)
+                    .and_then(|d| d.first())
+                    .and_then(|d| d.get("timestamp"))
+                    .cloned();
+                let t_us = match stamp {
+                    Some(s) => at.uint(&s, "sec")? * 1_000_000 + at.uint(&s, "nsec")? / 1000,
+                    None => return Err(at.bad("deletions[0].timestamp", "a timestamp", None)),
+                };
+                let map = at.map(&v, t_us)?;
+                self.maps.push(map);
+            }
+            SUMMARY_TOPIC => {
+                let v = self.parse(topic, 0, data)?;
+                self.summary = Some(v);
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn finish(mut self, mut warnings: Vec<String>) -> Result<Replay, EstimatesError> {
+        if !self.seen_frame_topic {
+            return Err(EstimatesError::NotEstimates {
+                path: self.path.to_path_buf(),
+                topics: self.topics,
+            });
+        }
+        // Written in data-time order; sorted again so that a reader may binary-search.
+        self.frames.sort_by_key(|f| f.t_us);
+        self.camera.sort_by_key(|c| c.t_us);
+        self.maps.sort_by_key(|m| m.t_us);
+        let at = self.at(SUMMARY_TOPIC, 0);
+        let last_frame_t = self.frames.last().map(|f| f.t_us);
+        let last_map = self
+            .maps
+            .last()
+            .filter(|m| Some(m.t_us) == last_frame_t)
+            .map(|m| m.landmarks.clone());
+        let Some(summary) = &self.summary else {
+            warnings.push(format!(
+                "{} has no {SUMMARY_TOPIC} message (cut short?): no counts, final camera from the last sample",
+                self.path.display()
+            ));
+            let final_camera = self
+                .camera
+                .last()
+                .map(|c| c.params.clone())
+                .unwrap_or_default();
+            let landmarks = self
+                .maps
+                .last()
+                .map(|m| m.landmarks.clone())
+                .unwrap_or_default();
+            return Ok(Replay {
+                phase_switch_t_us: self
+                    .camera
+                    .iter()
+                    .find(|c| c.phase == Phase::Navigating)
+                    .filter(|_| {
+                        self.camera
+                            .first()
+                            .is_some_and(|c| c.phase == Phase::Calibrating)
+                    })
+                    .map(|c| c.t_us),
+                frames: self.frames,
+                camera: self.camera,
+                maps: self.maps,
+                landmarks,
+                final_camera,
+                phase1_skipped: false,
+                counts: Counts::default(),
+                truth: None,
+                warnings,
+            });
+        };
+        let landmarks = match last_map {
+            Some(l) => l,
+            None => at.summary_landmarks(summary)?,
+        };
+        let phase_switch_t_us = match summary.get("phase_switch_t_us") {
+            Some(Value::Null) | None => None,
+            Some(_) => Some(at.uint(summary, "phase_switch_t_us")?),
+        };
+        let truth = match summary.get("truth") {
+            Some(Value::Null) | None => None,
+            Some(t) => Some(at.truth(t)?),
+        };
+        let mut written_warnings: Vec<String> = at
+            .array(summary, "warnings")?
+            .iter()
+            .filter_map(|w| w.as_str().map(str::to_string))
+            .collect();
+        written_warnings.append(&mut warnings);
+        Ok(Replay {
+            final_camera: at.params(summary, "camera")?,
+            phase1_skipped: summary
+                .get("phase1_skipped")
+                .and_then(Value::as_bool)
+                .unwrap_or(false),
+            counts: at.counts(summary)?,
+            phase_switch_t_us,
+            truth,
+            landmarks,
+            warnings: written_warnings,
+            frames: self.frames,
+            camera: self.camera,
+            maps: self.maps,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fixture(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/logs")
+            .join(name)
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("replay-estimates-reader-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    fn close(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
+        let scale = a.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .all(|(x, y)| (x - y).abs() <= 1e-9 * scale.max(1e-300))
+    }
+
+    fn assert_round_trip(original: &Replay, back: &Replay) {
+        assert_eq!(back.frames, original.frames);
+        assert_eq!(back.camera, original.camera);
+        assert_eq!(back.final_camera, original.final_camera);
+        assert_eq!(back.phase_switch_t_us, original.phase_switch_t_us);
+        assert_eq!(back.phase1_skipped, original.phase1_skipped);
+        assert_eq!(back.counts, original.counts);
+        assert_eq!(back.truth, original.truth);
+        assert_eq!(back.warnings, original.warnings);
+        assert_eq!(back.maps.len(), original.maps.len());
+        for (a, b) in original.maps.iter().zip(&back.maps) {
+            assert_eq!(a.t_us, b.t_us);
+            assert_eq!(a.landmarks.len(), b.landmarks.len());
+            for (la, lb) in a.landmarks.iter().zip(&b.landmarks) {
+                assert_eq!(
+                    (la.id, la.position, la.observations),
+                    (lb.id, lb.position, lb.observations)
+                );
+                assert!(close(&la.covariance, &lb.covariance), "{la:?} {lb:?}");
+            }
+        }
+        assert_eq!(back.landmarks.len(), original.landmarks.len());
+        for (la, lb) in original.landmarks.iter().zip(&back.landmarks) {
+            assert_eq!((la.id, la.position), (lb.id, lb.position));
+            assert!(close(&la.covariance, &lb.covariance));
+        }
+    }
+
+    #[test]
+    fn a_replay_comes_back_from_its_estimates_file() {
+        let settings = crate::NavSettings {
+            skip_phase1: true,
+            ..crate::NavSettings::default()
+        };
+        let original = crate::replay_log(
+            fixture("paper-experiment.mcap"),
+            None,
+            &settings,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let est = scratch("pe.mcap");
+        crate::write_estimates(&est, &original).unwrap();
+        let back = read_estimates(&est).unwrap();
+        assert_round_trip(&original, &back);
+    }
+
+    #[test]
+    fn the_phase_switch_and_both_phases_come_back() {
+        let original = crate::replay_log(
+            fixture("paper-calibration.mcap"),
+            None,
+            &crate::NavSettings::default(),
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert!(original.phase_switch_t_us.is_some());
+        let est = scratch("pc.mcap");
+        crate::write_estimates(&est, &original).unwrap();
+        assert_round_trip(&original, &read_estimates(&est).unwrap());
+    }
+
+    #[test]
+    fn bad_files_are_one_line_errors() {
+        let missing = read_estimates(scratch("missing.mcap")).unwrap_err();
+        assert!(matches!(missing, EstimatesError::Io { .. }), "{missing}");
+        let text = scratch("text.mcap");
+        std::fs::write(&text, "not mcap at all").unwrap();
+        let e = read_estimates(&text).unwrap_err();
+        assert!(e.to_string().contains("is not an MCAP file"), "{e}");
+        // A vehicle log is MCAP without /est/frame.
+        let e = read_estimates(fixture("paper-experiment.mcap")).unwrap_err();
+        assert!(e.to_string().contains("/fpga/features"), "{e}");
+        assert!(matches!(e, EstimatesError::NotEstimates { .. }));
+        for e in [missing, e] {
+            assert_eq!(e.to_string().lines().count(), 1);
+        }
+    }
+
+    #[test]
+    fn a_file_cut_short_is_read_as_far_as_it_goes() {
+        let settings = crate::NavSettings {
+            skip_phase1: true,
+            ..crate::NavSettings::default()
+        };
+        let original = crate::replay_log(
+            fixture("paper-experiment.mcap"),
+            None,
+            &settings,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let est = scratch("cut-src.mcap");
+        crate::write_estimates(&est, &original).unwrap();
+        let bytes = std::fs::read(&est).unwrap();
+        let cut = scratch("cut.mcap");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+        let back = read_estimates(&cut).unwrap();
+        assert!(!back.frames.is_empty() && back.frames.len() < original.frames.len());
+        assert!(
+            back.warnings.iter().any(|w| w.contains("ends early")),
+            "{:?}",
+            back.warnings
+        );
+        assert_eq!(back.frames[..], original.frames[..back.frames.len()]);
+    }
+}

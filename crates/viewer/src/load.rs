@@ -1,0 +1,178 @@
+//! Loading a file into a [`Model`]: a vehicle log is replayed through the stack
+//! (`replay::replay_log`) and its board stream decoded again for the features of every frame;
+//! an estimates file is read back (`replay::read_estimates`).
+
+use std::path::Path;
+
+use calib::camera::CameraParams;
+use calib::config::Rig;
+use fpga_link::{Decoder, Event};
+use replay::NavSettings;
+use vehicle_log::Record;
+
+use crate::Error;
+use crate::model::{Features, ImagePoint, Model, SourceKind, Truth};
+
+/// A decoded frame: its timestamp and the left and right features.
+type DecodedFrame = (u64, Vec<ImagePoint>, Vec<ImagePoint>);
+
+/// How a vehicle log is replayed.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LoadOptions {
+    /// The rig file's content; without it, the log's `/rig` message.
+    pub rig: Option<Rig>,
+    /// The navigator's settings (phase 1 skipped or not, the pair stride).
+    pub settings: NavSettings,
+}
+
+/// Loads `path`: a vehicle log (replayed with `options`; `progress` is called with
+/// `(frames done, frames in the log)`) or an estimates file written by `stereonav replay`.
+///
+/// Errors: the file cannot be read or is not MCAP, it is an MCAP file of neither kind, a
+/// vehicle message is malformed, or the replay fails (no rig, bad settings). A log cut short
+/// is shown as far as it goes, with a warning in [`Model::warnings`].
+pub fn load(
+    path: impl AsRef<Path>,
+    options: &LoadOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Model, Error> {
+    let path = path.as_ref();
+    let log = vehicle_log::read_log(path)?;
+    if log.has_vehicle_topics() {
+        let logged_rig = log.records.iter().find_map(|r| match r {
+            Record::Rig(text) => Some(text.as_str()),
+            _ => None,
+        });
+        let rig = match (&options.rig, logged_rig) {
+            (Some(rig), _) => Some(rig.clone()),
+            (None, Some(text)) => {
+                let name = format!("{} /rig", path.display());
+                Some(Rig::from_json_str(text, &name)?)
+            }
+            (None, None) => None,
+        };
+        let features = decode_features(&log.records);
+        let (truth, truth_camera) = truth_of(&log.records);
+        let replay = replay::replay_log(path, options.rig.clone(), &options.settings, progress)?;
+        let nominal = rig
+            .as_ref()
+            .map(|r| (r.nominal, [f64::from(r.width), f64::from(r.height)]));
+        return Ok(Model::from_replay(
+            path.to_path_buf(),
+            SourceKind::VehicleLog,
+            replay,
+            features,
+            truth,
+            nominal,
+            truth_camera,
+        ));
+    }
+    if log
+        .ignored_topics
+        .iter()
+        .any(|t| t == replay::ESTIMATES_FRAME_TOPIC)
+    {
+        let replay = replay::read_estimates(path)?;
+        let mut model = Model::from_replay(
+            path.to_path_buf(),
+            SourceKind::Estimates,
+            replay,
+            Features::default(),
+            None,
+            None,
+            None,
+        );
+        if options.rig.is_some() {
+            model.warnings.push(format!(
+                "{}: an estimates file carries its camera estimates: the rig given is not used",
+                path.display()
+            ));
+        }
+        return Ok(model);
+    }
+    Err(Error::NotViewable {
+        path: path.to_path_buf(),
+        topics: log.ignored_topics,
+        truncated: log.truncated,
+    })
+}
+
+/// The board's stream (the `/fpga/features` chunks concatenated in log order) decoded into
+/// features per frame, sorted by the frames' timestamps (as the replay orders them).
+fn decode_features(records: &[Record]) -> Features {
+    let mut decoder = Decoder::new();
+    let mut frames: Vec<DecodedFrame> = Vec::new();
+    let mut take = |event: Option<Event<'_>>| -> bool {
+        match event {
+            Some(Event::Frame(f)) => {
+                let px = |x: fpga_link::Feature| {
+                    let p = track::Pixel::from_q4(x.x_q4, x.y_q4);
+                    // Pixels of a 4095-pixel image at most: exact in f32.
+                    [p.u as f32, p.v as f32]
+                };
+                frames.push((
+                    f.t_us(),
+                    f.left().map(px).collect(),
+                    f.right().map(px).collect(),
+                ));
+                true
+            }
+            Some(Event::Corrupt(_)) => true,
+            None => false,
+        }
+    };
+    for record in records {
+        let Record::Features { bytes, .. } = record else {
+            continue;
+        };
+        let mut rest: &[u8] = bytes;
+        loop {
+            let (used, event) = decoder.decode(rest);
+            rest = rest.get(used..).unwrap_or_default();
+            if !take(event) {
+                break;
+            }
+        }
+    }
+    while take(decoder.decode_end()) {}
+    // Stable: equal timestamps keep stream order, as in the replay.
+    frames.sort_by_key(|(t_us, _, _)| *t_us);
+    let mut features = Features::default();
+    for (t_us, left, right) in &frames {
+        features.push(*t_us, left, right);
+    }
+    features
+}
+
+/// The simulator's truth in a log, and its camera.
+fn truth_of(records: &[Record]) -> (Option<Truth>, Option<CameraParams>) {
+    let mut truth = Truth::default();
+    let mut camera = None;
+    for r in records {
+        match r {
+            Record::TruthPose(p) => truth.poses.push((p.t_us, [p.x, p.y, p.theta])),
+            Record::TruthLandmarks(lamps) if truth.lamps.is_empty() => {
+                truth.lamps = lamps.iter().map(|l| [l.x, l.y, l.z]).collect();
+            }
+            Record::TruthCamera(c) if camera.is_none() => camera = Some(*c),
+            _ => {}
+        }
+    }
+    truth.poses.sort_by_key(|(t_us, _)| *t_us);
+    let truth_camera = camera.map(|t| CameraParams {
+        f: t.f,
+        cx: t.cx,
+        cy: t.cy,
+        baseline: t.baseline,
+        mount: calib::camera::Mount {
+            x: t.mount_x,
+            y: t.mount_y,
+            z: t.mount_z,
+            roll: t.mount_roll,
+            pitch: t.mount_pitch,
+            yaw: t.mount_yaw,
+        },
+    });
+    let any = !truth.poses.is_empty() || !truth.lamps.is_empty();
+    (any.then_some(truth), truth_camera)
+}

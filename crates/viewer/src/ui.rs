@@ -1,0 +1,986 @@
+//! The viewer's drawing (egui): a header, the two image planes, the top-down map, the plots of
+//! the camera parameters and the NIS, and a timeline to scrub and play. [`Viewer::ui`] draws
+//! one frame from the [`Model`] at the current time; it is the same in the window and in a
+//! headless screenshot.
+//!
+//! Each frame costs what it shows: the current frame is found by binary search, the marks of
+//! the images are computed when the frame changes (and kept), the plots borrow series built
+//! once at start, the map draws the thinned trajectory and the landmarks inside the view.
+
+use egui::{
+    Align2, Color32, FontId, Key, Pos2, Rect, Sense, Shape, Stroke, StrokeKind, Ui, Vec2, pos2,
+    vec2,
+};
+use egui_plot::{FilledArea, HLine, Line, LineStyle, Plot, PlotPoint, PlotPoints, Points, VLine};
+use replay::Phase;
+
+use crate::model::{FrameMarks, Model, SourceKind};
+
+/// The estimated trajectory.
+const TRAJECTORY: Color32 = Color32::from_rgb(80, 200, 255);
+/// The simulator's truth (trajectory, lamps, true parameter values).
+const TRUTH: Color32 = Color32::from_rgb(150, 150, 150);
+/// Landmarks of the map.
+const LANDMARK: Color32 = Color32::from_rgb(255, 140, 0);
+/// Uncertainty ellipses.
+const ELLIPSE: Color32 = Color32::from_rgb(110, 150, 255);
+/// An observation accepted at the current frame.
+const UPDATED: Color32 = Color32::from_rgb(80, 220, 100);
+/// A feature near a mapped landmark that was not updated at this frame.
+const MAPPED: Color32 = Color32::from_rgb(240, 200, 60);
+/// A feature of no landmark (not yet confirmed, or clutter).
+const UNASSOCIATED: Color32 = Color32::from_rgb(175, 175, 175);
+/// The phase switch.
+const SWITCH: Color32 = Color32::from_rgb(235, 80, 80);
+/// The current time on the plots.
+const NOW: Color32 = Color32::from_rgb(235, 235, 235);
+/// Estimates on the plots.
+const ESTIMATE: Color32 = Color32::from_rgb(100, 180, 255);
+/// The 3-sigma band.
+const BAND: Color32 = Color32::from_rgba_premultiplied(25, 50, 90, 110);
+/// The left and right cameras' fields of view on the map.
+const FOV: [Color32; 2] = [
+    Color32::from_rgb(60, 180, 105),
+    Color32::from_rgb(180, 75, 180),
+];
+/// The image planes' background (the logs carry no images).
+const IMAGE_PLANE: Color32 = Color32::from_rgb(18, 18, 22);
+
+/// Uncertainty ellipses and bands are drawn at this many standard deviations.
+const SIGMAS: f64 = 3.0;
+/// Most points of a drawn ellipse; a small one gets about one a point of its radius.
+const ELLIPSE_SEGMENTS: usize = 32;
+/// Fewest points of a drawn ellipse.
+const ELLIPSE_MIN_SEGMENTS: usize = 8;
+/// Landmark labels are drawn in the images when at most this many are projected.
+const MAX_LABELS: usize = 40;
+/// Playback speeds offered.
+const SPEEDS: [f64; 7] = [0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0];
+/// At most two plots a row past this many plots.
+const PLOTS_PER_COLUMN: usize = 6;
+
+/// Where the parts were drawn in the last frame, in points (= pixels in a screenshot).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Regions {
+    /// The left image plane.
+    pub left_image: Rect,
+    /// The right image plane.
+    pub right_image: Rect,
+    /// The map.
+    pub map: Rect,
+    /// The plots, all of them.
+    pub plots: Rect,
+    /// The timeline.
+    pub timeline: Rect,
+}
+
+/// A parameter's series, ready for the plots.
+#[derive(Debug, Clone)]
+struct ParamPlot {
+    param: calib::camera::Param,
+    unit: &'static str,
+    t: Vec<f64>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    value: Vec<PlotPoint>,
+    truth: Option<f64>,
+}
+
+/// The map's view: world metres at the centre, metres per point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct MapView {
+    centre: [f64; 2],
+    m_per_pt: f64,
+}
+
+/// The viewer's state: the model, the current time, playback, and caches of what the current
+/// frame shows.
+#[derive(Debug)]
+pub struct Viewer {
+    model: Model,
+    time_s: f64,
+    playing: bool,
+    speed: f64,
+    /// The frame whose marks are cached, and the marks.
+    marks: Option<(usize, FrameMarks)>,
+    params: Vec<ParamPlot>,
+    nis_frame: Vec<PlotPoint>,
+    nis_mean: Vec<PlotPoint>,
+    nis_bound: Vec<PlotPoint>,
+    ellipse_scale: f64,
+    /// `None`: fit the whole run.
+    map_view: Option<MapView>,
+    follow: bool,
+    regions: Regions,
+}
+
+fn points(v: &[[f64; 2]]) -> Vec<PlotPoint> {
+    v.iter().map(|p| PlotPoint::new(p[0], p[1])).collect()
+}
+
+impl Default for Regions {
+    fn default() -> Self {
+        Self {
+            left_image: Rect::NOTHING,
+            right_image: Rect::NOTHING,
+            map: Rect::NOTHING,
+            plots: Rect::NOTHING,
+            timeline: Rect::NOTHING,
+        }
+    }
+}
+
+impl Viewer {
+    /// A viewer of `model` at its end.
+    pub fn new(model: Model) -> Self {
+        let params = model
+            .params
+            .iter()
+            .map(|s| {
+                let band = |k: f64| -> Vec<f64> {
+                    s.value
+                        .iter()
+                        .zip(&s.sigma)
+                        .map(|(v, sd)| v + k * SIGMAS * sd)
+                        .collect()
+                };
+                ParamPlot {
+                    param: s.param,
+                    unit: s.unit,
+                    t: s.t_s.clone(),
+                    lower: band(-1.0),
+                    upper: band(1.0),
+                    value: s
+                        .t_s
+                        .iter()
+                        .zip(&s.value)
+                        .map(|(t, v)| PlotPoint::new(*t, *v))
+                        .collect(),
+                    truth: s.truth,
+                }
+            })
+            .collect();
+        let ellipse_scale = auto_ellipse_scale(&model);
+        Self {
+            time_s: model.duration_s(),
+            nis_frame: points(&model.nis.frame_mean),
+            nis_mean: points(&model.nis.window_mean),
+            nis_bound: points(&model.nis.window_bound),
+            params,
+            ellipse_scale,
+            model,
+            playing: false,
+            speed: 1.0,
+            marks: None,
+            map_view: None,
+            follow: false,
+            regions: Regions::default(),
+        }
+    }
+
+    /// The model shown.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The current time, seconds from the log's start.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Moves to `t_s` seconds from the log's start (clamped to the log).
+    pub fn set_time(&mut self, t_s: f64) {
+        self.time_s = t_s.clamp(0.0, self.model.duration_s().max(0.0));
+    }
+
+    /// Where the parts were drawn in the last frame.
+    pub fn regions(&self) -> Regions {
+        self.regions
+    }
+
+    /// Draws one frame of the viewer into `ui` (the whole window), and handles its input.
+    pub fn ui(&mut self, ui: &mut Ui) {
+        self.input(ui);
+        egui::Panel::top("stereonav-header").show(ui, |ui| self.header(ui));
+        let timeline = egui::Panel::bottom("stereonav-timeline").show(ui, |ui| self.timeline(ui));
+        self.regions.timeline = timeline.response.rect;
+        let width = ui.available_width();
+        let plots = egui::Panel::right("stereonav-plots")
+            .resizable(true)
+            .default_size((width * 0.42).max(300.0))
+            .show(ui, |ui| self.plots(ui));
+        self.regions.plots = plots.response.rect;
+        egui::CentralPanel::default().show(ui, |ui| {
+            self.images(ui);
+            self.map(ui);
+        });
+    }
+
+    /// Keys and playback.
+    fn input(&mut self, ui: &Ui) {
+        let (space, left, right, home, end, dt) = ui.input(|i| {
+            (
+                i.key_pressed(Key::Space),
+                i.key_pressed(Key::ArrowLeft),
+                i.key_pressed(Key::ArrowRight),
+                i.key_pressed(Key::Home),
+                i.key_pressed(Key::End),
+                i.stable_dt,
+            )
+        });
+        let typing = ui.ctx().text_edit_focused();
+        if !typing {
+            if space {
+                self.toggle_play();
+            }
+            if left {
+                self.step(-1);
+            }
+            if right {
+                self.step(1);
+            }
+            if home {
+                self.set_time(0.0);
+            }
+            if end {
+                self.set_time(self.model.duration_s());
+            }
+        }
+        if self.playing {
+            let end = self.model.duration_s();
+            self.time_s += f64::from(dt.min(0.1)) * self.speed;
+            if self.time_s >= end {
+                self.time_s = end;
+                self.playing = false;
+            }
+            ui.ctx().request_repaint();
+        }
+    }
+
+    fn toggle_play(&mut self) {
+        if !self.playing && self.time_s >= self.model.duration_s() {
+            self.time_s = 0.0;
+        }
+        self.playing = !self.playing;
+    }
+
+    /// One frame back or forward.
+    fn step(&mut self, by: isize) {
+        let frames = &self.model.replay.frames;
+        let next = match self.model.frame_at(self.time_s) {
+            Some(i) => i.saturating_add_signed(by),
+            None if by > 0 => 0,
+            None => return,
+        };
+        if let Some(f) = frames.get(next.min(frames.len().saturating_sub(1))) {
+            self.time_s = self.model.seconds(f.t_us);
+        }
+    }
+
+    fn header(&self, ui: &mut Ui) {
+        let m = &self.model;
+        let name = m.path.file_name().map_or_else(
+            || m.path.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        let source = match (m.kind, m.replay.phase1_skipped) {
+            (SourceKind::VehicleLog, true) => "vehicle log, replayed with phase 1 skipped",
+            (SourceKind::VehicleLog, false) => "vehicle log, replayed",
+            (SourceKind::Estimates, _) => "estimates file",
+        };
+        let frame = m.frame_at(self.time_s);
+        let phase = match m.phase_at(self.time_s) {
+            Some(Phase::Calibrating) => "phase 1 (self-calibration)",
+            Some(Phase::Navigating) => "phase 2 (EKF SLAM)",
+            None => "no frames",
+        };
+        let landmarks = frame.and_then(|i| m.frame(i)).map_or(0, |f| f.landmarks);
+        ui.horizontal(|ui| {
+            ui.strong(name);
+            ui.label(format!("({source})"));
+            ui.separator();
+            ui.label(format!(
+                "frame {} of {}",
+                frame.map_or(0, |i| i + 1),
+                m.replay.frames.len()
+            ));
+            ui.separator();
+            ui.label(phase);
+            ui.separator();
+            ui.label(format!("{landmarks} landmarks"));
+            if let Some(t) = m.replay.phase_switch_t_us {
+                ui.separator();
+                ui.colored_label(SWITCH, format!("phase switch at {:.1} s", m.seconds(t)));
+            }
+            if !m.warnings.is_empty() {
+                ui.separator();
+                ui.colored_label(MAPPED, format!("{} warning(s)", m.warnings.len()))
+                    .on_hover_text(m.warnings.join("\n"));
+            }
+        });
+    }
+
+    fn timeline(&mut self, ui: &mut Ui) {
+        let end = self.model.duration_s().max(0.0);
+        ui.horizontal(|ui| {
+            let label = if self.playing { "pause" } else { "play" };
+            if ui.button(label).clicked() {
+                self.toggle_play();
+            }
+            if ui
+                .button("<")
+                .on_hover_text("previous frame (left arrow)")
+                .clicked()
+            {
+                self.step(-1);
+            }
+            if ui
+                .button(">")
+                .on_hover_text("next frame (right arrow)")
+                .clicked()
+            {
+                self.step(1);
+            }
+            egui::ComboBox::from_id_salt("stereonav-speed")
+                .width(60.0)
+                .selected_text(format!("{}x", self.speed))
+                .show_ui(ui, |ui| {
+                    for s in SPEEDS {
+                        ui.selectable_value(&mut self.speed, s, format!("{s}x"));
+                    }
+                });
+            ui.label(format!("{:8.3} s / {end:.3} s", self.time_s));
+            ui.spacing_mut().slider_width = (ui.available_width() - 16.0).max(50.0);
+            let slider = ui.add(
+                egui::Slider::new(&mut self.time_s, 0.0..=end)
+                    .show_value(false)
+                    .smart_aim(false),
+            );
+            if slider.dragged() {
+                self.playing = false;
+            }
+            // The phase switch on the timeline.
+            if let Some(t) = self.model.replay.phase_switch_t_us
+                && end > 0.0
+            {
+                let r = slider.rect;
+                let inset = r.height() / 2.0;
+                let x = r.left()
+                    + inset
+                    + (r.width() - 2.0 * inset) * (self.model.seconds(t) / end) as f32;
+                ui.painter().line_segment(
+                    [pos2(x, r.top()), pos2(x, r.bottom())],
+                    Stroke::new(2.0, SWITCH),
+                );
+            }
+        });
+    }
+
+    /// The two image planes side by side.
+    fn images(&mut self, ui: &mut Ui) {
+        let frame = self.model.frame_at(self.time_s);
+        if let Some(i) = frame
+            && self.marks.as_ref().is_none_or(|(cached, _)| *cached != i)
+        {
+            self.marks = Some((i, self.model.marks(i)));
+        }
+        let marks = match (frame, &self.marks) {
+            (Some(i), Some((cached, m))) if *cached == i => Some(m),
+            _ => None,
+        };
+        let [w, h] = self.model.image_size;
+        let aspect = (h / w.max(1.0)) as f32;
+        let gap = 8.0;
+        let width = ((ui.available_width() - gap) / 2.0).max(50.0);
+        let height = (width * aspect).min(ui.available_height() * 0.45);
+        let width = height / aspect;
+        let no_features = self.model.features.frames.is_empty();
+        ui.horizontal(|ui| {
+            for side in [Side::Left, Side::Right] {
+                ui.vertical(|ui| {
+                    let (features, projected) = match (marks, side) {
+                        (Some(m), Side::Left) => (&m.left[..], &m.projected_left[..]),
+                        (Some(m), Side::Right) => (&m.right[..], &m.projected_right[..]),
+                        (None, _) => (&[][..], &[][..]),
+                    };
+                    let on = features.iter().filter(|f| f.landmark.is_some()).count();
+                    ui.label(format!(
+                        "{} image: {} features, {on} on landmarks, {} landmarks in view",
+                        side.name(),
+                        features.len(),
+                        projected.len()
+                    ));
+                    let (rect, _) = ui.allocate_exact_size(vec2(width, height), Sense::hover());
+                    match side {
+                        Side::Left => self.regions.left_image = rect,
+                        Side::Right => self.regions.right_image = rect,
+                    }
+                    let painter = ui.painter_at(rect);
+                    painter.rect_filled(rect, 0.0, IMAGE_PLANE);
+                    painter.rect_stroke(
+                        rect,
+                        0.0,
+                        Stroke::new(1.0, Color32::from_gray(90)),
+                        StrokeKind::Inside,
+                    );
+                    let to_screen = |u: f64, v: f64| {
+                        pos2(
+                            rect.left() + (u / w) as f32 * rect.width(),
+                            rect.top() + (v / h) as f32 * rect.height(),
+                        )
+                    };
+                    let labels = projected.len() <= MAX_LABELS;
+                    for p in projected {
+                        let colour = if p.observed { UPDATED } else { MAPPED };
+                        let at = to_screen(p.u, p.v);
+                        painter.circle_stroke(at, 6.0, Stroke::new(1.0, colour));
+                        if labels {
+                            painter.text(
+                                at + vec2(7.0, -7.0),
+                                Align2::LEFT_BOTTOM,
+                                p.id.to_string(),
+                                FontId::monospace(10.0),
+                                colour,
+                            );
+                        }
+                    }
+                    for f in features {
+                        let colour = match (f.landmark, f.observed) {
+                            (Some(_), true) => UPDATED,
+                            (Some(_), false) => MAPPED,
+                            (None, _) => UNASSOCIATED,
+                        };
+                        painter.circle_filled(
+                            to_screen(f64::from(f.u), f64::from(f.v)),
+                            2.5,
+                            colour,
+                        );
+                    }
+                    if no_features {
+                        painter.text(
+                            rect.center_bottom() - vec2(0.0, 6.0),
+                            Align2::CENTER_BOTTOM,
+                            "no board features in an estimates file: landmarks projected",
+                            FontId::proportional(12.0),
+                            Color32::from_gray(140),
+                        );
+                    }
+                });
+                ui.add_space(gap);
+            }
+        });
+        ui.horizontal(|ui| {
+            let key = |ui: &mut Ui, colour: Color32, text: &str| {
+                let (r, _) = ui.allocate_exact_size(vec2(10.0, 10.0), Sense::hover());
+                ui.painter().circle_filled(r.center(), 3.5, colour);
+                ui.label(text);
+            };
+            key(ui, UPDATED, "observation accepted");
+            key(ui, MAPPED, "near a landmark, not updated");
+            key(ui, UNASSOCIATED, "no landmark");
+            ui.label("(rings: landmarks projected)");
+        });
+    }
+
+    /// The top-down map.
+    fn map(&mut self, ui: &mut Ui) {
+        let m = &self.model;
+        let frame = m.frame_at(self.time_s);
+        ui.horizontal(|ui| {
+            ui.label("map (top view, world frame, metres)");
+            ui.separator();
+            ui.label(format!("{SIGMAS:.0}-sigma ellipses x"));
+            egui::ComboBox::from_id_salt("stereonav-ellipse-scale")
+                .width(70.0)
+                .selected_text(format!("{}", self.ellipse_scale))
+                .show_ui(ui, |ui| {
+                    for s in [1.0, 10.0, 100.0, 1000.0, 10000.0] {
+                        ui.selectable_value(&mut self.ellipse_scale, s, format!("{s}"));
+                    }
+                });
+            ui.checkbox(&mut self.follow, "follow the robot");
+            if ui.button("fit").clicked() {
+                self.map_view = None;
+                self.follow = false;
+            }
+        });
+        let size = ui.available_size().max(vec2(50.0, 50.0));
+        let (response, painter) = ui.allocate_painter(size, Sense::click_and_drag());
+        let rect = response.rect;
+        self.regions.map = rect;
+        painter.rect_filled(rect, 0.0, Color32::from_gray(14));
+
+        // The view: fit, follow, or the user's pan and zoom.
+        let fit = {
+            let [x0, y0, x1, y1] = m.bounds;
+            let margin = 0.08 * (x1 - x0).max(y1 - y0).max(1.0);
+            let m_per_pt = ((x1 - x0 + 2.0 * margin) / f64::from(rect.width()))
+                .max((y1 - y0 + 2.0 * margin) / f64::from(rect.height()));
+            MapView {
+                centre: [(x0 + x1) / 2.0, (y0 + y1) / 2.0],
+                m_per_pt,
+            }
+        };
+        let mut view = self.map_view.unwrap_or(fit);
+        if self.follow
+            && let Some(f) = frame.and_then(|i| m.frame(i))
+            && f.pose[..2].iter().all(|v| v.is_finite())
+        {
+            view.centre = [f.pose[0], f.pose[1]];
+        }
+        if response.dragged() {
+            let d = response.drag_delta();
+            view.centre[0] -= f64::from(d.x) * view.m_per_pt;
+            view.centre[1] += f64::from(d.y) * view.m_per_pt;
+            self.map_view = Some(view);
+            self.follow = false;
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                view.m_per_pt *= f64::from((-scroll / 200.0).exp());
+                self.map_view = Some(view);
+            }
+        }
+        if response.double_clicked() {
+            self.map_view = None;
+            self.follow = false;
+            view = fit;
+        }
+        let (cx, cy) = (rect.center().x, rect.center().y);
+        let to_screen = move |p: [f64; 2]| -> Pos2 {
+            pos2(
+                cx + ((p[0] - view.centre[0]) / view.m_per_pt) as f32,
+                cy - ((p[1] - view.centre[1]) / view.m_per_pt) as f32,
+            )
+        };
+        let visible = rect.expand(20.0);
+
+        grid(&painter, rect, view);
+
+        // Truth: lamps and trajectory.
+        if let Some(truth) = &m.truth {
+            for lamp in &truth.lamps {
+                let at = to_screen([lamp[0], lamp[1]]);
+                if visible.contains(at) {
+                    let d = 3.0;
+                    let stroke = Stroke::new(1.0, TRUTH);
+                    painter.line_segment([at + vec2(-d, -d), at + vec2(d, d)], stroke);
+                    painter.line_segment([at + vec2(-d, d), at + vec2(d, -d)], stroke);
+                }
+            }
+            let t_us = m.t_us_at(self.time_s);
+            let upto = m.truth_trajectory.partition_point(|(t, _)| *t <= t_us);
+            let path: Vec<Pos2> = m
+                .truth_trajectory
+                .iter()
+                .take(upto)
+                .map(|(_, p)| to_screen(*p))
+                .collect();
+            if path.len() >= 2 {
+                painter.add(Shape::line(path, Stroke::new(1.5, TRUTH)));
+            }
+        }
+
+        // Fields of view at the current frame.
+        if let Some(i) = frame {
+            for (footprint, colour) in m.field_of_view(i).iter().zip(FOV) {
+                if let Some(corners) = footprint {
+                    let pts: Vec<Pos2> = corners.iter().map(|c| to_screen(*c)).collect();
+                    painter.add(Shape::convex_polygon(
+                        pts,
+                        colour.gamma_multiply(0.08),
+                        Stroke::new(1.5, colour),
+                    ));
+                }
+            }
+        }
+
+        // The estimated trajectory up to now.
+        if let Some(i) = frame {
+            let upto = m.trajectory.partition_point(|(k, _)| *k <= i);
+            let mut path: Vec<Pos2> = m
+                .trajectory
+                .iter()
+                .take(upto)
+                .map(|(_, p)| to_screen(*p))
+                .collect();
+            if let Some(f) = m.frame(i)
+                && f.pose[..2].iter().all(|v| v.is_finite())
+            {
+                path.push(to_screen([f.pose[0], f.pose[1]]));
+            }
+            if path.len() >= 2 {
+                painter.add(Shape::line(path, Stroke::new(2.0, TRAJECTORY)));
+            }
+        }
+
+        // The map at this time, with the uncertainty ellipses.
+        let t_us = m.t_us_at(self.time_s);
+        let scale = self.ellipse_scale;
+        let observed: &[u64] = frame
+            .and_then(|i| m.frame(i))
+            .map_or(&[], |f| f.observed.as_slice());
+        for l in m.map_at(t_us) {
+            let centre = [l.position[0], l.position[1]];
+            if !centre.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            let at = to_screen(centre);
+            if !visible.contains(at) {
+                continue;
+            }
+            let cov = [
+                [l.covariance[0][0], l.covariance[0][1]],
+                [l.covariance[1][0], l.covariance[1][1]],
+            ];
+            if let Some(outline) = ellipse(centre, cov, SIGMAS * scale, view.m_per_pt) {
+                let pts: Vec<Pos2> = outline.iter().map(|p| to_screen(*p)).collect();
+                painter.add(Shape::closed_line(pts, Stroke::new(1.0, ELLIPSE)));
+            }
+            let colour = if observed.contains(&l.id) {
+                UPDATED
+            } else {
+                LANDMARK
+            };
+            painter.circle_filled(at, 3.0, colour);
+        }
+
+        // The robot: its pose, heading and pose ellipse.
+        if let Some(f) = frame.and_then(|i| m.frame(i))
+            && f.pose.iter().all(|v| v.is_finite())
+        {
+            let [x, y, theta] = f.pose;
+            let cov = [
+                [f.pose_covariance[0][0], f.pose_covariance[0][1]],
+                [f.pose_covariance[1][0], f.pose_covariance[1][1]],
+            ];
+            if let Some(outline) = ellipse([x, y], cov, SIGMAS * scale, view.m_per_pt) {
+                let pts: Vec<Pos2> = outline.iter().map(|p| to_screen(*p)).collect();
+                painter.add(Shape::closed_line(pts, Stroke::new(1.0, TRAJECTORY)));
+            }
+            let at = to_screen([x, y]);
+            let (s, c) = (theta.sin() as f32, theta.cos() as f32);
+            let ahead = vec2(c, -s);
+            let side = vec2(s, c);
+            let tip = at + ahead * 12.0;
+            painter.add(Shape::convex_polygon(
+                vec![
+                    tip,
+                    at - ahead * 6.0 + side * 6.0,
+                    at - ahead * 6.0 - side * 6.0,
+                ],
+                TRAJECTORY,
+                Stroke::new(1.0, Color32::WHITE),
+            ));
+        }
+
+        legend(&painter, rect, m.truth.is_some());
+        response.on_hover_text_at_pointer(
+            "drag to pan, scroll to zoom, double-click to fit the whole run",
+        );
+    }
+
+    /// The camera parameters and the NIS over time.
+    fn plots(&mut self, ui: &mut Ui) {
+        let count = self.params.len() + 1;
+        let columns = if count > PLOTS_PER_COLUMN { 2 } else { 1 };
+        let rows = count.div_ceil(columns);
+        ui.label(format!(
+            "camera parameters: estimate with its {SIGMAS:.0}-sigma band; NIS against its bound"
+        ));
+        let spacing = ui.spacing().item_spacing;
+        let title_height = ui.text_style_height(&egui::TextStyle::Body) + spacing.y;
+        // Each row: its title, the plot, the spacing; a few points spare for rounding.
+        let height =
+            ((ui.available_height() - 8.0 - rows as f32 * (title_height + 2.0 * spacing.y))
+                / rows as f32)
+                .max(60.0);
+        let width = (ui.available_width() - (columns as f32 - 1.0) * spacing.x) / columns as f32;
+        let link = ui.make_persistent_id("stereonav-plots-time");
+        let mut clicked: Option<f64> = None;
+        let now = self.time_s;
+        let switch = self
+            .model
+            .replay
+            .phase_switch_t_us
+            .map(|t| self.model.seconds(t));
+        let end = self.model.duration_s();
+        let t_us = self.model.t_us_at(now);
+        let mut index = 0usize;
+        let params = &self.params;
+        egui::Grid::new("stereonav-plot-grid")
+            .num_columns(columns)
+            .spacing(spacing)
+            .show(ui, |ui| {
+                for p in params {
+                    ui.vertical(|ui| {
+                        ui.set_width(width);
+                        let mut title = format!("{} [{}]", p.param.name(), p.unit);
+                        if let Some(e) = self.model.param_at(t_us, p.param) {
+                            let scale = crate::model::display_unit(p.param).1;
+                            let (v, s) = (e.value * scale, e.sigma * scale);
+                            title.push_str(&format!(": {v:.4} ± {s:.4}"));
+                        }
+                        if let Some(t) = p.truth {
+                            title.push_str(&format!(" (truth {t:.4})"));
+                        }
+                        ui.label(title);
+                        let response = Plot::new(("stereonav-param", index))
+                            .height(height)
+                            .width(width)
+                            .link_axis(link, [true, false])
+                            .include_x(0.0)
+                            .include_x(end)
+                            .allow_scroll(false)
+                            .show_x(true)
+                            .show(ui, |plot| {
+                                if p.t.len() >= 2 {
+                                    plot.add(
+                                        FilledArea::new("3 sigma", &p.t, &p.lower, &p.upper)
+                                            .fill_color(BAND),
+                                    );
+                                }
+                                plot.line(
+                                    Line::new("estimate", PlotPoints::Borrowed(&p.value))
+                                        .color(ESTIMATE)
+                                        .width(1.5),
+                                );
+                                if let Some(t) = p.truth {
+                                    plot.add(
+                                        HLine::new("truth", t)
+                                            .color(TRUTH)
+                                            .style(LineStyle::dashed_dense()),
+                                    );
+                                }
+                                time_markers(plot, now, switch);
+                            });
+                        if response.response.clicked()
+                            && let Some(pos) = response.response.interact_pointer_pos()
+                        {
+                            clicked = Some(response.transform.value_from_position(pos).x);
+                        }
+                    });
+                    index += 1;
+                    if index.is_multiple_of(columns) {
+                        ui.end_row();
+                    }
+                }
+                ui.vertical(|ui| {
+                    ui.set_width(width);
+                    ui.label(format!(
+                        "NIS per dof: frames (dots), last-{} mean (line), {:.1} % bound (red)",
+                        self.model.nis.window,
+                        vslam_ekf::health::DIVERGENCE_PROBABILITY * 100.0
+                    ));
+                    let response = Plot::new("stereonav-nis")
+                        .height(height)
+                        .width(width)
+                        .link_axis(link, [true, false])
+                        .include_x(0.0)
+                        .include_x(end)
+                        .include_y(0.0)
+                        .allow_scroll(false)
+                        .show(ui, |plot| {
+                            plot.add(
+                                Points::new("frame mean", PlotPoints::Borrowed(&self.nis_frame))
+                                    .radius(1.5)
+                                    .color(Color32::from_gray(150)),
+                            );
+                            plot.line(
+                                Line::new("window mean", PlotPoints::Borrowed(&self.nis_mean))
+                                    .color(LANDMARK)
+                                    .width(1.5),
+                            );
+                            plot.line(
+                                Line::new("bound", PlotPoints::Borrowed(&self.nis_bound))
+                                    .color(SWITCH)
+                                    .width(1.0),
+                            );
+                            plot.add(
+                                HLine::new("expected", 1.0)
+                                    .color(Color32::from_gray(110))
+                                    .style(LineStyle::dashed_dense()),
+                            );
+                            time_markers(plot, now, switch);
+                        });
+                    if response.response.clicked()
+                        && let Some(pos) = response.response.interact_pointer_pos()
+                    {
+                        clicked = Some(response.transform.value_from_position(pos).x);
+                    }
+                });
+                ui.end_row();
+            });
+        if let Some(t) = clicked {
+            self.set_time(t);
+            self.playing = false;
+        }
+    }
+}
+
+/// Which image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Side {
+    Left,
+    Right,
+}
+
+impl Side {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Left => "left",
+            Self::Right => "right",
+        }
+    }
+}
+
+/// The current time and the phase switch on a plot.
+fn time_markers(plot: &mut egui_plot::PlotUi<'_>, now: f64, switch: Option<f64>) {
+    if let Some(t) = switch {
+        plot.add(
+            VLine::new("phase switch", t)
+                .color(SWITCH)
+                .width(1.5)
+                .style(LineStyle::dashed_dense()),
+        );
+    }
+    plot.add(VLine::new("now", now).color(NOW).width(1.0));
+}
+
+/// A power of ten that makes the median landmark's ellipse a visible fraction of the run's
+/// extent (the ellipses of a good map are millimetres on a map of metres).
+fn auto_ellipse_scale(m: &Model) -> f64 {
+    let mut axes: Vec<f64> = m
+        .replay
+        .landmarks
+        .iter()
+        .map(|l| l.covariance[0][0].max(l.covariance[1][1]).max(0.0).sqrt() * SIGMAS)
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .collect();
+    axes.sort_by(f64::total_cmp);
+    let [x0, y0, x1, y1] = m.bounds;
+    let extent = (x1 - x0).max(y1 - y0).max(1.0);
+    match axes.get(axes.len() / 2) {
+        Some(&a) => {
+            let k = (0.015 * extent / a).log10().round().clamp(0.0, 4.0);
+            10f64.powf(k)
+        }
+        None => 1.0,
+    }
+}
+
+/// The outline of the `k`-sigma ellipse of a 2x2 covariance around `centre`, with about one
+/// point a screen point of its radius (`m_per_pt`); `None` when the covariance is not finite or
+/// the ellipse is under a point across (hidden by the marker drawn on it).
+fn ellipse(centre: [f64; 2], cov: [[f64; 2]; 2], k: f64, m_per_pt: f64) -> Option<Vec<[f64; 2]>> {
+    let [[a, b], [_, d]] = cov;
+    if ![a, b, d].iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    // Eigen-decomposition of a symmetric 2x2 matrix.
+    let mean = (a + d) / 2.0;
+    let radius = (((a - d) / 2.0).powi(2) + b * b).sqrt();
+    let (l1, l2) = ((mean + radius).max(0.0), (mean - radius).max(0.0));
+    let angle = 0.5 * (2.0 * b).atan2(a - d);
+    let (s, c) = angle.sin_cos();
+    let (r1, r2) = (k * l1.sqrt(), k * l2.sqrt());
+    let r1_pt = r1 / m_per_pt;
+    if r1_pt.is_nan() || r1_pt < 1.0 {
+        return None;
+    }
+    let segments = (r1_pt.ceil() as usize).clamp(ELLIPSE_MIN_SEGMENTS, ELLIPSE_SEGMENTS);
+    Some(
+        (0..segments)
+            .map(|i| {
+                let t = i as f64 / segments as f64 * core::f64::consts::TAU;
+                let (x, y) = (r1 * t.cos(), r2 * t.sin());
+                [centre[0] + c * x - s * y, centre[1] + s * x + c * y]
+            })
+            .collect(),
+    )
+}
+
+/// Grid lines at a round spacing, labelled in metres.
+fn grid(painter: &egui::Painter, rect: Rect, view: MapView) {
+    let target_pt = 80.0;
+    let raw = view.m_per_pt * target_pt;
+    let magnitude = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|k| k * magnitude)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * magnitude);
+    if !(step.is_finite() && step > 0.0) {
+        return;
+    }
+    let half_w = f64::from(rect.width()) / 2.0 * view.m_per_pt;
+    let half_h = f64::from(rect.height()) / 2.0 * view.m_per_pt;
+    let stroke = Stroke::new(1.0, Color32::from_gray(40));
+    let text = Color32::from_gray(110);
+    let font = FontId::proportional(10.0);
+    let mut x = ((view.centre[0] - half_w) / step).ceil() * step;
+    while x <= view.centre[0] + half_w {
+        let sx = rect.center().x + ((x - view.centre[0]) / view.m_per_pt) as f32;
+        painter.line_segment([pos2(sx, rect.top()), pos2(sx, rect.bottom())], stroke);
+        painter.text(
+            pos2(sx + 2.0, rect.bottom() - 2.0),
+            Align2::LEFT_BOTTOM,
+            format_m(x, step),
+            font.clone(),
+            text,
+        );
+        x += step;
+    }
+    let mut y = ((view.centre[1] - half_h) / step).ceil() * step;
+    while y <= view.centre[1] + half_h {
+        let sy = rect.center().y - ((y - view.centre[1]) / view.m_per_pt) as f32;
+        painter.line_segment([pos2(rect.left(), sy), pos2(rect.right(), sy)], stroke);
+        painter.text(
+            pos2(rect.left() + 2.0, sy - 2.0),
+            Align2::LEFT_BOTTOM,
+            format_m(y, step),
+            font.clone(),
+            text,
+        );
+        y += step;
+    }
+}
+
+/// A grid label: `v` metres with as many decimals as the grid `step` needs.
+fn format_m(v: f64, step: f64) -> String {
+    let decimals = (-step.log10().floor()).clamp(0.0, 6.0) as usize;
+    let v = if v.abs() < step * 1e-6 { 0.0 } else { v };
+    format!("{v:.decimals$} m")
+}
+
+/// The map's colour key, top left.
+fn legend(painter: &egui::Painter, rect: Rect, truth: bool) {
+    let mut entries = vec![
+        (TRAJECTORY, "estimated trajectory and robot"),
+        (LANDMARK, "landmark"),
+        (UPDATED, "landmark updated at this frame"),
+        (ELLIPSE, "uncertainty ellipse"),
+        (FOV[0], "left camera's view on the lamp plane"),
+        (FOV[1], "right camera's view"),
+    ];
+    if truth {
+        entries.push((TRUTH, "truth: trajectory, lamps (x)"));
+    }
+    let font = FontId::proportional(11.0);
+    let line = 14.0;
+    let size = Vec2::new(230.0, line * entries.len() as f32 + 8.0);
+    let frame = Rect::from_min_size(rect.left_top() + vec2(8.0, 8.0), size);
+    painter.rect_filled(frame, 3.0, Color32::from_rgba_premultiplied(0, 0, 0, 170));
+    for (k, (colour, text)) in entries.iter().enumerate() {
+        let y = frame.top() + 4.0 + line * k as f32 + line / 2.0;
+        painter.circle_filled(pos2(frame.left() + 10.0, y), 4.0, *colour);
+        painter.text(
+            pos2(frame.left() + 20.0, y),
+            Align2::LEFT_CENTER,
+            *text,
+            font.clone(),
+            Color32::from_gray(210),
+        );
+    }
+}
