@@ -131,20 +131,12 @@ fn camera_values(camera: &CameraParams, sigma: impl Fn(Param) -> f64) -> Map<Str
 }
 
 fn counts_json(c: &Counts) -> Value {
-    json!({
-        "frames": c.frames,
-        "corrupt": c.corrupt,
-        "lost": c.lost,
-        "bytes_skipped": c.bytes_skipped,
-        "frames_out_of_order": c.frames_out_of_order,
-        "odometry": c.odometry,
-        "stereo_matches": c.stereo_matches,
-        "tracks": c.tracks,
-        "confirmed_tracks": c.confirmed_tracks,
-        "pairs": c.pairs,
-        "landmark_pairs": c.landmark_pairs,
-        "tracker_resets": c.tracker_resets,
-    })
+    Value::Object(
+        c.named()
+            .into_iter()
+            .map(|(name, value)| (name.to_string(), json!(value)))
+            .collect(),
+    )
 }
 
 fn observability_json(report: &ObservabilityReport) -> Value {

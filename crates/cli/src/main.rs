@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 mod calibrate;
 mod fpga;
 mod harris;
+mod progress;
 mod replay;
 mod simulate;
 mod view;

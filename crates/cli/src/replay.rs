@@ -8,14 +8,15 @@
 //! on stderr when it is a terminal, nothing otherwise.
 
 use std::fmt::Write as _;
-use std::io::{self, IsTerminal, Write};
+use std::io::{self, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use calib::Rig;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use replay::{NavSettings, Phase, Replay};
+
+use crate::progress::FrameProgress;
 use track::PairSettings;
 
 /// Arguments of `stereonav replay`.
@@ -52,15 +53,18 @@ pub(crate) struct Args {
     consider_camera: bool,
 }
 
-/// Frames below which no progress bar is drawn (a short log is done before it would show).
-const PROGRESS_MIN_FRAMES: u64 = 2000;
-
-pub(crate) fn run(args: &Args) -> Result<()> {
+/// The navigator's settings from the command line, checked before any log is read (a bad
+/// setting should not wait for a long log).
+pub(crate) fn nav_settings(
+    skip_phase1: bool,
+    stride: usize,
+    consider_camera: bool,
+) -> Result<NavSettings> {
     let defaults = NavSettings::default();
     let settings = NavSettings {
-        skip_phase1: args.skip_phase1,
+        skip_phase1,
         ekf: vslam_ekf::Settings {
-            camera_update: if args.consider_camera {
+            camera_update: if consider_camera {
                 vslam_ekf::CameraUpdate::Consider
             } else {
                 vslam_ekf::CameraUpdate::Refine
@@ -68,39 +72,26 @@ pub(crate) fn run(args: &Args) -> Result<()> {
             ..defaults.ekf
         },
         pairs: PairSettings {
-            stride: args.stride,
+            stride,
             ..defaults.pairs
         },
         ..defaults
     };
-    // Before the log is read: a bad setting should not wait for a long log.
     settings
         .pairs
         .validate()
-        .with_context(|| format!("--stride {}", args.stride))?;
+        .with_context(|| format!("--stride {stride}"))?;
+    Ok(settings)
+}
+
+pub(crate) fn run(args: &Args) -> Result<()> {
+    let settings = nav_settings(args.skip_phase1, args.stride, args.consider_camera)?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
-    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
-    let terminal = io::stderr().is_terminal();
-    let mut shown = false;
-    let mut progress = |done: u64, total: u64| {
-        if !shown && terminal && total >= PROGRESS_MIN_FRAMES {
-            shown = true;
-            bar.set_length(total);
-            bar.set_style(
-                ProgressStyle::with_template("replaying [{bar:30}] {pos}/{len} frames, {eta} left")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar())
-                    .progress_chars("=> "),
-            );
-            bar.set_draw_target(ProgressDrawTarget::stderr());
-            bar.enable_steady_tick(Duration::from_millis(200));
-        }
-        if shown {
-            bar.set_position(done);
-        }
-    };
+    let mut bar = FrameProgress::new("replaying");
+    let mut progress = |done: u64, total: u64| bar.update(done, total);
     let started = Instant::now();
     let result = replay::replay_log(&args.log, rig, &settings, &mut progress);
-    bar.finish_and_clear();
+    bar.finish();
     let replay = result?;
     let took = started.elapsed();
     {

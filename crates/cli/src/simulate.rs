@@ -2,15 +2,11 @@
 //! [--rendered] [--seed N]`: runs the seeded simulator and writes a vehicle log
 //! (vehicle-interfaces.md section 4), the nominal rig file and the ground truth.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::time::Duration;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-/// Runs with at least this many stereo frames get a progress bar (on a terminal).
-const PROGRESS_MIN_FRAMES: usize = 2_000;
+use crate::progress::FrameProgress;
 
 /// Arguments of `stereonav simulate`.
 #[derive(Debug, clap::Args)]
@@ -46,25 +42,10 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     } else {
         sim::Mode::Fast
     };
-    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
-    let terminal = std::io::stderr().is_terminal();
-    let mut progress = |done: usize, total: usize| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-        if done == 0 && terminal && total >= PROGRESS_MIN_FRAMES {
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "simulating [{bar:30}] {pos}/{len} frames, {eta} left",
-                )
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
-            );
-            bar.set_draw_target(ProgressDrawTarget::stderr());
-            bar.enable_steady_tick(Duration::from_millis(200));
-        }
-    };
+    let mut bar = FrameProgress::new("simulating");
+    let mut progress = |done: usize, total: usize| bar.update(done as u64, total as u64);
     let result = sim::simulate_with_progress(&scenario, mode, &mut progress);
-    bar.finish_and_clear();
+    bar.finish();
     let run = result?;
     run.write_log(&args.out)?;
     if let Some(path) = &args.rig {

@@ -7,14 +7,12 @@
 //! window (OpenGL under X11), and says so in one line when there is no display. Warnings of
 //! the replay go to stderr, one line each.
 
-use std::io::{self, IsTerminal, Write};
+use std::io::{self, Write};
 use std::path::PathBuf;
-use std::time::Duration;
 
+use crate::progress::FrameProgress;
 use anyhow::{Context, Result, bail};
 use calib::Rig;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use replay::NavSettings;
 use track::PairSettings;
 
 /// Arguments of `stereonav view`.
@@ -44,9 +42,6 @@ pub(crate) struct Args {
     size: [u32; 2],
 }
 
-/// Frames below which no progress bar is drawn.
-const PROGRESS_MIN_FRAMES: u64 = 2000;
-
 /// `WxH` as two whole numbers of pixels.
 fn parse_size(text: &str) -> Result<[u32; 2], String> {
     let parsed = text
@@ -56,20 +51,8 @@ fn parse_size(text: &str) -> Result<[u32; 2], String> {
 }
 
 pub(crate) fn run(args: &Args) -> Result<()> {
-    let defaults = NavSettings::default();
-    let settings = NavSettings {
-        skip_phase1: args.skip_phase1,
-        pairs: PairSettings {
-            stride: args.stride,
-            ..defaults.pairs
-        },
-        ..defaults
-    };
     // Before the log is read: bad settings should not wait for a long replay.
-    settings
-        .pairs
-        .validate()
-        .with_context(|| format!("--stride {}", args.stride))?;
+    let settings = crate::replay::nav_settings(args.skip_phase1, args.stride, false)?;
     if args.screenshot.is_some() {
         viewer::check_size(args.size).context("--size")?;
     } else if args.size != viewer::MIN_SCREENSHOT_SIZE {
@@ -87,27 +70,10 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     }
     let options = viewer::LoadOptions { rig, settings };
 
-    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
-    let terminal = io::stderr().is_terminal();
-    let mut shown = false;
-    let mut progress = |done: u64, total: u64| {
-        if !shown && terminal && total >= PROGRESS_MIN_FRAMES {
-            shown = true;
-            bar.set_length(total);
-            bar.set_style(
-                ProgressStyle::with_template("replaying [{bar:30}] {pos}/{len} frames, {eta} left")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar())
-                    .progress_chars("=> "),
-            );
-            bar.set_draw_target(ProgressDrawTarget::stderr());
-            bar.enable_steady_tick(Duration::from_millis(200));
-        }
-        if shown {
-            bar.set_position(done);
-        }
-    };
+    let mut bar = FrameProgress::new("replaying");
+    let mut progress = |done: u64, total: u64| bar.update(done, total);
     let loaded = viewer::load(&args.log, &options, &mut progress);
-    bar.finish_and_clear();
+    bar.finish();
     let model = loaded?;
     {
         let mut stderr = io::stderr().lock();

@@ -29,7 +29,7 @@ use calib::{CameraParams, Measurement, N_PARAMS, Param, ParamVector, Rig, RigFil
 use numpy::ndarray::{Array2, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use replay::{Counts, LogCalibration, RigSource};
+use replay::{LogCalibration, RigSource};
 use track::{PairSettings, PairingScheme, SettingsError};
 
 use crate::input_error;
@@ -1037,24 +1037,6 @@ pub(crate) fn calibrate_log(
     Ok(LogCalibrationResult { result })
 }
 
-/// Every counter of a log's calibration or replay by name, in the order of `replay::Counts`.
-pub(crate) fn counts_list(c: &Counts) -> Vec<(&'static str, u64)> {
-    vec![
-        ("frames", c.frames),
-        ("corrupt", c.corrupt),
-        ("lost", c.lost),
-        ("bytes_skipped", c.bytes_skipped),
-        ("frames_out_of_order", c.frames_out_of_order),
-        ("odometry", c.odometry),
-        ("stereo_matches", c.stereo_matches),
-        ("tracks", c.tracks),
-        ("confirmed_tracks", c.confirmed_tracks),
-        ("pairs", c.pairs),
-        ("landmark_pairs", c.landmark_pairs),
-        ("tracker_resets", c.tracker_resets),
-    ]
-}
-
 /// Phase 1 on a whole vehicle log (`replay::LogCalibration`). Arrays are copied out on access.
 #[pyclass(module = "stereonav._native", frozen)]
 pub(crate) struct LogCalibrationResult {
@@ -1088,7 +1070,7 @@ impl LogCalibrationResult {
     /// `[(name, count), ...]`: what was read, decoded, associated and paired.
     #[getter]
     fn counts(&self) -> Vec<(&'static str, u64)> {
-        counts_list(&self.result.counts)
+        self.result.counts.named().to_vec()
     }
 
     /// What limits the result without stopping it (a log cut short, a rig that differs from

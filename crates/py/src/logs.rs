@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use calib::{CameraParams, Mount, Rig};
+use calib::Rig;
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -140,21 +140,11 @@ fn read_contents(path: &Path) -> Result<LogContents, replay::Error> {
 
 /// The ten camera parameters of the simulator's truth, in `Param::ALL` order.
 fn truth_camera_vector(t: &TruthCamera) -> Vec<f64> {
-    let camera = CameraParams {
-        f: t.f,
-        cx: t.cx,
-        cy: t.cy,
-        baseline: t.baseline,
-        mount: Mount {
-            x: t.mount_x,
-            y: t.mount_y,
-            z: t.mount_z,
-            roll: t.mount_roll,
-            pitch: t.mount_pitch,
-            yaw: t.mount_yaw,
-        },
-    };
-    camera.to_vector().iter().copied().collect()
+    replay::truth_camera(t)
+        .to_vector()
+        .iter()
+        .copied()
+        .collect()
 }
 
 /// Rows of three values as a `(K, 3)` array.

@@ -36,7 +36,7 @@ use replay::{
 };
 use track::{PairSettings, Pixel, SettingsError};
 
-use crate::calibration::{counts_list, replay_error};
+use crate::calibration::replay_error;
 use crate::filter::stereonav_error;
 use crate::input_error;
 
@@ -365,7 +365,7 @@ impl ReplayResult {
     /// `[(name, count), ...]`: what was read, decoded and associated.
     #[getter]
     fn counts(&self) -> Vec<(&'static str, u64)> {
-        counts_list(&self.replay.counts)
+        self.replay.counts.named().to_vec()
     }
 
     /// What limits the result without stopping it, one line each.

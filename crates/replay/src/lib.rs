@@ -48,7 +48,9 @@ use vehicle_log::Record;
 pub use error::Error;
 pub use estimates_reader::{ESTIMATES_FRAME_TOPIC, EstimatesError, read_estimates};
 pub use nav::{NavSettings, Navigator};
-pub use navigate::{LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, replay_log};
+pub use navigate::{
+    LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, replay_log, truth_camera,
+};
 pub use output::{summary_json, write_estimates, write_summary, write_trajectory};
 pub use types::{
     CameraSample, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, Replay,
@@ -122,6 +124,26 @@ pub struct Counts {
     pub tracker_resets: u64,
 }
 
+impl Counts {
+    /// Every counter by name (the JSON keys and Python names), in field order.
+    pub fn named(&self) -> [(&'static str, u64); 12] {
+        [
+            ("frames", self.frames),
+            ("corrupt", self.corrupt),
+            ("lost", self.lost),
+            ("bytes_skipped", self.bytes_skipped),
+            ("frames_out_of_order", self.frames_out_of_order),
+            ("odometry", self.odometry),
+            ("stereo_matches", self.stereo_matches),
+            ("tracks", self.tracks),
+            ("confirmed_tracks", self.confirmed_tracks),
+            ("pairs", self.pairs),
+            ("landmark_pairs", self.landmark_pairs),
+            ("tracker_resets", self.tracker_resets),
+        ]
+    }
+}
+
 /// Phase 1 on a whole log.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LogCalibration {
@@ -142,12 +164,15 @@ pub struct LogCalibration {
     pub warnings: Vec<String>,
 }
 
-/// One decoded stereo frame.
-#[derive(Debug, Clone)]
-pub(crate) struct DecodedFrame {
-    pub(crate) t_us: u64,
-    pub(crate) left: Vec<Pixel>,
-    pub(crate) right: Vec<Pixel>,
+/// One decoded stereo frame: the board's features as pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DecodedFrame {
+    /// The packet's timestamp, microseconds.
+    pub t_us: u64,
+    /// The left camera's features, in the board's order.
+    pub left: Vec<Pixel>,
+    /// The right camera's features, in the board's order.
+    pub right: Vec<Pixel>,
 }
 
 /// A vehicle log read, decoded and ordered by data time.
@@ -201,7 +226,11 @@ pub(crate) fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput
     let (rig, rig_source) = choose_rig(path, rig, logged_rig, &mut warnings)?;
 
     let mut counts = Counts::default();
-    let mut frames = decode(&chunks, &mut counts);
+    let (mut frames, stats) = decode_stream(&chunks);
+    counts.frames = stats.packets;
+    counts.corrupt = stats.corrupt;
+    counts.lost = stats.lost;
+    counts.bytes_skipped = stats.bytes_skipped;
     counts.frames_out_of_order = frames
         .windows(2)
         .filter(|w| matches!(w, [a, b] if b.t_us < a.t_us))
@@ -227,8 +256,10 @@ pub(crate) fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput
     })
 }
 
-/// Decodes the concatenated chunks; returns the frames in stream order and the counters.
-fn decode(chunks: &[&[u8]], counts: &mut Counts) -> Vec<DecodedFrame> {
+/// The board's byte stream, given as the chunks of `/fpga/features` in log order, decoded:
+/// the good frames in stream order (not sorted by time) and the decoder's counters. Corrupt
+/// packets and garbage are skipped and counted, never fatal.
+pub fn decode_stream(chunks: &[&[u8]]) -> (Vec<DecodedFrame>, fpga_link::Stats) {
     let mut decoder = Decoder::new();
     let mut frames = Vec::new();
     let mut take = |event: Option<Event<'_>>| -> bool {
@@ -257,12 +288,7 @@ fn decode(chunks: &[&[u8]], counts: &mut Counts) -> Vec<DecodedFrame> {
         }
     }
     while take(decoder.decode_end()) {}
-    let stats = decoder.stats();
-    counts.frames = stats.packets;
-    counts.corrupt = stats.corrupt;
-    counts.lost = stats.lost;
-    counts.bytes_skipped = stats.bytes_skipped;
-    frames
+    (frames, decoder.stats())
 }
 
 /// Phase 1 in batch on the vehicle log at `path`.

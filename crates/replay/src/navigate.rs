@@ -209,23 +209,22 @@ impl Truth {
     }
 }
 
-fn camera_of(t: &TruthCamera, nominal: &CameraParams) -> CameraParams {
-    let mut c = *nominal;
-    for (p, v) in [
-        (Param::F, t.f),
-        (Param::Cx, t.cx),
-        (Param::Cy, t.cy),
-        (Param::Baseline, t.baseline),
-        (Param::MountX, t.mount_x),
-        (Param::MountY, t.mount_y),
-        (Param::MountZ, t.mount_z),
-        (Param::MountRoll, t.mount_roll),
-        (Param::MountPitch, t.mount_pitch),
-        (Param::MountYaw, t.mount_yaw),
-    ] {
-        c.set(p, v);
+/// The camera parameters of the simulator's truth (`/truth/camera`).
+pub fn truth_camera(t: &TruthCamera) -> CameraParams {
+    CameraParams {
+        f: t.f,
+        cx: t.cx,
+        cy: t.cy,
+        baseline: t.baseline,
+        mount: calib::camera::Mount {
+            x: t.mount_x,
+            y: t.mount_y,
+            z: t.mount_z,
+            roll: t.mount_roll,
+            pitch: t.mount_pitch,
+            yaw: t.mount_yaw,
+        },
     }
-    c
 }
 
 fn truth_errors(
@@ -325,10 +324,7 @@ fn truth_errors(
         }
     }
     // Lamps in view of both cameras at enough phase-2 frames, with no landmark.
-    let true_camera = truth
-        .camera
-        .as_ref()
-        .map_or(rig.nominal, |c| camera_of(c, &rig.nominal));
+    let true_camera = truth.camera.as_ref().map_or(rig.nominal, truth_camera);
     let (w, h) = (f64::from(rig.width), f64::from(rig.height));
     let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
     let mut seen = vec![0usize; truth.landmarks.len()];
@@ -356,7 +352,7 @@ fn truth_errors(
         .filter(|&(&s, &used)| s >= LAMP_SEEN_FRAMES && !used)
         .count();
     let camera = truth.camera.as_ref().map_or_else(Vec::new, |c| {
-        let t = camera_of(c, &rig.nominal);
+        let t = truth_camera(c);
         Param::ALL
             .iter()
             .map(|&p| (p, final_camera.get(p) - t.get(p)))

@@ -226,19 +226,16 @@ fn landmark_sigma(l: &LandmarkEstimate) -> [f64; 3] {
     [xx, yy, zz].map(|v| if v.is_nan() { v } else { v.max(0.0).sqrt() })
 }
 
+/// The counters the summary does not hold at its top level, and the frames processed.
 fn counts_json(c: &Counts, frames_processed: usize) -> Value {
-    json!({
-        "frames_processed": frames_processed,
-        "bytes_skipped": c.bytes_skipped,
-        "frames_out_of_order": c.frames_out_of_order,
-        "odometry": c.odometry,
-        "stereo_matches": c.stereo_matches,
-        "tracks": c.tracks,
-        "confirmed_tracks": c.confirmed_tracks,
-        "pairs": c.pairs,
-        "landmark_pairs": c.landmark_pairs,
-        "tracker_resets": c.tracker_resets,
-    })
+    let mut map = serde_json::Map::new();
+    map.insert("frames_processed".to_string(), json!(frames_processed));
+    for (name, value) in c.named() {
+        if !matches!(name, "frames" | "corrupt" | "lost") {
+            map.insert(name.to_string(), json!(value));
+        }
+    }
+    Value::Object(map)
 }
 
 fn truth_json(t: &TruthErrors) -> Value {

@@ -6,7 +6,6 @@ use std::path::Path;
 
 use calib::camera::CameraParams;
 use calib::config::Rig;
-use fpga_link::{Decoder, Event};
 use replay::NavSettings;
 use vehicle_log::Record;
 
@@ -100,41 +99,22 @@ pub fn load(
 /// The board's stream (the `/fpga/features` chunks concatenated in log order) decoded into
 /// features per frame, sorted by the frames' timestamps (as the replay orders them).
 fn decode_features(records: &[Record]) -> Features {
-    let mut decoder = Decoder::new();
-    let mut frames: Vec<DecodedFrame> = Vec::new();
-    let mut take = |event: Option<Event<'_>>| -> bool {
-        match event {
-            Some(Event::Frame(f)) => {
-                let px = |x: fpga_link::Feature| {
-                    let p = track::Pixel::from_q4(x.x_q4, x.y_q4);
-                    // Pixels of a 4095-pixel image at most: exact in f32.
-                    [p.u as f32, p.v as f32]
-                };
-                frames.push((
-                    f.t_us(),
-                    f.left().map(px).collect(),
-                    f.right().map(px).collect(),
-                ));
-                true
-            }
-            Some(Event::Corrupt(_)) => true,
-            None => false,
-        }
+    let chunks: Vec<&[u8]> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Features { bytes, .. } => Some(bytes.as_slice()),
+            _ => None,
+        })
+        .collect();
+    // Pixels of a 4095-pixel image at most: exact in f32.
+    let points = |px: &[track::Pixel]| -> Vec<ImagePoint> {
+        px.iter().map(|p| [p.u as f32, p.v as f32]).collect()
     };
-    for record in records {
-        let Record::Features { bytes, .. } = record else {
-            continue;
-        };
-        let mut rest: &[u8] = bytes;
-        loop {
-            let (used, event) = decoder.decode(rest);
-            rest = rest.get(used..).unwrap_or_default();
-            if !take(event) {
-                break;
-            }
-        }
-    }
-    while take(decoder.decode_end()) {}
+    let mut frames: Vec<DecodedFrame> = replay::decode_stream(&chunks)
+        .0
+        .iter()
+        .map(|f| (f.t_us, points(&f.left), points(&f.right)))
+        .collect();
     // Stable: equal timestamps keep stream order, as in the replay.
     frames.sort_by_key(|(t_us, _, _)| *t_us);
     let mut features = Features::default();
@@ -159,20 +139,7 @@ fn truth_of(records: &[Record]) -> (Option<Truth>, Option<CameraParams>) {
         }
     }
     truth.poses.sort_by_key(|(t_us, _)| *t_us);
-    let truth_camera = camera.map(|t| CameraParams {
-        f: t.f,
-        cx: t.cx,
-        cy: t.cy,
-        baseline: t.baseline,
-        mount: calib::camera::Mount {
-            x: t.mount_x,
-            y: t.mount_y,
-            z: t.mount_z,
-            roll: t.mount_roll,
-            pitch: t.mount_pitch,
-            yaw: t.mount_yaw,
-        },
-    });
+    let truth_camera = camera.as_ref().map(replay::truth_camera);
     let any = !truth.poses.is_empty() || !truth.lamps.is_empty();
     (any.then_some(truth), truth_camera)
 }
