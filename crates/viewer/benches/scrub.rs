@@ -12,7 +12,9 @@
 //!   or llvmpipe does this part in the window).
 //!
 //! Before criterion's timings it prints the worst, the 99th percentile and the mean over a
-//! scrub of 400 positions (`cargo bench -p viewer --bench scrub`).
+//! scrub of 400 positions (`cargo bench -p viewer --bench scrub`), and what the frames ask of
+//! a software OpenGL renderer ([`viewer::fill_estimate`]: deterministic, unlike frame times in
+//! a window). Whole frames in a real window: `examples/window_scrub.rs`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stdout)]
 
 use std::path::Path;
@@ -94,17 +96,31 @@ fn bench(c: &mut Criterion) {
     let times = scrub_times(duration, 400);
     let mut ui_times = Vec::with_capacity(times.len());
     let mut raster_times = Vec::with_capacity(times.len());
-    let mut triangles = 0;
+    let mut fill: Vec<viewer::FillEstimate> = Vec::with_capacity(times.len());
     for t in &times {
         headless.viewer_mut().set_time(*t);
         let started = Instant::now();
-        triangles = triangles.max(headless.run_frame());
+        headless.run_frame();
         ui_times.push(started.elapsed());
+        fill.extend(headless.fill_estimate());
         let started = Instant::now();
         std::hint::black_box(headless.render());
         raster_times.push(started.elapsed());
     }
-    println!("scrubbing the warehouse at 1280x800 (at most {triangles} triangles a frame):");
+    let most = |f: fn(&viewer::FillEstimate) -> f64| fill.iter().map(f).fold(0.0, f64::max);
+    let mean = |f: fn(&viewer::FillEstimate) -> f64| {
+        fill.iter().map(f).sum::<f64>() / fill.len().max(1) as f64
+    };
+    println!(
+        "scrubbing the warehouse at 1280x800: triangles a frame mean {:.0}, most {:.0}; \
+         pixels of the 4x4 blocks they touch (software OpenGL's fill) mean {:.2} M, most {:.2} M \
+         ({:.2} M pixels covered on average)",
+        mean(|e| e.triangles as f64),
+        most(|e| e.triangles as f64),
+        mean(|e| e.block_pixels) / 1e6,
+        most(|e| e.block_pixels) / 1e6,
+        mean(|e| e.covered_pixels) / 1e6,
+    );
     summary("  ui_and_tessellation", ui_times);
     summary("  software_raster", raster_times);
 

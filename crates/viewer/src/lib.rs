@@ -23,7 +23,9 @@
 mod error;
 mod load;
 pub mod model;
+pub mod plot_items;
 pub mod raster;
+pub mod thin;
 mod ui;
 
 use std::path::Path;
@@ -31,8 +33,8 @@ use std::path::Path;
 pub use error::Error;
 pub use load::{LoadOptions, load};
 pub use model::Model;
-pub use raster::{Frame, SoftwareRenderer};
-pub use ui::{Regions, Viewer};
+pub use raster::{FillEstimate, Frame, SoftwareRenderer, fill_estimate};
+pub use ui::{Regions, Viewer, background};
 
 /// The smallest screenshot, pixels (the fixed size).
 pub const MIN_SCREENSHOT_SIZE: [u32; 2] = [1280, 800];
@@ -121,6 +123,14 @@ impl Headless {
         triangles
     }
 
+    /// What the last frame ([`Headless::run_frame`]) asks of a software OpenGL renderer
+    /// ([`raster::fill_estimate`]); `None` before the first frame.
+    pub fn fill_estimate(&self) -> Option<FillEstimate> {
+        self.last
+            .as_ref()
+            .map(|(primitives, ppp)| fill_estimate(primitives, *ppp))
+    }
+
     /// Rasterises the last frame ([`Headless::run_frame`]; one is run first if there is
     /// none).
     pub fn render(&mut self) -> Frame {
@@ -128,7 +138,7 @@ impl Headless {
             self.run_frame();
         }
         let [w, h] = self.size;
-        let clear = self.ctx.global_style().visuals.panel_fill;
+        let clear = background(&self.ctx.global_style().visuals);
         match &self.last {
             Some((primitives, ppp)) => self.renderer.paint(primitives, w, h, *ppp, clear),
             None => self.renderer.paint(&[], w, h, 1.0, clear),
@@ -267,6 +277,10 @@ struct Window {
 }
 
 impl eframe::App for Window {
+    fn clear_color(&self, visuals: &egui::Visuals) -> [f32; 4] {
+        background(visuals).to_normalized_gamma_f32()
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         self.viewer.ui(ui);
     }

@@ -349,6 +349,81 @@ impl Target {
     }
 }
 
+/// What a frame asks of a software OpenGL renderer, counted from its meshes.
+///
+/// llvmpipe (Mesa's software OpenGL, the renderer of a machine without a GPU) shades pixels in
+/// 4x4 blocks: every block a triangle touches is shaded whole, once per triangle. A frame's
+/// painting time there follows `block_pixels` far more than the pixels actually covered: a long
+/// one-pixel anti-aliased line touches a column or row of blocks with each of its thin
+/// triangles. The count is deterministic, so a bench can track it where frame times are noisy.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FillEstimate {
+    /// Triangles drawn.
+    pub triangles: usize,
+    /// Pixels covered, summed over triangles (overlaps counted each time).
+    pub covered_pixels: f64,
+    /// Pixels of the 4x4 blocks touched, summed over triangles (inside their clip rectangles).
+    pub block_pixels: f64,
+}
+
+/// The [`FillEstimate`] of tessellated primitives at `pixels_per_point`.
+pub fn fill_estimate(primitives: &[ClippedPrimitive], pixels_per_point: f32) -> FillEstimate {
+    const BLOCK: f32 = 4.0;
+    let mut out = FillEstimate::default();
+    for p in primitives {
+        let Primitive::Mesh(mesh) = &p.primitive else {
+            continue;
+        };
+        let clip = p.clip_rect;
+        let (cx0, cy0) = (clip.min.x * pixels_per_point, clip.min.y * pixels_per_point);
+        let (cx1, cy1) = (clip.max.x * pixels_per_point, clip.max.y * pixels_per_point);
+        for t in mesh.indices.chunks_exact(3) {
+            let v: Vec<[f32; 2]> = t
+                .iter()
+                .filter_map(|i| mesh.vertices.get(*i as usize))
+                .map(|v| [v.pos.x * pixels_per_point, v.pos.y * pixels_per_point])
+                .collect();
+            let [a, b, c] = v.as_slice() else {
+                continue;
+            };
+            out.triangles += 1;
+            let cross = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+            out.covered_pixels += f64::from(cross.abs() / 2.0);
+            // Wind the triangle counter-clockwise (inside on the left of each edge).
+            let (b, c) = if cross >= 0.0 { (b, c) } else { (c, b) };
+            let edges = [Edge::new(*a, *b), Edge::new(*b, *c), Edge::new(*c, *a)];
+            let x0 = a[0].min(b[0]).min(c[0]).max(cx0);
+            let x1 = a[0].max(b[0]).max(c[0]).min(cx1);
+            let y0 = a[1].min(b[1]).min(c[1]).max(cy0);
+            let y1 = a[1].max(b[1]).max(c[1]).min(cy1);
+            if !(x0 < x1 && y0 < y1) {
+                continue;
+            }
+            let (bx0, bx1) = ((x0 / BLOCK).floor() as i64, ((x1 / BLOCK).ceil() as i64));
+            let (by0, by1) = ((y0 / BLOCK).floor() as i64, ((y1 / BLOCK).ceil() as i64));
+            for by in by0..by1 {
+                for bx in bx0..bx1 {
+                    let (l, t) = (bx as f32 * BLOCK, by as f32 * BLOCK);
+                    let corners = [
+                        [l, t],
+                        [l + BLOCK, t],
+                        [l, t + BLOCK],
+                        [l + BLOCK, t + BLOCK],
+                    ];
+                    // Touched unless all four corners are outside one edge.
+                    let outside = edges
+                        .iter()
+                        .any(|e| corners.iter().all(|p| e.at(p[0], p[1]) < 0.0));
+                    if !outside {
+                        out.block_pixels += f64::from(BLOCK * BLOCK);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -561,5 +636,30 @@ mod tests {
             Color32::BLACK,
         );
         assert_eq!(f.rgba, vec![0, 0, 0, 255, 0, 0, 0, 255]);
+    }
+
+    #[test]
+    fn fill_estimate_counts_the_blocks_a_thin_bar_touches() {
+        // A one-pixel bar 40 pixels long: 40 pixels covered, ten 4x4 blocks for each of its
+        // two triangles.
+        let bar = mesh_rect(
+            Rect::from_min_max(pos2(0.0, 0.0), pos2(40.0, 1.0)),
+            Color32::WHITE,
+        );
+        let clip = Rect::from_min_max(pos2(0.0, 0.0), pos2(100.0, 100.0));
+        let primitives = [ClippedPrimitive {
+            clip_rect: clip,
+            primitive: Primitive::Mesh(bar),
+        }];
+        let e = fill_estimate(&primitives, 1.0);
+        assert_eq!(e.triangles, 2);
+        assert!((e.covered_pixels - 40.0).abs() < 1e-9, "{e:?}");
+        assert!((e.block_pixels - 2.0 * 10.0 * 16.0).abs() < 1e-9, "{e:?}");
+        // Clipped to its first 20 pixels: half the blocks.
+        let primitives = [ClippedPrimitive {
+            clip_rect: Rect::from_min_max(pos2(0.0, 0.0), pos2(20.0, 100.0)),
+            primitive: primitives[0].primitive.clone(),
+        }];
+        assert!((fill_estimate(&primitives, 1.0).block_pixels - 2.0 * 5.0 * 16.0).abs() < 1e-9);
     }
 }

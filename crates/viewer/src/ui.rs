@@ -11,10 +11,12 @@ use egui::{
     Align2, Color32, FontId, Key, Pos2, Rect, Sense, Shape, Stroke, StrokeKind, Ui, Vec2, pos2,
     vec2,
 };
-use egui_plot::{FilledArea, HLine, Line, LineStyle, Plot, PlotPoint, PlotPoints, Points, VLine};
+use egui_plot::{HLine, LineStyle, Plot, VLine};
 use replay::Phase;
 
 use crate::model::{FrameMarks, Model, SourceKind};
+use crate::plot_items::{Dots, Grid, Series, ThinBand, ThinLine};
+use crate::thin;
 
 /// The estimated trajectory.
 const TRAJECTORY: Color32 = Color32::from_rgb(80, 200, 255);
@@ -43,8 +45,14 @@ const FOV: [Color32; 2] = [
     Color32::from_rgb(60, 180, 105),
     Color32::from_rgb(180, 75, 180),
 ];
-/// The image planes' background (the logs carry no images).
-const IMAGE_PLANE: Color32 = Color32::from_rgb(18, 18, 22);
+
+/// The plots' grid lines show from this spacing (fading in) to full strength, points (egui_plot
+/// shows them from 8 points apart: a hundred lines a plot, each a long thin pair of triangles,
+/// which software OpenGL fills 4x4 pixels at a time).
+const GRID_SPACING: std::ops::RangeInclusive<f32> = 30.0..=300.0;
+
+/// Half the width of a landmark's square marker on the map, points.
+const MARKER_HALF_WIDTH: f64 = 2.5;
 
 /// Uncertainty ellipses and bands are drawn at this many standard deviations.
 const SIGMAS: f64 = 3.0;
@@ -58,6 +66,12 @@ const MAX_LABELS: usize = 40;
 const SPEEDS: [f64; 7] = [0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0];
 /// At most two plots a row past this many plots.
 const PLOTS_PER_COLUMN: usize = 6;
+
+/// The colour the window (or a headless frame) is cleared to before the viewer draws: the
+/// theme's panel colour, which the viewer's panels leave unpainted.
+pub fn background(visuals: &egui::Visuals) -> Color32 {
+    visuals.panel_fill
+}
 
 /// Where the parts were drawn in the last frame, in points (= pixels in a screenshot).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -79,10 +93,10 @@ pub struct Regions {
 struct ParamPlot {
     param: calib::camera::Param,
     unit: &'static str,
-    t: Vec<f64>,
-    lower: Vec<f64>,
-    upper: Vec<f64>,
-    value: Vec<PlotPoint>,
+    /// The 3-sigma band's edges.
+    lower: Series,
+    upper: Series,
+    value: Series,
     truth: Option<f64>,
 }
 
@@ -104,9 +118,9 @@ pub struct Viewer {
     /// The frame whose marks are cached, and the marks.
     marks: Option<(usize, FrameMarks)>,
     params: Vec<ParamPlot>,
-    nis_frame: Vec<PlotPoint>,
-    nis_mean: Vec<PlotPoint>,
-    nis_bound: Vec<PlotPoint>,
+    nis_frame: Series,
+    nis_mean: Series,
+    nis_bound: Series,
     ellipse_scale: f64,
     /// `None`: fit the whole run.
     map_view: Option<MapView>,
@@ -114,8 +128,13 @@ pub struct Viewer {
     regions: Regions,
 }
 
-fn points(v: &[[f64; 2]]) -> Vec<PlotPoint> {
-    v.iter().map(|p| PlotPoint::new(p[0], p[1])).collect()
+/// A path on the screen thinned to what its pixels show ([`thin::simplify`]).
+fn thin_path(path: &[Pos2]) -> Vec<Pos2> {
+    let px: Vec<[f32; 2]> = path.iter().map(|p| [p.x, p.y]).collect();
+    thin::simplify(&px, thin::TOLERANCE_PX, &[])
+        .iter()
+        .filter_map(|k| path.get(*k).copied())
+        .collect()
 }
 
 impl Default for Regions {
@@ -137,25 +156,20 @@ impl Viewer {
             .params
             .iter()
             .map(|s| {
-                let band = |k: f64| -> Vec<f64> {
-                    s.value
-                        .iter()
-                        .zip(&s.sigma)
-                        .map(|(v, sd)| v + k * SIGMAS * sd)
-                        .collect()
+                let band = |k: f64| {
+                    Series::new(
+                        s.t_s
+                            .iter()
+                            .zip(s.value.iter().zip(&s.sigma))
+                            .map(|(t, (v, sd))| [*t, v + k * SIGMAS * sd]),
+                    )
                 };
                 ParamPlot {
                     param: s.param,
                     unit: s.unit,
-                    t: s.t_s.clone(),
                     lower: band(-1.0),
                     upper: band(1.0),
-                    value: s
-                        .t_s
-                        .iter()
-                        .zip(&s.value)
-                        .map(|(t, v)| PlotPoint::new(*t, *v))
-                        .collect(),
+                    value: band(0.0),
                     truth: s.truth,
                 }
             })
@@ -163,10 +177,10 @@ impl Viewer {
         let ellipse_scale = auto_ellipse_scale(&model);
         Self {
             time_s: model.duration_s(),
-            nis_frame: points(&model.nis.frame_mean),
-            nis_mean: points(&model.nis.window_mean),
-            nis_bound: points(&model.nis.window_bound),
             params,
+            nis_frame: Series::new(model.nis.frame_mean.iter().copied()),
+            nis_mean: Series::new(model.nis.window_mean.iter().copied()),
+            nis_bound: Series::new(model.nis.window_bound.iter().copied()),
             ellipse_scale,
             model,
             playing: false,
@@ -199,21 +213,35 @@ impl Viewer {
     }
 
     /// Draws one frame of the viewer into `ui` (the whole window), and handles its input.
+    ///
+    /// The panels paint no background of their own: the window is cleared to
+    /// [`background`] (as the headless renderer clears its frame), which saves a layer of
+    /// blended pixels over the whole window each frame (software OpenGL spends most of a
+    /// frame filling pixels).
     pub fn ui(&mut self, ui: &mut Ui) {
         self.input(ui);
-        egui::Panel::top("stereonav-header").show(ui, |ui| self.header(ui));
-        let timeline = egui::Panel::bottom("stereonav-timeline").show(ui, |ui| self.timeline(ui));
+        let style = ui.style().clone();
+        let bar = egui::Frame::side_top_panel(&style).fill(Color32::TRANSPARENT);
+        egui::Panel::top("stereonav-header")
+            .frame(bar)
+            .show(ui, |ui| self.header(ui));
+        let timeline = egui::Panel::bottom("stereonav-timeline")
+            .frame(bar)
+            .show(ui, |ui| self.timeline(ui));
         self.regions.timeline = timeline.response.rect;
         let width = ui.available_width();
         let plots = egui::Panel::right("stereonav-plots")
+            .frame(bar)
             .resizable(true)
             .default_size((width * 0.42).max(300.0))
             .show(ui, |ui| self.plots(ui));
         self.regions.plots = plots.response.rect;
-        egui::CentralPanel::default().show(ui, |ui| {
-            self.images(ui);
-            self.map(ui);
-        });
+        egui::CentralPanel::default()
+            .frame(egui::Frame::central_panel(&style).fill(Color32::TRANSPARENT))
+            .show(ui, |ui| {
+                self.images(ui);
+                self.map(ui);
+            });
     }
 
     /// Keys and playback.
@@ -416,7 +444,7 @@ impl Viewer {
                         Side::Right => self.regions.right_image = rect,
                     }
                     let painter = ui.painter_at(rect);
-                    painter.rect_filled(rect, 0.0, IMAGE_PLANE);
+                    // Outlined, not filled: the logs carry no images (see [`Viewer::ui`]).
                     painter.rect_stroke(
                         rect,
                         0.0,
@@ -508,7 +536,13 @@ impl Viewer {
         let (response, painter) = ui.allocate_painter(size, Sense::click_and_drag());
         let rect = response.rect;
         self.regions.map = rect;
-        painter.rect_filled(rect, 0.0, Color32::from_gray(14));
+        // An outline, not a filled background: see [`Viewer::ui`].
+        painter.rect_stroke(
+            rect,
+            0.0,
+            Stroke::new(1.0, Color32::from_gray(70)),
+            StrokeKind::Inside,
+        );
 
         // The view: fit, follow, or the user's pan and zoom.
         let fit = {
@@ -560,15 +594,14 @@ impl Viewer {
 
         // Truth: lamps and trajectory.
         if let Some(truth) = &m.truth {
+            let mut lamps = egui::Mesh::default();
             for lamp in &truth.lamps {
                 let at = to_screen([lamp[0], lamp[1]]);
                 if visible.contains(at) {
-                    let d = 3.0;
-                    let stroke = Stroke::new(1.0, TRUTH);
-                    painter.line_segment([at + vec2(-d, -d), at + vec2(d, d)], stroke);
-                    painter.line_segment([at + vec2(-d, d), at + vec2(d, -d)], stroke);
+                    plus_marker(&mut lamps, at, TRUTH);
                 }
             }
+            painter.add(lamps);
             let t_us = m.t_us_at(self.time_s);
             let upto = m.truth_trajectory.partition_point(|(t, _)| *t <= t_us);
             let path: Vec<Pos2> = m
@@ -578,7 +611,7 @@ impl Viewer {
                 .map(|(_, p)| to_screen(*p))
                 .collect();
             if path.len() >= 2 {
-                painter.add(Shape::line(path, Stroke::new(1.5, TRUTH)));
+                painter.add(Shape::line(thin_path(&path), Stroke::new(1.5, TRUTH)));
             }
         }
 
@@ -611,7 +644,7 @@ impl Viewer {
                 path.push(to_screen([f.pose[0], f.pose[1]]));
             }
             if path.len() >= 2 {
-                painter.add(Shape::line(path, Stroke::new(2.0, TRAJECTORY)));
+                painter.add(Shape::line(thin_path(&path), Stroke::new(2.0, TRAJECTORY)));
             }
         }
 
@@ -621,6 +654,7 @@ impl Viewer {
         let observed: &[u64] = frame
             .and_then(|i| m.frame(i))
             .map_or(&[], |f| f.observed.as_slice());
+        let mut markers = egui::Mesh::default();
         for l in m.map_at(t_us) {
             let centre = [l.position[0], l.position[1]];
             if !centre.iter().all(|v| v.is_finite()) {
@@ -643,8 +677,9 @@ impl Viewer {
             } else {
                 LANDMARK
             };
-            painter.circle_filled(at, 3.0, colour);
+            square_marker(&mut markers, at, colour);
         }
+        painter.add(markers);
 
         // The robot: its pose, heading and pose ellipse.
         if let Some(f) = frame.and_then(|i| m.frame(i))
@@ -733,19 +768,24 @@ impl Viewer {
                             .include_x(0.0)
                             .include_x(end)
                             .allow_scroll(false)
+                            .show_background(false)
+                            .grid_spacing(GRID_SPACING)
+                            .show_grid(false)
+                            .x_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
+                            .y_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
+                            .x_axis_formatter(grid_label)
+                            .y_axis_formatter(grid_label)
                             .show_x(true)
                             .show(ui, |plot| {
-                                if p.t.len() >= 2 {
-                                    plot.add(
-                                        FilledArea::new("3 sigma", &p.t, &p.lower, &p.upper)
-                                            .fill_color(BAND),
-                                    );
+                                plot.add(Grid::new(GRID_SPACING.into(), grid_steps));
+                                if p.value.len() >= 2 {
+                                    plot.add(ThinBand::new("3 sigma", &p.lower, &p.upper, BAND));
                                 }
-                                plot.line(
-                                    Line::new("estimate", PlotPoints::Borrowed(&p.value))
-                                        .color(ESTIMATE)
-                                        .width(1.5),
-                                );
+                                plot.add(ThinLine::new(
+                                    "estimate",
+                                    &p.value,
+                                    Stroke::new(1.5, ESTIMATE),
+                                ));
                                 if let Some(t) = p.truth {
                                     plot.add(
                                         HLine::new("truth", t)
@@ -781,22 +821,33 @@ impl Viewer {
                         .include_x(end)
                         .include_y(0.0)
                         .allow_scroll(false)
+                        .show_background(false)
+                        .grid_spacing(GRID_SPACING)
+                        .show_grid(false)
+                        .x_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
+                        .y_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
+                        .x_axis_formatter(grid_label)
+                        .y_axis_formatter(grid_label)
                         .show(ui, |plot| {
+                            plot.add(Grid::new(GRID_SPACING.into(), grid_steps));
+                            plot.add(Dots::new(
+                                "frame mean",
+                                &self.nis_frame,
+                                Color32::from_gray(150),
+                            ));
                             plot.add(
-                                Points::new("frame mean", PlotPoints::Borrowed(&self.nis_frame))
-                                    .radius(1.5)
-                                    .color(Color32::from_gray(150)),
+                                ThinLine::new(
+                                    "window mean",
+                                    &self.nis_mean,
+                                    Stroke::new(1.0, LANDMARK),
+                                )
+                                .columns(),
                             );
-                            plot.line(
-                                Line::new("window mean", PlotPoints::Borrowed(&self.nis_mean))
-                                    .color(LANDMARK)
-                                    .width(1.5),
-                            );
-                            plot.line(
-                                Line::new("bound", PlotPoints::Borrowed(&self.nis_bound))
-                                    .color(SWITCH)
-                                    .width(1.0),
-                            );
+                            plot.add(ThinLine::new(
+                                "bound",
+                                &self.nis_bound,
+                                Stroke::new(1.0, SWITCH),
+                            ));
                             plot.add(
                                 HLine::new("expected", 1.0)
                                     .color(Color32::from_gray(110))
@@ -833,6 +884,47 @@ impl Side {
             Self::Right => "right",
         }
     }
+}
+
+/// The grid steps of a plot's axis: the smallest step of 1, 2 or 5 times a power of ten that
+/// is at least `input.base_step_size` (the [`GRID_SPACING`] minimum in axis units), and two
+/// coarser steps, each a multiple of the finer (egui_plot's own steps are powers of ten only,
+/// which leaves an axis with one label when a decade is just too dense).
+fn grid_steps(input: egui_plot::GridInput) -> [f64; 3] {
+    let base = input.base_step_size;
+    let span = (input.bounds.1 - input.bounds.0).abs();
+    // Never more than a few hundred lines, whatever the input.
+    let base = if base.is_finite() && base > 0.0 {
+        base.max(span / 500.0)
+    } else {
+        span.max(1.0)
+    };
+    let s0 = nice_step(base);
+    // Each coarser step a multiple of the finer: 1-5-10, 2-10-20, 5-10-50 (times 10^k).
+    let mantissa = s0 / 10f64.powf(s0.log10().floor());
+    let s1 = if mantissa > 3.0 { 2.0 * s0 } else { 5.0 * s0 };
+    [s0, s1, 10.0 * s0]
+}
+
+/// The smallest of 1, 2 or 5 times a power of ten that is at least `x` (positive).
+fn nice_step(x: f64) -> f64 {
+    let decade = 10f64.powf(x.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * decade)
+        .find(|s| *s >= x * (1.0 - 1e-9))
+        .unwrap_or(10.0 * decade)
+}
+
+/// A grid line's label: its value with as many decimals as its step needs (a step of 0.2 or
+/// 0.5 needs one).
+fn grid_label(mark: egui_plot::GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
+    let decimals = if mark.step_size > 0.0 && mark.step_size.is_finite() {
+        (-mark.step_size.log10() - 1e-9).ceil().clamp(0.0, 12.0) as usize
+    } else {
+        0
+    };
+    format!("{:.*}", decimals, mark.value)
 }
 
 /// The current time and the phase switch on a plot.
@@ -872,7 +964,7 @@ fn auto_ellipse_scale(m: &Model) -> f64 {
 
 /// The outline of the `k`-sigma ellipse of a 2x2 covariance around `centre`, with about one
 /// point a screen point of its radius (`m_per_pt`); `None` when the covariance is not finite or
-/// the ellipse is under a point across (hidden by the marker drawn on it).
+/// the ellipse fits inside the 5-point marker drawn on it.
 fn ellipse(centre: [f64; 2], cov: [[f64; 2]; 2], k: f64, m_per_pt: f64) -> Option<Vec<[f64; 2]>> {
     let [[a, b], [_, d]] = cov;
     if ![a, b, d].iter().all(|v| v.is_finite()) {
@@ -886,7 +978,7 @@ fn ellipse(centre: [f64; 2], cov: [[f64; 2]; 2], k: f64, m_per_pt: f64) -> Optio
     let (s, c) = angle.sin_cos();
     let (r1, r2) = (k * l1.sqrt(), k * l2.sqrt());
     let r1_pt = r1 / m_per_pt;
-    if r1_pt.is_nan() || r1_pt < 1.0 {
+    if r1_pt.is_nan() || r1_pt < MARKER_HALF_WIDTH {
         return None;
     }
     let segments = (r1_pt.ceil() as usize).clamp(ELLIPSE_MIN_SEGMENTS, ELLIPSE_SEGMENTS);
@@ -904,25 +996,26 @@ fn ellipse(centre: [f64; 2], cov: [[f64; 2]; 2], k: f64, m_per_pt: f64) -> Optio
 /// Grid lines at a round spacing, labelled in metres.
 fn grid(painter: &egui::Painter, rect: Rect, view: MapView) {
     let target_pt = 80.0;
-    let raw = view.m_per_pt * target_pt;
-    let magnitude = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0]
-        .iter()
-        .map(|k| k * magnitude)
-        .find(|s| *s >= raw)
-        .unwrap_or(10.0 * magnitude);
+    let step = nice_step(view.m_per_pt * target_pt);
     if !(step.is_finite() && step > 0.0) {
         return;
     }
     let half_w = f64::from(rect.width()) / 2.0 * view.m_per_pt;
     let half_h = f64::from(rect.height()) / 2.0 * view.m_per_pt;
-    let stroke = Stroke::new(1.0, Color32::from_gray(40));
+    // One-pixel bars on the pixel grid, one mesh (see [`crate::plot_items::Grid`]).
+    let mut lines = egui::Mesh::default();
+    let colour = Color32::from_gray(40);
+    let under_labels = painter.add(Shape::Noop);
     let text = Color32::from_gray(110);
     let font = FontId::proportional(10.0);
     let mut x = ((view.centre[0] - half_w) / step).ceil() * step;
     while x <= view.centre[0] + half_w {
         let sx = rect.center().x + ((x - view.centre[0]) / view.m_per_pt) as f32;
-        painter.line_segment([pos2(sx, rect.top()), pos2(sx, rect.bottom())], stroke);
+        let px = sx.floor();
+        lines.add_colored_rect(
+            Rect::from_min_max(pos2(px, rect.top()), pos2(px + 1.0, rect.bottom())),
+            colour,
+        );
         painter.text(
             pos2(sx + 2.0, rect.bottom() - 2.0),
             Align2::LEFT_BOTTOM,
@@ -935,7 +1028,11 @@ fn grid(painter: &egui::Painter, rect: Rect, view: MapView) {
     let mut y = ((view.centre[1] - half_h) / step).ceil() * step;
     while y <= view.centre[1] + half_h {
         let sy = rect.center().y - ((y - view.centre[1]) / view.m_per_pt) as f32;
-        painter.line_segment([pos2(rect.left(), sy), pos2(rect.right(), sy)], stroke);
+        let py = sy.floor();
+        lines.add_colored_rect(
+            Rect::from_min_max(pos2(rect.left(), py), pos2(rect.right(), py + 1.0)),
+            colour,
+        );
         painter.text(
             pos2(rect.left() + 2.0, sy - 2.0),
             Align2::LEFT_BOTTOM,
@@ -945,6 +1042,7 @@ fn grid(painter: &egui::Painter, rect: Rect, view: MapView) {
         );
         y += step;
     }
+    painter.set(under_labels, lines);
 }
 
 /// A grid label: `v` metres with as many decimals as the grid `step` needs.
@@ -957,24 +1055,32 @@ fn format_m(v: f64, step: f64) -> String {
 /// The map's colour key, top left.
 fn legend(painter: &egui::Painter, rect: Rect, truth: bool) {
     let mut entries = vec![
-        (TRAJECTORY, "estimated trajectory and robot"),
-        (LANDMARK, "landmark"),
-        (UPDATED, "landmark updated at this frame"),
-        (ELLIPSE, "uncertainty ellipse"),
-        (FOV[0], "left camera's view on the lamp plane"),
-        (FOV[1], "right camera's view"),
+        (TRAJECTORY, "estimated trajectory and robot", Mark::Dot),
+        (LANDMARK, "landmark", Mark::Square),
+        (UPDATED, "landmark updated at this frame", Mark::Square),
+        (ELLIPSE, "uncertainty ellipse", Mark::Dot),
+        (FOV[0], "left camera's view on the lamp plane", Mark::Dot),
+        (FOV[1], "right camera's view", Mark::Dot),
     ];
     if truth {
-        entries.push((TRUTH, "truth: trajectory, lamps (x)"));
+        entries.push((TRUTH, "truth: trajectory, lamps (+)", Mark::Plus));
     }
     let font = FontId::proportional(11.0);
     let line = 14.0;
     let size = Vec2::new(230.0, line * entries.len() as f32 + 8.0);
     let frame = Rect::from_min_size(rect.left_top() + vec2(8.0, 8.0), size);
     painter.rect_filled(frame, 3.0, Color32::from_rgba_premultiplied(0, 0, 0, 170));
-    for (k, (colour, text)) in entries.iter().enumerate() {
+    let mut keys = egui::Mesh::default();
+    for (k, (colour, text, mark)) in entries.iter().enumerate() {
         let y = frame.top() + 4.0 + line * k as f32 + line / 2.0;
-        painter.circle_filled(pos2(frame.left() + 10.0, y), 4.0, *colour);
+        let at = pos2(frame.left() + 10.0, y);
+        match mark {
+            Mark::Dot => {
+                painter.circle_filled(at, 4.0, *colour);
+            }
+            Mark::Square => square_marker(&mut keys, at, *colour),
+            Mark::Plus => plus_marker(&mut keys, at, *colour),
+        }
         painter.text(
             pos2(frame.left() + 20.0, y),
             Align2::LEFT_CENTER,
@@ -982,5 +1088,85 @@ fn legend(painter: &egui::Painter, rect: Rect, truth: bool) {
             font.clone(),
             Color32::from_gray(210),
         );
+    }
+    painter.add(keys);
+}
+
+/// How a legend entry shows its colour.
+#[derive(Debug, Clone, Copy)]
+enum Mark {
+    Dot,
+    Square,
+    Plus,
+}
+
+/// A 5x5-pixel square at `at`, aligned to the pixel grid, added to `mesh`: two triangles
+/// without anti-aliasing (a map draws hundreds of them each frame; see [`crate::thin`]).
+fn square_marker(mesh: &mut egui::Mesh, at: Pos2, colour: Color32) {
+    let (x, y) = (at.x.floor(), at.y.floor());
+    mesh.add_colored_rect(
+        Rect::from_min_max(pos2(x - 2.0, y - 2.0), pos2(x + 3.0, y + 3.0)),
+        colour,
+    );
+}
+
+/// A 7-pixel plus at `at`, aligned to the pixel grid, added to `mesh`: two one-pixel bars,
+/// four triangles without anti-aliasing (a map draws hundreds of them each frame).
+fn plus_marker(mesh: &mut egui::Mesh, at: Pos2, colour: Color32) {
+    let (x, y) = (at.x.floor(), at.y.floor());
+    mesh.add_colored_rect(
+        Rect::from_min_max(pos2(x - 3.0, y), pos2(x + 4.0, y + 1.0)),
+        colour,
+    );
+    mesh.add_colored_rect(
+        Rect::from_min_max(pos2(x, y - 3.0), pos2(x + 1.0, y)),
+        colour,
+    );
+    mesh.add_colored_rect(
+        Rect::from_min_max(pos2(x, y + 1.0), pos2(x + 1.0, y + 4.0)),
+        colour,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn steps(lo: f64, hi: f64, base: f64) -> [f64; 3] {
+        grid_steps(egui_plot::GridInput {
+            bounds: (lo, hi),
+            base_step_size: base,
+        })
+    }
+
+    #[test]
+    fn grid_steps_are_nice_and_nested() {
+        assert_eq!(steps(118.4, 119.8, 0.11), [0.2, 1.0, 2.0]);
+        assert_eq!(steps(0.0, 3.0, 0.3), [0.5, 1.0, 5.0]);
+        assert_eq!(steps(0.0, 240.0, 9.0), [10.0, 50.0, 100.0]);
+        for [s0, s1, s2] in [steps(0.0, 1.0, 0.013), steps(-5.0, 5.0, 0.7)] {
+            assert!(((s1 / s0) - (s1 / s0).round()).abs() < 1e-9);
+            assert!(((s2 / s1) - (s2 / s1).round()).abs() < 1e-9);
+        }
+        // Degenerate input gives a few lines, never millions.
+        let [s0, ..] = steps(0.0, 1e6, 1e-12);
+        assert!(1e6 / s0 <= 1000.0);
+        assert!(
+            steps(0.0, 1.0, f64::NAN)
+                .iter()
+                .all(|s| s.is_finite() && *s > 0.0)
+        );
+    }
+
+    #[test]
+    fn grid_labels_have_the_decimals_their_step_needs() {
+        let label = |value: f64, step_size: f64| {
+            grid_label(egui_plot::GridMark { value, step_size }, &(0.0..=1.0))
+        };
+        assert_eq!(label(119.4, 0.2), "119.4");
+        assert_eq!(label(119.5, 0.5), "119.5");
+        assert_eq!(label(119.0, 1.0), "119");
+        assert_eq!(label(0.05, 0.05), "0.05");
+        assert_eq!(label(200.0, 50.0), "200");
     }
 }
