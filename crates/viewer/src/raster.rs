@@ -386,6 +386,10 @@ pub fn fill_estimate(primitives: &[ClippedPrimitive], pixels_per_point: f32) -> 
             let [a, b, c] = v.as_slice() else {
                 continue;
             };
+            // A renderer drops a triangle with a vertex that is not a number.
+            if !v.iter().flatten().all(|x| x.is_finite()) {
+                continue;
+            }
             out.triangles += 1;
             let cross = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
             out.covered_pixels += f64::from(cross.abs() / 2.0);
@@ -661,5 +665,21 @@ mod tests {
             primitive: primitives[0].primitive.clone(),
         }];
         assert!((fill_estimate(&primitives, 1.0).block_pixels - 2.0 * 5.0 * 16.0).abs() < 1e-9);
+        // A triangle with a vertex that is not a number is dropped, as a renderer drops it.
+        let mut bad = mesh_rect(
+            Rect::from_min_max(pos2(0.0, 0.0), pos2(40.0, 1.0)),
+            Color32::WHITE,
+        );
+        bad.vertices[0].pos.x = f32::NAN;
+        let primitives = [ClippedPrimitive {
+            clip_rect: clip,
+            primitive: Primitive::Mesh(bad),
+        }];
+        let e = fill_estimate(&primitives, 1.0);
+        assert_eq!(e.triangles, 1, "{e:?}");
+        assert!(
+            e.covered_pixels.is_finite() && e.block_pixels <= 10.0 * 16.0,
+            "{e:?}"
+        );
     }
 }

@@ -4,8 +4,11 @@
 //! headless screenshot.
 //!
 //! Each frame costs what it shows: the current frame is found by binary search, the marks of
-//! the images are computed when the frame changes (and kept), the plots borrow series built
-//! once at start, the map draws the thinned trajectory and the landmarks inside the view.
+//! the images are computed when the frame changes (and kept), the plots draw series built once
+//! at start through items that thin them to the pixels ([`crate::plot_items`]), the map draws
+//! the trajectories simplified on the screen and the landmarks inside the view. What is painted
+//! is chosen for software OpenGL, which fills 4x4-pixel blocks once per triangle touching them:
+//! no panel backgrounds, one-pixel bars for grids, unfeathered markers in one mesh.
 
 use egui::{
     Align2, Color32, FontId, Key, Pos2, Rect, Sense, Shape, Stroke, StrokeKind, Ui, Vec2, pos2,
