@@ -17,33 +17,18 @@
 //! a window). Whole frames in a real window: `examples/window_scrub.rs`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stdout)]
 
-use std::path::Path;
+mod common;
+
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use replay::NavSettings;
-use viewer::{Headless, LoadOptions, MIN_SCREENSHOT_SIZE, Model, Viewer};
+use viewer::{Headless, MIN_SCREENSHOT_SIZE, Model, Viewer};
 
 /// The warehouse log, simulated, replayed and loaded.
 fn warehouse() -> Model {
-    let scenario =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/warehouse.toml");
-    let sc = sim::Scenario::load(&scenario).unwrap();
-    let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-    let path = std::env::temp_dir().join(format!("bench-viewer-{}.mcap", std::process::id()));
-    run.write_log(&path).unwrap();
-    let mut settings = NavSettings::default();
-    settings.pairs.stride = 10;
+    let path = common::simulate_warehouse("bench-viewer").unwrap();
     let started = Instant::now();
-    let model = viewer::load(
-        &path,
-        &LoadOptions {
-            rig: None,
-            settings,
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let model = common::load(&path).unwrap();
     println!(
         "warehouse: {} frames, {:.1} s, {} landmarks, {} features; replayed and loaded in {:.2} s",
         model.replay.frames.len(),
@@ -56,33 +41,9 @@ fn warehouse() -> Model {
     model
 }
 
-/// `n` times sweeping the log forward then back, as a slider dragged to and fro.
-fn scrub_times(duration_s: f64, n: usize) -> Vec<f64> {
-    (0..n)
-        .map(|i| {
-            let phase = (i as f64 / n as f64) * 2.0;
-            let x = if phase <= 1.0 { phase } else { 2.0 - phase };
-            // An irrational step so that consecutive positions land on different frames.
-            (x * duration_s + i as f64 * 0.618_034).rem_euclid(duration_s.max(1e-9))
-        })
-        .collect()
-}
-
-fn summary(name: &str, mut times: Vec<Duration>) {
-    times.sort();
-    let ms = |d: Duration| d.as_secs_f64() * 1e3;
-    let mean = times.iter().map(|d| ms(*d)).sum::<f64>() / times.len().max(1) as f64;
-    let p99 = times
-        .get(times.len() * 99 / 100)
-        .copied()
-        .unwrap_or_default();
-    let worst = times.last().copied().unwrap_or_default();
-    println!(
-        "{name}: {} frames, mean {mean:.2} ms, 99th percentile {:.2} ms, worst {:.2} ms",
-        times.len(),
-        ms(p99),
-        ms(worst)
-    );
+/// Durations in milliseconds.
+fn ms(times: &[Duration]) -> Vec<f64> {
+    times.iter().map(|d| d.as_secs_f64() * 1e3).collect()
 }
 
 fn bench(c: &mut Criterion) {
@@ -93,7 +54,7 @@ fn bench(c: &mut Criterion) {
     for _ in 0..3 {
         headless.run_frame();
     }
-    let times = scrub_times(duration, 400);
+    let times = common::scrub_times(duration, 400);
     let mut ui_times = Vec::with_capacity(times.len());
     let mut raster_times = Vec::with_capacity(times.len());
     let mut fill: Vec<viewer::FillEstimate> = Vec::with_capacity(times.len());
@@ -121,8 +82,14 @@ fn bench(c: &mut Criterion) {
         most(|e| e.block_pixels) / 1e6,
         mean(|e| e.covered_pixels) / 1e6,
     );
-    summary("  ui_and_tessellation", ui_times);
-    summary("  software_raster", raster_times);
+    println!(
+        "{}",
+        common::summary("  ui_and_tessellation", ms(&ui_times))
+    );
+    println!(
+        "{}",
+        common::summary("  software_raster", ms(&raster_times))
+    );
 
     let mut group = c.benchmark_group("scrub_warehouse_1280x800");
     group.sample_size(20);

@@ -16,13 +16,15 @@
 //! ```
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
-use std::path::{Path, PathBuf};
+#[path = "../benches/common/mod.rs"]
+mod common;
+
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use replay::NavSettings;
-use viewer::{LoadOptions, Model, Viewer};
+use viewer::{Model, Viewer};
 
 /// Frames drawn before the timing starts (fonts, the first layouts, the plot memory).
 const WARM_UP: usize = 20;
@@ -72,48 +74,16 @@ fn parse_args() -> Result<Args, String> {
     Ok(args)
 }
 
-/// The warehouse log, simulated into a temporary file.
-fn simulate_warehouse() -> Result<PathBuf, String> {
-    let scenario =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/warehouse.toml");
-    let sc = sim::Scenario::load(&scenario).map_err(|e| e.to_string())?;
-    let run = sim::simulate(&sc, sim::Mode::Fast).map_err(|e| e.to_string())?;
-    let path = std::env::temp_dir().join(format!("window-scrub-{}.mcap", std::process::id()));
-    run.write_log(&path).map_err(|e| e.to_string())?;
-    Ok(path)
-}
-
 fn load(args: &Args) -> Result<Model, String> {
     let (path, temporary) = match &args.log {
         Some(p) => (p.clone(), false),
-        None => (simulate_warehouse()?, true),
+        None => (common::simulate_warehouse("window-scrub")?, true),
     };
-    let mut settings = NavSettings::default();
-    settings.pairs.stride = 10;
-    let model = viewer::load(
-        &path,
-        &LoadOptions {
-            rig: None,
-            settings,
-        },
-        &mut |_, _| {},
-    )
-    .map_err(|e| e.to_string());
+    let model = common::load(&path);
     if temporary {
         std::fs::remove_file(&path).ok();
     }
     model
-}
-
-/// `n` positions sweeping the log forward then back (the bench's scrub).
-fn scrub_times(duration_s: f64, n: usize) -> Vec<f64> {
-    (0..n)
-        .map(|i| {
-            let phase = (i as f64 / n as f64) * 2.0;
-            let x = if phase <= 1.0 { phase } else { 2.0 - phase };
-            (x * duration_s + i as f64 * 0.618_034).rem_euclid(duration_s.max(1e-9))
-        })
-        .collect()
 }
 
 /// Per frame: the wall time since the previous frame and eframe's CPU time of the previous
@@ -180,23 +150,6 @@ impl eframe::App for App {
     }
 }
 
-fn summary(name: &str, mut v: Vec<f64>) {
-    if v.is_empty() {
-        println!("{name}: no frames");
-        return;
-    }
-    v.sort_by(f64::total_cmp);
-    let mean = v.iter().sum::<f64>() / v.len() as f64;
-    let p99 = v.get(v.len() * 99 / 100).copied().unwrap_or(f64::NAN);
-    let worst = v.last().copied().unwrap_or(f64::NAN);
-    let over = v.iter().filter(|x| **x > 50.0).count();
-    println!(
-        "{name}: {} frames, mean {mean:.1} ms, median {:.1} ms, 99th percentile {p99:.1} ms, worst {worst:.1} ms, {over} over 50 ms",
-        v.len(),
-        v.get(v.len() / 2).copied().unwrap_or(f64::NAN),
-    );
-}
-
 fn main() -> ExitCode {
     let args = match parse_args() {
         Ok(a) => a,
@@ -225,7 +178,7 @@ fn main() -> ExitCode {
         model.replay.landmarks.len(),
         started.elapsed().as_secs_f64()
     );
-    let times = scrub_times(model.duration_s(), args.frames);
+    let times = common::scrub_times(model.duration_s(), args.frames);
     let timings = Arc::new(Mutex::new(Timings::default()));
     let app = App {
         viewer: Viewer::new(model),
@@ -268,9 +221,15 @@ fn main() -> ExitCode {
         "scrubbing in a {}x{} window, vsync off:",
         args.size[0], args.size[1]
     );
-    summary("  frame interval", t.interval_ms.clone());
-    summary("  eframe cpu_usage", t.cpu_ms.clone());
-    summary("  Viewer::ui", t.ui_ms.clone());
+    println!(
+        "{}",
+        common::summary("  frame interval", t.interval_ms.clone())
+    );
+    println!(
+        "{}",
+        common::summary("  eframe cpu_usage", t.cpu_ms.clone())
+    );
+    println!("{}", common::summary("  Viewer::ui", t.ui_ms.clone()));
     let mut shown = t.shown.clone();
     shown.sort_by(|a, b| b.0.total_cmp(&a.0));
     let worst: Vec<String> = shown

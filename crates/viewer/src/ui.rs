@@ -764,40 +764,30 @@ impl Viewer {
                             title.push_str(&format!(" (truth {t:.4})"));
                         }
                         ui.label(title);
-                        let response = Plot::new(("stereonav-param", index))
-                            .height(height)
-                            .width(width)
-                            .link_axis(link, [true, false])
-                            .include_x(0.0)
-                            .include_x(end)
-                            .allow_scroll(false)
-                            .show_background(false)
-                            .grid_spacing(GRID_SPACING)
-                            .show_grid(false)
-                            .x_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
-                            .y_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
-                            .x_axis_formatter(grid_label)
-                            .y_axis_formatter(grid_label)
-                            .show_x(true)
-                            .show(ui, |plot| {
-                                plot.add(Grid::new(GRID_SPACING.into(), grid_steps));
-                                if p.value.len() >= 2 {
-                                    plot.add(ThinBand::new("3 sigma", &p.lower, &p.upper, BAND));
-                                }
-                                plot.add(ThinLine::new(
-                                    "estimate",
-                                    &p.value,
-                                    Stroke::new(1.5, ESTIMATE),
-                                ));
-                                if let Some(t) = p.truth {
-                                    plot.add(
-                                        HLine::new("truth", t)
-                                            .color(TRUTH)
-                                            .style(LineStyle::dashed_dense()),
-                                    );
-                                }
-                                time_markers(plot, now, switch);
-                            });
+                        let response =
+                            time_plot(("stereonav-param", index), [width, height], link, end)
+                                .show_x(true)
+                                .show(ui, |plot| {
+                                    plot.add(Grid::new(GRID_SPACING.into(), grid_steps));
+                                    if p.value.len() >= 2 {
+                                        plot.add(ThinBand::new(
+                                            "3 sigma", &p.lower, &p.upper, BAND,
+                                        ));
+                                    }
+                                    plot.add(ThinLine::new(
+                                        "estimate",
+                                        &p.value,
+                                        Stroke::new(1.5, ESTIMATE),
+                                    ));
+                                    if let Some(t) = p.truth {
+                                        plot.add(
+                                            HLine::new("truth", t)
+                                                .color(TRUTH)
+                                                .style(LineStyle::dashed_dense()),
+                                        );
+                                    }
+                                    time_markers(plot, now, switch);
+                                });
                         if response.response.clicked()
                             && let Some(pos) = response.response.interact_pointer_pos()
                         {
@@ -816,21 +806,8 @@ impl Viewer {
                         self.model.nis.window,
                         vslam_ekf::health::DIVERGENCE_PROBABILITY * 100.0
                     ));
-                    let response = Plot::new("stereonav-nis")
-                        .height(height)
-                        .width(width)
-                        .link_axis(link, [true, false])
-                        .include_x(0.0)
-                        .include_x(end)
+                    let response = time_plot("stereonav-nis", [width, height], link, end)
                         .include_y(0.0)
-                        .allow_scroll(false)
-                        .show_background(false)
-                        .grid_spacing(GRID_SPACING)
-                        .show_grid(false)
-                        .x_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
-                        .y_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
-                        .x_axis_formatter(grid_label)
-                        .y_axis_formatter(grid_label)
                         .show(ui, |plot| {
                             plot.add(Grid::new(GRID_SPACING.into(), grid_steps));
                             plot.add(Dots::new(
@@ -889,6 +866,27 @@ impl Side {
     }
 }
 
+/// A plot over the log's time (0 to `end_s`) of `size` points, its time axis linked to the
+/// other plots' by `link`: no background, no scrolling, the viewer's own grid ([`Grid`], at
+/// [`grid_steps`], added by the caller) and labels ([`grid_label`]).
+fn time_plot<'a>(id: impl egui::AsIdSalt, size: [f32; 2], link: egui::Id, end_s: f64) -> Plot<'a> {
+    let [width, height] = size;
+    Plot::new(id)
+        .height(height)
+        .width(width)
+        .link_axis(link, [true, false])
+        .include_x(0.0)
+        .include_x(end_s)
+        .allow_scroll(false)
+        .show_background(false)
+        .grid_spacing(GRID_SPACING)
+        .show_grid(false)
+        .x_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
+        .y_grid_spacer(egui_plot::uniform_grid_spacer(grid_steps))
+        .x_axis_formatter(grid_label)
+        .y_axis_formatter(grid_label)
+}
+
 /// The grid steps of a plot's axis: the smallest step of 1, 2 or 5 times a power of ten that
 /// is at least `input.base_step_size` (the [`GRID_SPACING`] minimum in axis units), and two
 /// coarser steps, each a multiple of the finer (egui_plot's own steps are powers of ten only,
@@ -922,12 +920,17 @@ fn nice_step(x: f64) -> f64 {
 /// A grid line's label: its value with as many decimals as its step needs (a step of 0.2 or
 /// 0.5 needs one).
 fn grid_label(mark: egui_plot::GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
-    let decimals = if mark.step_size > 0.0 && mark.step_size.is_finite() {
-        (-mark.step_size.log10() - 1e-9).ceil().clamp(0.0, 12.0) as usize
+    format!("{:.*}", step_decimals(mark.step_size, 12), mark.value)
+}
+
+/// The decimals a value on a grid of `step` needs (0.2 or 0.5: one; 1 or 50: none), at most
+/// `most`; none for a step that is not a positive number.
+fn step_decimals(step: f64, most: usize) -> usize {
+    if step > 0.0 && step.is_finite() {
+        ((-step.log10() - 1e-9).ceil().max(0.0) as usize).min(most)
     } else {
         0
-    };
-    format!("{:.*}", decimals, mark.value)
+    }
 }
 
 /// The current time and the phase switch on a plot.
@@ -1050,7 +1053,7 @@ fn grid(painter: &egui::Painter, rect: Rect, view: MapView) {
 
 /// A grid label: `v` metres with as many decimals as the grid `step` needs.
 fn format_m(v: f64, step: f64) -> String {
-    let decimals = (-step.log10().floor()).clamp(0.0, 6.0) as usize;
+    let decimals = step_decimals(step, 6);
     let v = if v.abs() < step * 1e-6 { 0.0 } else { v };
     format!("{v:.decimals$} m")
 }
@@ -1171,5 +1174,11 @@ mod tests {
         assert_eq!(label(119.0, 1.0), "119");
         assert_eq!(label(0.05, 0.05), "0.05");
         assert_eq!(label(200.0, 50.0), "200");
+        // The map's labels: metres on steps of 1, 2 or 5 times a power of ten, at most 6.
+        assert_eq!(format_m(0.4, 0.2), "0.4 m");
+        assert_eq!(format_m(-10.0, 10.0), "-10 m");
+        assert_eq!(format_m(1e-12, 0.001), "0.000 m");
+        assert_eq!(step_decimals(1e-9, 6), 6);
+        assert_eq!(step_decimals(f64::NAN, 6), 0);
     }
 }
