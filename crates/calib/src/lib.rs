@@ -25,6 +25,8 @@ pub mod rig;
 pub mod rig_file;
 #[cfg(feature = "alloc")]
 pub mod selfcal;
+#[cfg(feature = "alloc")]
+pub mod smoother;
 
 pub use camera::{CameraParams, Mount, N_PARAMS, Param, ParamVector, Pose2};
 #[cfg(feature = "alloc")]

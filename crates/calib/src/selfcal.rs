@@ -36,7 +36,8 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Normal-equation matrices over all ten parameters.
-type Mat10 = SMatrix<f64, N_PARAMS, N_PARAMS>;
+/// A 10x10 matrix over the camera parameters, [`Param::ALL`] order.
+pub type Mat10 = SMatrix<f64, N_PARAMS, N_PARAMS>;
 
 /// One landmark seen at both instants of a frame pair.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -644,6 +645,28 @@ fn covariance(h: &Mat10, active: &[bool; N_PARAMS]) -> Mat10 {
     cov
 }
 
+/// The known trap of the rig and the path that makes `p` unobservable, if any: an upward head
+/// (`tilted` false) for `f`, planar motion for the camera height, a straight path
+/// (`total_rotation_rad`, the sum of the odometry's absolute yaw changes, under 0.3 rad) for
+/// the mounting offsets and angles. Anything else is a lack of data so far.
+pub fn structural_trap(p: Param, tilted: bool, total_rotation_rad: f64) -> Option<&'static str> {
+    match p {
+        Param::F if !tilted => Some(
+            "with the camera looking straight up and planar motion, f and every landmark depth scale together: f is not observable unless the camera is tilted or a lamp height is known",
+        ),
+        Param::MountZ => Some(
+            "the camera height is not observable from planar motion: it cancels between the two instants",
+        ),
+        Param::MountX | Param::MountY | Param::MountYaw if total_rotation_rad < 0.3 => Some(
+            "a straight path cannot give the mounting offsets: they cancel unless the vehicle turns",
+        ),
+        Param::MountRoll | Param::MountPitch if total_rotation_rad < 0.3 => Some(
+            "a straight path cannot give the roll about the direction of travel: the vehicle must turn",
+        ),
+        _ => None,
+    }
+}
+
 /// Observability of the estimated parameters from the data's information matrix `h_data`.
 fn observability(
     h_data: &Mat10,
@@ -684,21 +707,7 @@ fn observability(
         let observable = posterior_sigma <= settings.observable_ratio * prior_sigma;
         // The known traps are properties of the rig and the path; anything else is a lack of
         // data so far, which more driving may cure.
-        let trap = match p {
-            Param::F if !tilted => Some(
-                "with the camera looking straight up and planar motion, f and every landmark depth scale together: f is not observable unless the camera is tilted or a lamp height is known",
-            ),
-            Param::MountZ => Some(
-                "the camera height is not observable from planar motion: it cancels between the two instants",
-            ),
-            Param::MountX | Param::MountY | Param::MountYaw if total_rotation < 0.3 => Some(
-                "a straight path cannot give the mounting offsets: they cancel unless the vehicle turns",
-            ),
-            Param::MountRoll | Param::MountPitch if total_rotation < 0.3 => Some(
-                "a straight path cannot give the roll about the direction of travel: the vehicle must turn",
-            ),
-            _ => None,
-        };
+        let trap = structural_trap(*p, tilted, total_rotation);
         let reason = (!observable).then_some(trap.unwrap_or(
             "the data so far constrain it less than its prior: more motion (turns, speed) or more landmarks are needed",
         ));

@@ -1,5 +1,5 @@
 //! `stereonav replay LOG.mcap [--rig RIG.toml] [--out EST.mcap] [--summary SUMMARY.json]
-//! [--trajectory TRAJ.csv] [--skip-phase1] [--stride N] [--consider-camera]`: the whole stack on a vehicle log
+//! [--trajectory TRAJ.csv] [--skip-phase1] [--phase1-frames N] [--consider-camera]`: the whole stack on a vehicle log
 //! (vehicle-interfaces.md section 5; `replay::replay_log`).
 //!
 //! Prints a short human summary on stdout (frames, the phase switch, the map, the camera
@@ -12,12 +12,12 @@ use std::io::{self, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use calib::Rig;
 use replay::{NavSettings, Phase, Replay};
 
 use crate::progress::FrameProgress;
-use track::PairSettings;
+use calib::smoother::SmootherSettings;
 
 /// Arguments of `stereonav replay`.
 #[derive(Debug, clap::Args)]
@@ -42,10 +42,10 @@ pub(crate) struct Args {
     /// (as in the paper's experiment).
     #[arg(long)]
     skip_phase1: bool,
-    /// Frames between the two frames of a phase-1 pair; lamps must stay in view across a pair,
-    /// so a fast vehicle needs fewer (at 20 Hz, 40 frames are 2 s).
-    #[arg(long, value_name = "N", default_value_t = PairSettings::default().stride)]
-    stride: usize,
+    /// Frames phase 1's batch holds at most: when it is full before calibration is stable,
+    /// phase 2 starts from what the data gave (2000 frames are 100 s at 20 Hz).
+    #[arg(long, value_name = "N", default_value_t = SmootherSettings::default().max_frames)]
+    phase1_frames: usize,
     /// Keep phase 2 from refining the camera parameters: their covariance is carried into the
     /// pose and landmark sigmas, their values stay phase 1's (Schmidt-Kalman; for drives on
     /// which refining them is over-confident, docs/phase2.md).
@@ -57,7 +57,7 @@ pub(crate) struct Args {
 /// setting should not wait for a long log).
 pub(crate) fn nav_settings(
     skip_phase1: bool,
-    stride: usize,
+    phase1_frames: usize,
     consider_camera: bool,
 ) -> Result<NavSettings> {
     let defaults = NavSettings::default();
@@ -71,21 +71,20 @@ pub(crate) fn nav_settings(
             },
             ..defaults.ekf
         },
-        pairs: PairSettings {
-            stride,
-            ..defaults.pairs
+        phase1: SmootherSettings {
+            max_frames: phase1_frames,
+            ..defaults.phase1
         },
         ..defaults
     };
-    settings
-        .pairs
-        .validate()
-        .with_context(|| format!("--stride {stride}"))?;
+    if let Err((name, value, expected)) = settings.phase1.validate() {
+        anyhow::bail!("--phase1-frames {phase1_frames}: phase-1 setting {name} = {value} must be {expected}");
+    }
     Ok(settings)
 }
 
 pub(crate) fn run(args: &Args) -> Result<()> {
-    let settings = nav_settings(args.skip_phase1, args.stride, args.consider_camera)?;
+    let settings = nav_settings(args.skip_phase1, args.phase1_frames, args.consider_camera)?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
     let mut bar = FrameProgress::new("replaying");
     let mut progress = |done: u64, total: u64| bar.update(done, total);

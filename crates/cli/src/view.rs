@@ -1,4 +1,4 @@
-//! `stereonav view LOG.mcap [--rig RIG.toml] [--skip-phase1] [--stride N] [--screenshot OUT.png]
+//! `stereonav view LOG.mcap [--rig RIG.toml] [--skip-phase1] [--phase1-frames N] [--screenshot OUT.png]
 //! [--time SECONDS] [--size WxH]`: the viewer (crate `viewer`) on a vehicle log, replayed on
 //! the fly, or on an estimates file written by `stereonav replay --out`.
 //!
@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use crate::progress::FrameProgress;
 use anyhow::{Context, Result, bail};
 use calib::Rig;
-use track::PairSettings;
+use calib::smoother::SmootherSettings;
 
 /// Arguments of `stereonav view`.
 #[derive(Debug, clap::Args)]
@@ -28,9 +28,9 @@ pub(crate) struct Args {
     /// Skip phase 1: start phase 2 at the first frame from the rig's nominal values and priors.
     #[arg(long)]
     skip_phase1: bool,
-    /// Frames between the two frames of a phase-1 pair (as for `stereonav replay`).
-    #[arg(long, value_name = "N", default_value_t = PairSettings::default().stride)]
-    stride: usize,
+    /// Frames phase 1's batch holds at most (as for `stereonav replay`).
+    #[arg(long, value_name = "N", default_value_t = SmootherSettings::default().max_frames)]
+    phase1_frames: usize,
     /// Render the viewer headless and write it as PNG, then exit (no window).
     #[arg(long, value_name = "OUT.png")]
     screenshot: Option<PathBuf>,
@@ -52,7 +52,7 @@ fn parse_size(text: &str) -> Result<[u32; 2], String> {
 
 pub(crate) fn run(args: &Args) -> Result<()> {
     // Before the log is read: bad settings should not wait for a long replay.
-    let settings = crate::replay::nav_settings(args.skip_phase1, args.stride, false)?;
+    let settings = crate::replay::nav_settings(args.skip_phase1, args.phase1_frames, false)?;
     if args.screenshot.is_some() {
         viewer::check_size(args.size).context("--size")?;
     } else if args.size != viewer::MIN_SCREENSHOT_SIZE {
@@ -81,11 +81,11 @@ pub(crate) fn run(args: &Args) -> Result<()> {
             writeln!(stderr, "stereonav: warning: {w}")?;
         }
         if model.kind == viewer::model::SourceKind::Estimates
-            && (args.skip_phase1 || args.stride != PairSettings::default().stride)
+            && (args.skip_phase1 || args.phase1_frames != SmootherSettings::default().max_frames)
         {
             writeln!(
                 stderr,
-                "stereonav: warning: {}: an estimates file is shown as it was replayed: --skip-phase1 and --stride are not used",
+                "stereonav: warning: {}: an estimates file is shown as it was replayed: --skip-phase1 and --phase1-frames are not used",
                 args.log.display()
             )?;
         }

@@ -3,13 +3,20 @@
 //!
 //! 1. **Phase 1, self-calibration.** Every frame goes through the association
 //!    ([`track::FrontEnd`]: left-right matching on the rectified rig, frame-to-frame tracking
-//!    predicted by the odometry); frame pairs of confirmed tracks feed an incremental
-//!    [`calib::selfcal::SelfCalibrator`]. The pose is dead reckoning from the odometry, with its
-//!    covariance growing by the rig's odometry noise.
-//! 2. **The switch**, at the frame where the calibration became stable
-//!    ([`calib::selfcal::StableRule`]; its time is [`Navigator::phase_switch_t_us`]): the EKF
-//!    starts from the hand-over (camera parameters and covariance) at the dead-reckoned pose
-//!    with its covariance, and the association continues with the calibrated camera.
+//!    predicted by the odometry); every frame's confirmed tracks and the odometry since the
+//!    frame before feed [`calib::smoother::Smoother`], the batch over every frame (every pose,
+//!    every landmark and `C` at once), re-solved every half second. Between solves the pose is
+//!    dead reckoning from the batch's last one.
+//! 2. **The switch**, at the frame where the calibration became stable (the smoother's stable
+//!    rule; its time is [`Navigator::phase_switch_t_us`]): the EKF starts from the batch's joint
+//!    estimate of the last pose, every landmark and `C` with their covariance, so the frames of
+//!    phase 1 are in the map and the map is in the first frame's world frame; the association
+//!    continues with the calibrated camera. The phase-1 trajectory, smoothed, is
+//!    [`Navigator::phase1_trajectory`]. The batch's buffer is bounded
+//!    ([`calib::smoother::SmootherSettings::max_frames`]): when it is full the hand-over is
+//!    forced, and so it is by [`Navigator::finish`] at the end of a log, so that phase 2
+//!    always maps; [`Navigator::uninformed`] names the parameters the data did not give (they
+//!    enter phase 2 with about their prior).
 //! 3. **Phase 2, EKF SLAM** ([`vslam_ekf::Ekf`]): predict with the odometry between frames,
 //!    update with the tracks bound to landmarks, confirm new landmarks
 //!    ([`vslam_ekf::Candidates`]). A track not bound to a landmark is first matched against
@@ -48,9 +55,11 @@ use alloc::vec::Vec;
 use calib::camera::{CameraParams, Pose2};
 use calib::config::Rig;
 use calib::odometry::OdomSample;
-use calib::selfcal::{Calibration, Handover, SelfCalibrator, SolverSettings, StableRule};
+use calib::camera::Param;
+use calib::selfcal::Handover;
+use calib::smoother::{BatchHandover, HandoverReason, Smoother, SmootherSettings};
 use nalgebra::{Matrix3, Matrix4, Vector4};
-use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel, TrackedFrame};
+use track::{FrontEnd, FrontEndSettings, Model, Pixel, TrackedFrame};
 use vslam_ekf::chi2::chi2_quantile;
 use vslam_ekf::{
     CameraCovariance, CandidateSettings, Candidates, Ekf, Increment, LandmarkId, Settings,
@@ -58,19 +67,17 @@ use vslam_ekf::{
 
 pub use error::Error;
 
+/// Odometry samples the navigator holds at most between two frames (100 s at 100 Hz): a live
+/// stream with odometry and no frames does not grow it without bound.
+pub const MAX_ODOMETRY_BUFFER: usize = 10_000;
+
 /// The navigator's tuning.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NavSettings {
     /// Stereo matching and tracking.
     pub front_end: FrontEndSettings,
-    /// Phase 1's frame pairs.
-    pub pairs: PairSettings,
-    /// The phase-1 solver.
-    pub solver: SolverSettings,
-    /// When phase 1's calibration counts as stable (the switch).
-    pub stable: StableRule,
-    /// Phase 1 re-solves every this many frame pairs.
-    pub solve_every: usize,
+    /// Phase 1, the batch over every frame (and when it counts as stable: the switch).
+    pub phase1: SmootherSettings,
     /// The filter.
     pub ekf: Settings,
     /// Landmark confirmation.
@@ -82,14 +89,11 @@ pub struct NavSettings {
 }
 
 impl Default for NavSettings {
-    /// The crates' defaults; phase 1 re-solves every 10 pairs, phase 1 not skipped.
+    /// The crates' defaults; phase 1 not skipped.
     fn default() -> Self {
         Self {
             front_end: FrontEndSettings::default(),
-            pairs: PairSettings::default(),
-            solver: SolverSettings::default(),
-            stable: StableRule::default(),
-            solve_every: 10,
+            phase1: SmootherSettings::default(),
             ekf: Settings::default(),
             candidates: CandidateSettings::default(),
             map_match_probability: 0.999,
@@ -137,8 +141,11 @@ pub struct NavStats {
     pub odometry: u64,
     /// Frames at which the odometry did not reach back to the previous frame.
     pub frames_without_odometry: u64,
-    /// Phase-1 frame pairs.
-    pub pairs: u64,
+    /// Phase-1 solves of the batch.
+    pub phase1_solves: u64,
+    /// Odometry samples dropped because no frame came for too long (the buffer is bounded,
+    /// [`MAX_ODOMETRY_BUFFER`]).
+    pub odometry_dropped: u64,
     /// Tracks bound to an existing landmark by map matching.
     pub rematched: u64,
     /// Observations the filter's gate rejected.
@@ -153,8 +160,9 @@ pub struct Navigator {
     rig: Rig,
     settings: NavSettings,
     front_end: FrontEnd,
-    pairs: PairBuilder,
-    calibrator: SelfCalibrator,
+    smoother: Smoother,
+    /// The hand-over in the filter's form (camera and covariance), once it happened.
+    handover: Option<Handover>,
     ekf: Option<Ekf>,
     candidates: Candidates,
     /// Odometry since (and including the last sample before) the previous frame.
@@ -180,15 +188,14 @@ impl Navigator {
                 expected: "strictly between 0 and 1",
             });
         }
-        if settings.solve_every == 0 {
+        if let Err((name, value, expected)) = settings.phase1.validate() {
             return Err(Error::Settings {
-                name: "solve_every",
-                value: 0.0,
-                expected: "at least 1",
+                name,
+                value,
+                expected,
             });
         }
         let front_end = FrontEnd::new(Model::from_rig(&rig), settings.front_end)?;
-        let pairs = PairBuilder::new(settings.pairs)?;
         let candidates = Candidates::new(settings.candidates)?;
         let ekf = if settings.skip_phase1 {
             Some(Ekf::from_prior(&rig, settings.ekf)?)
@@ -197,18 +204,13 @@ impl Navigator {
             Ekf::from_prior(&rig, settings.ekf)?;
             None
         };
-        let calibrator = SelfCalibrator::new(
-            rig.clone(),
-            settings.solver,
-            settings.stable,
-            settings.solve_every,
-        );
+        let smoother = Smoother::new(rig.clone(), settings.phase1);
         Ok(Self {
             rig,
             settings,
             front_end,
-            pairs,
-            calibrator,
+            smoother,
+            handover: None,
             ekf,
             candidates,
             odometry: Vec::new(),
@@ -262,19 +264,47 @@ impl Navigator {
         &self.front_end
     }
 
-    /// Phase 1's calibrator (its latest solve, history and hand-over).
-    pub fn calibrator(&self) -> &SelfCalibrator {
-        &self.calibrator
+    /// Phase 1's batch (its latest solve and the history of C).
+    pub fn smoother(&self) -> &Smoother {
+        &self.smoother
     }
 
-    /// Phase 1's latest calibration, if any solve ran.
-    pub fn calibration(&self) -> Option<&Calibration> {
-        self.calibrator.latest()
-    }
-
-    /// The hand-over to phase 2, once phase 1 is stable.
+    /// The hand-over to phase 2 (camera parameters and covariance), once it happened.
     pub fn handover(&self) -> Option<&Handover> {
-        self.calibrator.handover()
+        self.handover.as_ref()
+    }
+
+    /// Phase 1's whole hand-over (the batch's joint estimate and smoothed trajectory).
+    pub fn batch_handover(&self) -> Option<&BatchHandover> {
+        self.smoother.handover()
+    }
+
+    /// The smoothed poses of every frame of phase 1, `(t_us, pose)`, once phase 2 started.
+    pub fn phase1_trajectory(&self) -> &[(u64, Pose2)] {
+        self.smoother.handover().map_or(&[], |h| h.trajectory.as_slice())
+    }
+
+    /// The estimated parameters phase 1's data did not inform at the hand-over (they entered
+    /// phase 2 with about their prior), and why the hand-over happened.
+    pub fn uninformed(&self) -> Option<(HandoverReason, Vec<Param>)> {
+        self.smoother.handover().map(|h| (h.reason, h.uninformed()))
+    }
+
+    /// Ends phase 1 if it is still running (the end of a log): the batch solves once more and
+    /// phase 2 starts from it, so that the frames seen so far are mapped even when the
+    /// calibration never became stable. Returns whether the switch happened now.
+    pub fn finish(&mut self) -> Result<bool, Error> {
+        if self.ekf.is_some() || self.settings.skip_phase1 {
+            return Ok(false);
+        }
+        let Some(t) = self.last_frame_t else {
+            return Ok(false);
+        };
+        if self.smoother.finish().is_none() {
+            return Ok(false);
+        }
+        self.switch(t)?;
+        Ok(true)
     }
 
     /// Counters.
@@ -302,11 +332,7 @@ impl Navigator {
         if let Some(ekf) = &self.ekf {
             return (ekf.camera(), ekf.camera_covariance());
         }
-        if let Some(c) = self.calibrator.latest() {
-            return (c.camera, c.covariance);
-        }
-        let model = Model::from_rig(&self.rig);
-        (model.camera, model.camera_covariance)
+        (self.smoother.camera(), self.smoother.camera_covariance())
     }
 
     /// Adds an odometry sample (robot-frame velocities held from `t_us` until the next one).
@@ -335,8 +361,11 @@ impl Navigator {
         }
         self.last_odometry_t = Some(sample.t_us);
         self.front_end.push_odometry(sample);
-        if self.ekf.is_none() {
-            self.pairs.push_odometry(sample);
+        if self.odometry.len() >= MAX_ODOMETRY_BUFFER {
+            // No frame for a long time: the oldest samples go (a frame after the gap finds no
+            // odometry back to the frame before and holds the pose, counted).
+            self.odometry.drain(..MAX_ODOMETRY_BUFFER / 2);
+            self.stats.odometry_dropped += (MAX_ODOMETRY_BUFFER / 2) as u64;
         }
         self.odometry.push(sample);
         self.stats.odometry += 1;
@@ -370,6 +399,7 @@ impl Navigator {
             }
         }
         let mut outcome = FrameOutcome::default();
+        let mut phase1_motion = None;
         // Motion since the previous frame.
         if let Some(t0) = self.last_frame_t {
             let moved = match &mut self.ekf {
@@ -380,6 +410,7 @@ impl Navigator {
                 },
                 None => match Increment::from_odometry(&self.odometry, t0, t_us, &self.rig.noise) {
                     Ok(inc) => {
+                        phase1_motion = Some((inc.motion, inc.covariance));
                         let (pose, f, q) = inc.apply(&self.pose);
                         self.pose = pose;
                         let p = f * self.pose_covariance * f.transpose() + q;
@@ -406,7 +437,7 @@ impl Navigator {
 
         let tracked = self.front_end.push_frame(t_us, left, right);
         if self.ekf.is_none() {
-            self.phase1(&tracked, &mut outcome)?;
+            self.phase1(&tracked, phase1_motion, &mut outcome)?;
         }
         if self.ekf.is_some() {
             self.phase2(&tracked, &mut outcome)?;
@@ -414,26 +445,59 @@ impl Navigator {
         Ok(outcome)
     }
 
-    /// Phase 1: frame pairs into the calibrator; the switch when it is stable.
-    fn phase1(&mut self, tracked: &TrackedFrame, outcome: &mut FrameOutcome) -> Result<(), Error> {
-        let Some(pair) = self.pairs.push_frame(tracked) else {
+    /// Phase 1: the frame into the batch; the switch when it is stable (or its buffer full).
+    fn phase1(
+        &mut self,
+        tracked: &TrackedFrame,
+        motion: Option<(calib::odometry::Motion, Matrix3<f64>)>,
+        outcome: &mut FrameOutcome,
+    ) -> Result<(), Error> {
+        let observations: Vec<(u64, calib::Measurement)> = tracked
+            .observations
+            .iter()
+            .filter(|o| o.confirmed)
+            .map(|o| (o.track.0, o.measurement))
+            .collect();
+        outcome.solved = self
+            .smoother
+            .add_frame(tracked.t_us, motion, &observations);
+        if outcome.solved {
+            self.stats.phase1_solves += 1;
+            if let Some(p) = self.smoother.last_pose() {
+                self.pose = p;
+            }
+        }
+        if self.smoother.handover().is_none() {
+            return Ok(());
+        }
+        self.switch(tracked.t_us)?;
+        outcome.switched = true;
+        Ok(())
+    }
+
+    /// Phase 2 from the batch's hand-over.
+    fn switch(&mut self, t_us: u64) -> Result<(), Error> {
+        let Some(batch) = self.smoother.handover() else {
             return Ok(());
         };
-        self.stats.pairs += 1;
-        outcome.solved = self.calibrator.add_pair(pair).is_some();
-        let Some(handover) = self.calibrator.handover().cloned() else {
-            return Ok(());
-        };
-        let mut ekf = Ekf::from_handover(&self.rig, &handover, self.settings.ekf)?;
-        ekf.set_start_pose(self.pose, &self.pose_covariance)?;
+        let (ekf, ids) = Ekf::from_batch(&self.rig, batch, self.settings.ekf)?;
+        for (l, id) in batch.landmarks.iter().zip(&ids) {
+            self.candidates.bind(&ekf, l.track, *id)?;
+        }
         let model = self
             .front_end
             .model()
-            .with_camera(handover.camera, handover.covariance);
+            .with_camera(batch.camera, batch.camera_covariance);
         self.front_end.set_model(model);
+        self.pose = batch.pose;
+        self.handover = Some(Handover {
+            camera: batch.camera,
+            covariance: batch.camera_covariance,
+            t_us: batch.t_us,
+            observability: batch.observability.clone(),
+        });
         self.ekf = Some(ekf);
-        self.phase_switch_t_us = Some(tracked.t_us);
-        outcome.switched = true;
+        self.phase_switch_t_us = Some(t_us);
         Ok(())
     }
 

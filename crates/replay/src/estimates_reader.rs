@@ -407,6 +407,8 @@ impl At<'_> {
             pairs: self.uint(c, "pairs")?,
             landmark_pairs: self.uint(c, "landmark_pairs")?,
             tracker_resets: self.uint(c, "tracker_resets")?,
+            // Absent from estimates files written before phase 1 became a batch.
+            phase1_solves: self.uint(c, "phase1_solves").unwrap_or(0),
         })
     }
 

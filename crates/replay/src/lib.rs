@@ -122,11 +122,13 @@ pub struct Counts {
     pub landmark_pairs: u64,
     /// Frames at which the odometry was missing, so that every track was restarted.
     pub tracker_resets: u64,
+    /// Solves of phase 1's batch over every frame (the replay's phase 1).
+    pub phase1_solves: u64,
 }
 
 impl Counts {
     /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 12] {
+    pub fn named(&self) -> [(&'static str, u64); 13] {
         [
             ("frames", self.frames),
             ("corrupt", self.corrupt),
@@ -140,6 +142,7 @@ impl Counts {
             ("pairs", self.pairs),
             ("landmark_pairs", self.landmark_pairs),
             ("tracker_resets", self.tracker_resets),
+            ("phase1_solves", self.phase1_solves),
         ]
     }
 }

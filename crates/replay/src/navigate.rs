@@ -82,7 +82,6 @@ pub fn replay_log(
     let mut maps: Vec<MapSnapshot> = Vec::new();
     let mut next_snapshot: Option<u64> = None;
     let mut refused: BTreeMap<String, u64> = BTreeMap::new();
-    let mut phase2_frames: Vec<u64> = Vec::new();
     let mut next_odom = input.odometry.iter().peekable();
     for (k, frame) in input.frames.iter().enumerate() {
         while let Some(s) = next_odom.next_if(|s| s.t_us <= frame.t_us) {
@@ -119,7 +118,6 @@ pub fn replay_log(
             });
         }
         if phase == Phase::Navigating {
-            phase2_frames.push(frame.t_us);
             let due = next_snapshot.is_none_or(|t| frame.t_us >= t);
             if due {
                 maps.push(MapSnapshot {
@@ -130,6 +128,31 @@ pub fn replay_log(
             }
         }
         progress(k as u64 + 1, total);
+    }
+    // A log that ends in phase 1 is still mapped: phase 2 starts from the batch of every frame.
+    let finished_in_phase1 = match navigator.finish() {
+        Ok(switched) => switched,
+        Err(e) => {
+            *refused.entry(e.to_string()).or_default() += 1;
+            false
+        }
+    };
+    // The frames of phase 1 take the batch's smoothed poses: the whole trajectory is in the
+    // first frame's world frame.
+    let smoothed = navigator.phase1_trajectory();
+    if !smoothed.is_empty() {
+        let mut i = 0usize;
+        for f in &mut frames {
+            while smoothed.get(i).is_some_and(|(t, _)| *t < f.t_us) {
+                i += 1;
+            }
+            if let Some((t, p)) = smoothed.get(i)
+                && *t == f.t_us
+                && f.phase == Phase::Calibrating
+            {
+                f.pose = [p.x, p.y, p.theta];
+            }
+        }
     }
     let landmarks = map_of(&navigator);
     if let Some(last) = frames.last()
@@ -149,7 +172,7 @@ pub fn replay_log(
     counts.tracks = tracker.started;
     counts.confirmed_tracks = tracker.confirmed;
     counts.tracker_resets = tracker.resets;
-    counts.pairs = stats.pairs;
+    counts.phase1_solves = stats.phase1_solves;
     for (why, n) in refused {
         warnings.push(format!("{n} input(s) refused by the navigator: {why}"));
     }
@@ -159,12 +182,34 @@ pub fn replay_log(
             stats.frames_without_odometry
         ));
     }
-    if !settings.skip_phase1 && navigator.phase_switch_t_us().is_none() {
+    if stats.odometry_dropped > 0 {
         warnings.push(format!(
-            "phase 1 never became stable ({} frame pairs): no map was built; replay with phase 1 skipped to map from the rig's priors",
-            stats.pairs
+            "{} odometry sample(s) dropped: no stereo frame came for longer than the navigator's odometry buffer",
+            stats.odometry_dropped
         ));
     }
+    if let Some((reason, uninformed)) = navigator.uninformed()
+        && (reason != calib::smoother::HandoverReason::Stable || !uninformed.is_empty())
+    {
+        let why = match reason {
+            calib::smoother::HandoverReason::Stable => "phase 1 became stable",
+            calib::smoother::HandoverReason::BufferFull => {
+                "phase 1 was not stable when its frame buffer filled"
+            }
+            calib::smoother::HandoverReason::Requested => "phase 1 was not stable by the end of the log",
+        };
+        let names: Vec<&str> = uninformed.iter().map(|p| p.name()).collect();
+        warnings.push(if names.is_empty() {
+            format!("{why}: phase 2 mapped from its estimate")
+        } else {
+            format!(
+                "{why}; the data did not inform {}: phase 2 used the rig's nominal values and priors for them",
+                names.join(", ")
+            )
+        });
+    }
+    let _ = finished_in_phase1;
+    let phase2_frames: Vec<u64> = frames.iter().map(|f| f.t_us).collect();
     let truth = input
         .truth
         .as_ref()

@@ -6,6 +6,7 @@ use calib::camera::Param;
 use calib::odometry::OdomSample;
 use calib::rig::Jac4x3;
 use calib::selfcal::Handover;
+use calib::smoother::BatchHandover;
 use calib::{CameraParams, Measurement, N_PARAMS, Noise, Pose2, Rig, project_with_jacobians};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, SMatrix, Vector3, Vector4};
 
@@ -382,6 +383,80 @@ impl Ekf {
         settings: Settings,
     ) -> Result<Self, Error> {
         Self::new(rig, &CameraStart::from_handover(handover), settings)
+    }
+
+    /// A filter starting from phase 1's batch ([`calib::smoother::BatchHandover`]): the last
+    /// frame's pose, every landmark and the estimated camera parameters with their joint
+    /// covariance, so that the frames of phase 1 are in the map. Returns the filter and the
+    /// landmarks' ids in the hand-over's order.
+    pub fn from_batch(
+        rig: &Rig,
+        handover: &BatchHandover,
+        settings: Settings,
+    ) -> Result<(Self, Vec<LandmarkId>), Error> {
+        let start = CameraStart {
+            camera: handover.camera,
+            covariance: handover.camera_covariance,
+        };
+        let mut ekf = Self::new(rig, &start, settings)?;
+        let m = ekf.estimated.len();
+        let nl = handover.landmarks.len();
+        let n = POSE_DIM + LANDMARK_DIM * nl + m;
+        let src = &handover.covariance;
+        if src.nrows() != POSE_DIM + m + LANDMARK_DIM * nl || src.ncols() != src.nrows() {
+            return Err(Error::BadCameraCovariance);
+        }
+        // Batch order [pose, C, landmarks] -> filter order [pose, landmarks, C].
+        let map = |i: usize| -> usize {
+            if i < POSE_DIM {
+                i
+            } else if i < POSE_DIM + m {
+                POSE_DIM + LANDMARK_DIM * nl + (i - POSE_DIM)
+            } else {
+                i - m
+            }
+        };
+        let mut x = DVector::zeros(n);
+        x[0] = handover.pose.x;
+        x[1] = handover.pose.y;
+        x[2] = wrap_angle(handover.pose.theta);
+        for (j, l) in handover.landmarks.iter().enumerate() {
+            for a in 0..LANDMARK_DIM {
+                x[POSE_DIM + LANDMARK_DIM * j + a] = l.position[a];
+            }
+        }
+        for (a, &pa) in ekf.estimated.iter().enumerate() {
+            x[POSE_DIM + LANDMARK_DIM * nl + a] = handover.camera.get(pa);
+        }
+        if let Some(&value) = x.iter().find(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "phase-1 batch state",
+                value,
+            });
+        }
+        let mut p = DMatrix::zeros(n, n);
+        for i in 0..n {
+            for j in 0..n {
+                p[(map(i), map(j))] = 0.5 * (src[(i, j)] + src[(j, i)]);
+            }
+        }
+        if p.iter().any(|v| !v.is_finite()) {
+            return Err(Error::BadCameraCovariance);
+        }
+        ekf.x = x;
+        ekf.p = p;
+        let mut ids = Vec::with_capacity(nl);
+        for l in &handover.landmarks {
+            let id = LandmarkId(ekf.next_id);
+            ekf.next_id += 1;
+            ekf.landmarks.push(Slot {
+                id,
+                observations: l.observations,
+                rejections_in_a_row: 0,
+            });
+            ids.push(id);
+        }
+        Ok((ekf, ids))
     }
 
     /// Sets the start pose and its covariance (symmetric positive semi-definite), before any

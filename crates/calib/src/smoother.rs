@@ -1,0 +1,994 @@
+//! Phase 1 as one batch over every frame: every pose since the first frame, every landmark and
+//! the estimated camera parameters `C` solved together by Levenberg-Marquardt on the pixels
+//! and the odometry (docs/phase1.md, "The batch over every frame").
+//!
+//! The paper's eq. (1) compares landmarks triangulated at two instants with the odometry's
+//! motion between them. Frame pairs far apart share no noise but use one frame in forty; pairs
+//! that overlap share their odometry and pixel noise, and treating them as independent made the
+//! sigmas four times too small (docs/phase1.md). Solving for the poses of every frame instead
+//! models every correlation exactly: each frame's pixels enter once, each odometry interval
+//! once, between consecutive frames. The maximum-likelihood estimate of `C` then uses all the
+//! information the drive carries, so the stable rule fires as soon as that information allows.
+//!
+//! Unknowns: poses `x_1 .. x_{n-1}` (the first frame's pose is the world origin,
+//! vehicle-interfaces.md section 1), the estimated camera parameters and the landmarks. The
+//! normal equations are block tridiagonal in the poses (odometry between neighbours) with an
+//! arrow (each pose sees some landmarks and `C`): the poses are eliminated in time order, which
+//! costs `O(n w^2)` for an arrow of width `w = |C| + 3 m`, and the reduced system over the last
+//! pose, `C` and the landmarks is exactly their joint marginal information. Its inverse is what
+//! phase 2 starts from: the EKF's state and covariance at the switch, with the map in the first
+//! frame's world frame and the frames of phase 1 all mapped.
+//!
+//! Hand-written rather than a sparse solver from a crate: the structure is fixed and known
+//! (a chain with an arrow), the solve must build without `std` for the vehicle controller, and
+//! the elimination order that makes the reduced system the phase-2 prior is part of the method.
+
+use alloc::collections::BTreeMap;
+use alloc::vec::Vec;
+
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
+
+use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, Pose2};
+use crate::config::Rig;
+use crate::odometry::Motion;
+use crate::rig::{Measurement, project, project_with_jacobians, triangulate};
+use crate::selfcal::{Mat10, ObservabilityReport, ParamObservability, structural_trap};
+
+/// Tuning of the batch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmootherSettings {
+    /// Frames kept at most. When the buffer is full and calibration is still not stable, the
+    /// hand-over is forced with what the data gave (parameters they did not inform keep about
+    /// their prior, and the navigator says so): memory and solve time stay bounded.
+    pub max_frames: usize,
+    /// Frames between solves.
+    pub solve_every: usize,
+    /// Gauss-Newton iterations at most per solve (warm-started, usually 1-3).
+    pub max_iterations: usize,
+    /// Huber threshold on an observation's whitened residual norm (4 measurements).
+    pub huber: f64,
+    /// A new track is bound to an existing landmark not seen in this frame when the
+    /// landmark projects within this many pixels of each of its four measurements, and to no
+    /// other (a lamp seen again after leaving the view keeps its landmark).
+    pub rebind_px: f64,
+    /// Largest posterior / prior sigma ratio for a parameter to count as informed.
+    pub sigma_fraction: f64,
+    /// Largest change between consecutive solves, in posterior sigmas.
+    pub step_fraction: f64,
+    /// Solves in a row that must satisfy both.
+    pub consecutive: usize,
+}
+
+impl Default for SmootherSettings {
+    fn default() -> Self {
+        Self {
+            // 100 s at 20 Hz.
+            max_frames: 2000,
+            // Half a second at 20 Hz.
+            solve_every: 10,
+            max_iterations: 8,
+            huber: 4.0,
+            rebind_px: 6.0,
+            sigma_fraction: 0.2,
+            step_fraction: 1.0,
+            consecutive: 3,
+        }
+    }
+}
+
+impl SmootherSettings {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), (&'static str, f64, &'static str)> {
+        #[allow(clippy::cast_precision_loss)]
+        let checks: [(&'static str, f64, bool, &'static str); 8] = [
+            ("max_frames", self.max_frames as f64, self.max_frames >= 2, "at least 2"),
+            ("solve_every", self.solve_every as f64, self.solve_every >= 1, "at least 1"),
+            ("max_iterations", self.max_iterations as f64, self.max_iterations >= 1, "at least 1"),
+            ("huber", self.huber, self.huber.is_finite() && self.huber > 0.0, "positive"),
+            ("rebind_px", self.rebind_px, self.rebind_px.is_finite() && self.rebind_px >= 0.0, "finite, >= 0"),
+            ("sigma_fraction", self.sigma_fraction, self.sigma_fraction > 0.0 && self.sigma_fraction <= 1.0, "in (0, 1]"),
+            ("step_fraction", self.step_fraction, self.step_fraction.is_finite() && self.step_fraction > 0.0, "positive"),
+            ("consecutive", self.consecutive as f64, self.consecutive >= 1, "at least 1"),
+        ];
+        for (name, value, ok, expected) in checks {
+            if !ok {
+                return Err((name, value, expected));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One landmark of the batch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatchLandmark {
+    /// World position, metres.
+    pub position: Vector3<f64>,
+    /// The track that saw it last (the one phase 2 keeps following).
+    pub track: u64,
+    /// Frame index of its first observation.
+    pub first_frame: usize,
+    /// Observations of it used.
+    pub observations: u64,
+}
+
+/// Why the hand-over happened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum HandoverReason {
+    /// The stable rule fired.
+    Stable,
+    /// The frame buffer was full ([`SmootherSettings::max_frames`]).
+    BufferFull,
+    /// The caller asked for it (the end of a log).
+    Requested,
+}
+
+/// What phase 1 hands to phase 2: the joint estimate at the last frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchHandover {
+    /// Time of the last frame, microseconds.
+    pub t_us: u64,
+    /// Why now.
+    pub reason: HandoverReason,
+    /// The camera parameters (the ones not estimated at nominal).
+    pub camera: CameraParams,
+    /// Their covariance (zero rows for the ones not estimated).
+    pub camera_covariance: Mat10,
+    /// The last frame's pose.
+    pub pose: Pose2,
+    /// The landmarks.
+    pub landmarks: Vec<BatchLandmark>,
+    /// Joint covariance of `[pose (3), estimated C (rig order), landmarks (3 each)]`.
+    pub covariance: DMatrix<f64>,
+    /// Every frame's `(t_us, pose)`: the smoothed trajectory of phase 1.
+    pub trajectory: Vec<(u64, Pose2)>,
+    /// Which parameters the data informed, and why not the others.
+    pub observability: ObservabilityReport,
+}
+
+impl BatchHandover {
+    /// The estimated parameters that the data did not inform (they enter phase 2 with about
+    /// their prior).
+    pub fn uninformed(&self) -> Vec<Param> {
+        self.observability
+            .params
+            .iter()
+            .filter(|p| !p.observable)
+            .map(|p| p.param)
+            .collect()
+    }
+}
+
+/// The result of one solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveSummary {
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Robust cost at the solution.
+    pub cost: f64,
+    /// Observations used, and how many the Huber loss down-weighted.
+    pub observations: usize,
+    /// Observations beyond the Huber threshold.
+    pub outliers: usize,
+}
+
+#[derive(Debug, Clone)]
+struct Frame {
+    t_us: u64,
+    pose: Pose2,
+    /// Odometry from the previous frame: motion and its information (inverse covariance).
+    odometry: Option<(Motion, Matrix3<f64>)>,
+    observations: Vec<(usize, Measurement)>,
+}
+
+/// Phase 1 over every frame (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Smoother {
+    rig: Rig,
+    settings: SmootherSettings,
+    estimated: Vec<Param>,
+    camera: CameraParams,
+    frames: Vec<Frame>,
+    landmarks: Vec<BatchLandmark>,
+    track_landmark: BTreeMap<u64, usize>,
+    lambda: f64,
+    total_rotation: f64,
+    /// `(t_us, values, sigmas)` of C after each solve.
+    history: Vec<(u64, ParamVector, ParamVector)>,
+    /// Joint covariance `[last pose, C, landmarks]` of the last solve.
+    last_covariance: Option<DMatrix<f64>>,
+    last_summary: Option<SolveSummary>,
+    stable_run: usize,
+    handover: Option<BatchHandover>,
+}
+
+/// Wraps an angle into `(-pi, pi]`.
+fn wrap(a: f64) -> f64 {
+    use core::f64::consts::PI;
+    let w = a - 2.0 * PI * libm::floor((a + PI) / (2.0 * PI));
+    if w <= -PI { w + 2.0 * PI } else { w }
+}
+
+/// The odometry residual `h(x_a, x_b) - m` with `h = (Rz(-theta_a) (p_b - p_a), theta_b -
+/// theta_a)` and its Jacobians with respect to `x_a` and `x_b`.
+fn odometry_residual(a: &Pose2, b: &Pose2, m: &Motion) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+    let (s, c) = (libm::sin(a.theta), libm::cos(a.theta));
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    let hx = c * dx + s * dy;
+    let hy = -s * dx + c * dy;
+    let r = Vector3::new(hx - m.dx, hy - m.dy, wrap(b.theta - a.theta - m.dtheta));
+    let ja = Matrix3::new(-c, -s, hy, s, -c, -hx, 0.0, 0.0, -1.0);
+    let jb = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+    (r, ja, jb)
+}
+
+/// Information of a frame interval without odometry: the pose is free to within metres.
+const NO_ODOMETRY_INFORMATION: f64 = 1e-2;
+
+impl Smoother {
+    /// A batch for this rig; the first frame's pose is the world origin.
+    pub fn new(rig: Rig, settings: SmootherSettings) -> Self {
+        let estimated = rig.estimate.clone();
+        let camera = rig.nominal;
+        Self {
+            rig,
+            settings,
+            estimated,
+            camera,
+            frames: Vec::new(),
+            landmarks: Vec::new(),
+            track_landmark: BTreeMap::new(),
+            lambda: 1e-4,
+            total_rotation: 0.0,
+            history: Vec::new(),
+            last_covariance: None,
+            last_summary: None,
+            stable_run: 0,
+            handover: None,
+        }
+    }
+
+    /// Frames buffered.
+    pub fn frames(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Landmarks so far.
+    pub fn landmarks(&self) -> &[BatchLandmark] {
+        &self.landmarks
+    }
+
+    /// The current camera estimate.
+    pub fn camera(&self) -> CameraParams {
+        self.camera
+    }
+
+    /// The camera covariance of the last solve (the prior before the first).
+    pub fn camera_covariance(&self) -> Mat10 {
+        let mut cov = Mat10::zeros();
+        match &self.last_covariance {
+            Some(joint) => {
+                for (a, pa) in self.estimated.iter().enumerate() {
+                    for (b, pb) in self.estimated.iter().enumerate() {
+                        if let Some(v) = joint.get((3 + a, 3 + b)) {
+                            cov[(pa.index(), pb.index())] = *v;
+                        }
+                    }
+                }
+            }
+            None => {
+                for p in &self.estimated {
+                    let s = self.rig.prior[p.index()].unwrap_or(0.0);
+                    cov[(p.index(), p.index())] = s * s;
+                }
+            }
+        }
+        cov
+    }
+
+    /// The latest frame's pose and its covariance (the last solve's, dead reckoning since).
+    pub fn last_pose(&self) -> Option<Pose2> {
+        self.frames.last().map(|f| f.pose)
+    }
+
+    /// `(t_us, values, sigmas)` of C after each solve.
+    pub fn history(&self) -> &[(u64, ParamVector, ParamVector)] {
+        &self.history
+    }
+
+    /// The last solve's summary.
+    pub fn last_summary(&self) -> Option<SolveSummary> {
+        self.last_summary
+    }
+
+    /// The hand-over, once it happened.
+    pub fn handover(&self) -> Option<&BatchHandover> {
+        self.handover.as_ref()
+    }
+
+    /// Adds a frame: the odometry motion since the previous frame with its covariance
+    /// (`None` for the first frame, or when no odometry covered the interval), and the
+    /// confirmed tracks' measurements. Returns `true` when a solve ran. Does nothing once the
+    /// hand-over happened.
+    pub fn add_frame(
+        &mut self,
+        t_us: u64,
+        odometry: Option<(Motion, Matrix3<f64>)>,
+        observations: &[(u64, Measurement)],
+    ) -> bool {
+        if self.handover.is_some() {
+            return false;
+        }
+        let odometry = odometry.and_then(|(m, cov)| {
+            let info = cov.try_inverse()?;
+            info.iter().all(|v| v.is_finite()).then_some((m, 0.5 * (info + info.transpose())))
+        });
+        let pose = match (self.frames.last(), &odometry) {
+            (None, _) => Pose2::default(),
+            (Some(prev), Some((m, _))) => m.apply(&prev.pose),
+            (Some(prev), None) => prev.pose,
+        };
+        if let Some((m, _)) = &odometry {
+            self.total_rotation += libm::fabs(m.dtheta);
+        }
+        let k = self.frames.len();
+        let mut used: Vec<(usize, Measurement)> = Vec::with_capacity(observations.len());
+        let seen_now: Vec<usize> = observations
+            .iter()
+            .filter_map(|(t, _)| self.track_landmark.get(t).copied())
+            .collect();
+        for (track, z) in observations {
+            if !z.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            let index = match self.track_landmark.get(track) {
+                Some(&j) => j,
+                None => {
+                    let Some(j) = self.rebind(&pose, z, &seen_now, &used) else {
+                        let Ok(tri) = triangulate(&self.camera, z) else {
+                            continue;
+                        };
+                        let position = tri.p_in_world(&self.camera, &pose);
+                        if !position.iter().all(|v| v.is_finite()) {
+                            continue;
+                        }
+                        self.landmarks.push(BatchLandmark {
+                            position,
+                            track: *track,
+                            first_frame: k,
+                            observations: 0,
+                        });
+                        let j = self.landmarks.len() - 1;
+                        self.track_landmark.insert(*track, j);
+                        used.push((j, *z));
+                        continue;
+                    };
+                    self.track_landmark.insert(*track, j);
+                    j
+                }
+            };
+            if used.iter().any(|(u, _)| *u == index) {
+                continue;
+            }
+            if let Some(l) = self.landmarks.get_mut(index) {
+                l.track = *track;
+            }
+            used.push((index, *z));
+        }
+        for (j, _) in &used {
+            if let Some(l) = self.landmarks.get_mut(*j) {
+                l.observations += 1;
+            }
+        }
+        self.frames.push(Frame {
+            t_us,
+            pose,
+            odometry,
+            observations: used,
+        });
+        let n = self.frames.len();
+        let due = n >= 2 && (n - 1).is_multiple_of(self.settings.solve_every);
+        let full = n >= self.settings.max_frames;
+        if !(due || full) {
+            return false;
+        }
+        self.solve_and_judge(t_us);
+        if full && self.handover.is_none() {
+            self.hand_over(HandoverReason::BufferFull);
+        }
+        true
+    }
+
+    /// Forces the hand-over now (the end of a log), after a last solve.
+    pub fn finish(&mut self) -> Option<&BatchHandover> {
+        if self.handover.is_none() && !self.frames.is_empty() {
+            if self.frames.len() >= 2 {
+                self.solve_and_judge(self.frames.last().map_or(0, |f| f.t_us));
+            }
+            if self.handover.is_none() {
+                self.hand_over(HandoverReason::Requested);
+            }
+        }
+        self.handover.as_ref()
+    }
+
+    /// The unique landmark, not seen under another track in this frame, that projects close
+    /// to `z` from `pose`.
+    fn rebind(
+        &self,
+        pose: &Pose2,
+        z: &Measurement,
+        seen_now: &[usize],
+        used: &[(usize, Measurement)],
+    ) -> Option<usize> {
+        let mut found = None;
+        for (j, l) in self.landmarks.iter().enumerate() {
+            if seen_now.contains(&j) || used.iter().any(|(u, _)| *u == j) {
+                continue;
+            }
+            let Ok(p) = project(&self.camera, pose, &l.position) else {
+                continue;
+            };
+            if (p - z).amax() <= self.settings.rebind_px {
+                if found.is_some() {
+                    return None;
+                }
+                found = Some(j);
+            }
+        }
+        found
+    }
+
+    fn prior_sigma(&self, p: Param) -> f64 {
+        self.rig.prior[p.index()].unwrap_or(f64::INFINITY)
+    }
+
+    /// Solves, records C, applies the stable rule.
+    fn solve_and_judge(&mut self, t_us: u64) {
+        let Some(summary) = self.solve() else {
+            return;
+        };
+        self.last_summary = Some(summary);
+        let cov = self.camera_covariance();
+        let values = self.camera.to_vector();
+        let sigmas = ParamVector::from_fn(|i, _| libm::sqrt(cov[(i, i)].max(0.0)));
+        let report = self.observability(&cov);
+        let steady = self.history.last().is_some_and(|(_, prev, _)| {
+            report.params.iter().all(|p| {
+                let i = p.param.index();
+                p.structural
+                    || (p.observable
+                        && libm::fabs(values[i] - prev[i]) <= self.settings.step_fraction * sigmas[i])
+            })
+        });
+        let any = report.params.iter().any(|p| p.observable) || report.params.is_empty();
+        self.stable_run = if steady && any { self.stable_run + 1 } else { 0 };
+        self.history.push((t_us, values, sigmas));
+        if self.stable_run >= self.settings.consecutive {
+            self.hand_over(HandoverReason::Stable);
+        }
+    }
+
+    /// Which estimated parameters the data informed.
+    fn observability(&self, cov: &Mat10) -> ObservabilityReport {
+        let c = &self.camera;
+        let tilted = libm::fabs(c.mount.pitch) > 0.05 || libm::fabs(c.mount.roll) > 0.05;
+        let mut report = ObservabilityReport::default();
+        for &p in &self.estimated {
+            let i = p.index();
+            let prior_sigma = self.prior_sigma(p);
+            let posterior_sigma = libm::sqrt(cov[(i, i)].max(0.0));
+            let data_info = 1.0 / (posterior_sigma * posterior_sigma) - 1.0 / (prior_sigma * prior_sigma);
+            let data_sigma = if data_info > 0.0 { 1.0 / libm::sqrt(data_info) } else { f64::INFINITY };
+            let observable = posterior_sigma <= self.settings.sigma_fraction * prior_sigma;
+            let trap = structural_trap(p, tilted, self.total_rotation);
+            let reason = (!observable).then_some(trap.unwrap_or(
+                "the data so far constrain it less than its prior: more motion (turns, speed) or more landmarks are needed",
+            ));
+            report.params.push(ParamObservability {
+                param: p,
+                prior_sigma,
+                data_sigma,
+                posterior_sigma,
+                observable,
+                reason,
+                structural: !observable && trap.is_some(),
+            });
+        }
+        report
+    }
+
+    fn hand_over(&mut self, reason: HandoverReason) {
+        let Some(last) = self.frames.last() else {
+            return;
+        };
+        let m = self.estimated.len();
+        let covariance = self.last_covariance.clone().unwrap_or_else(|| {
+            // No solve yet: the prior for C, nothing known of the landmarks beyond their
+            // first triangulation (large), the first pose exact.
+            let w = 3 + m + 3 * self.landmarks.len();
+            let mut p = DMatrix::zeros(w, w);
+            for (a, &pa) in self.estimated.iter().enumerate() {
+                let s = self.prior_sigma(pa);
+                p[(3 + a, 3 + a)] = s * s;
+            }
+            for j in 0..3 * self.landmarks.len() {
+                p[(3 + m + j, 3 + m + j)] = 1.0;
+            }
+            p
+        });
+        let camera_covariance = self.camera_covariance();
+        let observability = self.observability(&camera_covariance);
+        self.handover = Some(BatchHandover {
+            t_us: last.t_us,
+            reason,
+            camera: self.camera,
+            camera_covariance,
+            pose: last.pose,
+            landmarks: self.landmarks.clone(),
+            covariance,
+            trajectory: self.frames.iter().map(|f| (f.t_us, f.pose)).collect(),
+            observability,
+        });
+        // The buffer is not needed any more.
+        self.frames = Vec::new();
+    }
+
+    /// Robust cost at the current state.
+    fn cost(&self, camera: &CameraParams, poses: &[Pose2], landmarks: &[Vector3<f64>]) -> f64 {
+        let sigma = self.rig.noise.pixel;
+        let mut cost = 0.0;
+        for (i, f) in self.frames.iter().enumerate() {
+            let Some(pose) = poses.get(i) else { continue };
+            if i > 0
+                && let Some(prev) = poses.get(i - 1)
+            {
+                cost += match &f.odometry {
+                    Some((m, info)) => {
+                        let (r, _, _) = odometry_residual(prev, pose, m);
+                        r.dot(&(info * r))
+                    }
+                    None => {
+                        let (r, _, _) = odometry_residual(prev, pose, &Motion::default());
+                        NO_ODOMETRY_INFORMATION * r.norm_squared()
+                    }
+                };
+            }
+            for (j, z) in &f.observations {
+                let Some(l) = landmarks.get(*j) else { continue };
+                let e = match project(camera, pose, l) {
+                    Ok(p) => (z - p).norm() / sigma,
+                    Err(_) => self.settings.huber * 10.0,
+                };
+                cost += huber_cost(e, self.settings.huber);
+            }
+        }
+        for &p in &self.estimated {
+            let s = self.prior_sigma(p);
+            if s.is_finite() {
+                let d = (camera.get(p) - self.rig.nominal.get(p)) / s;
+                cost += d * d;
+            }
+        }
+        cost
+    }
+
+    /// Levenberg-Marquardt on the whole batch, warm-started; `None` when nothing can be solved.
+    fn solve(&mut self) -> Option<SolveSummary> {
+        let n = self.frames.len();
+        if n < 2 {
+            return None;
+        }
+        let mut poses: Vec<Pose2> = self.frames.iter().map(|f| f.pose).collect();
+        let mut landmarks: Vec<Vector3<f64>> = self.landmarks.iter().map(|l| l.position).collect();
+        let mut camera = self.camera;
+        let mut cost = self.cost(&camera, &poses, &landmarks);
+        let mut iterations = 0;
+        for _ in 0..self.settings.max_iterations {
+            iterations += 1;
+            let system = self.normal_equations(&camera, &poses, &landmarks);
+            let mut accepted = false;
+            let mut converged = false;
+            for _ in 0..12 {
+                let Some(step) = system.solve(self.lambda) else {
+                    self.lambda *= 10.0;
+                    continue;
+                };
+                let (c2, p2, l2) = self.apply(&camera, &poses, &landmarks, &step);
+                let cost2 = self.cost(&c2, &p2, &l2);
+                if cost2.is_finite() && cost2 <= cost {
+                    let decrease = cost - cost2;
+                    camera = c2;
+                    poses = p2;
+                    landmarks = l2;
+                    cost = cost2;
+                    self.lambda = (self.lambda / 10.0).max(1e-9);
+                    accepted = true;
+                    converged = decrease <= 1e-6 * (1.0 + cost);
+                    break;
+                }
+                self.lambda *= 10.0;
+            }
+            if !accepted || converged {
+                break;
+            }
+        }
+        // Commit and take the covariance at the solution (undamped).
+        self.camera = camera;
+        for (f, p) in self.frames.iter_mut().zip(&poses) {
+            f.pose = *p;
+        }
+        for (l, p) in self.landmarks.iter_mut().zip(&landmarks) {
+            l.position = *p;
+        }
+        let system = self.normal_equations(&camera, &poses, &landmarks);
+        self.last_covariance = system.marginal_covariance();
+        Some(SolveSummary {
+            iterations,
+            cost,
+            observations: system.observations,
+            outliers: system.outliers,
+        })
+    }
+
+    fn apply(
+        &self,
+        camera: &CameraParams,
+        poses: &[Pose2],
+        landmarks: &[Vector3<f64>],
+        step: &Step,
+    ) -> (CameraParams, Vec<Pose2>, Vec<Vector3<f64>>) {
+        let mut c = *camera;
+        for (a, &p) in self.estimated.iter().enumerate() {
+            c.set(p, c.get(p) + step.camera.get(a).copied().unwrap_or(0.0));
+        }
+        let mut p2 = poses.to_vec();
+        for (k, d) in step.poses.iter().enumerate() {
+            if let Some(p) = p2.get_mut(k + 1) {
+                p.x += d.x;
+                p.y += d.y;
+                p.theta += d.z;
+            }
+        }
+        let mut l2 = landmarks.to_vec();
+        for (l, d) in l2.iter_mut().zip(&step.landmarks) {
+            *l += d;
+        }
+        (c, p2, l2)
+    }
+
+    /// The normal equations at the current state, in the chain-and-arrow layout.
+    fn normal_equations(
+        &self,
+        camera: &CameraParams,
+        poses: &[Pose2],
+        landmarks: &[Vector3<f64>],
+    ) -> System {
+        let n = self.frames.len();
+        let m = self.estimated.len();
+        let w = m + 3 * landmarks.len();
+        let pv = n - 1; // pose variables: frames 1..n-1
+        let mut sys = System {
+            d: vec3x3(pv),
+            e: vec3x3(pv),
+            f: (0..pv).map(|_| DMatrix::zeros(3, w)).collect(),
+            b: alloc::vec![Vector3::zeros(); pv],
+            active: alloc::vec![m; pv],
+            z: DMatrix::zeros(w, w),
+            bz: DVector::zeros(w),
+            m,
+            observations: 0,
+            outliers: 0,
+        };
+        // Landmarks are in first-seen order, so the arrow columns a pose touches (with the
+        // fill from the poses before it) are a prefix.
+        for (k, a) in sys.active.iter_mut().enumerate() {
+            let frame = k + 1;
+            let seen = self.landmarks.partition_point(|l| l.first_frame <= frame);
+            *a = m + 3 * seen;
+        }
+        let inv_var = 1.0 / (self.rig.noise.pixel * self.rig.noise.pixel);
+        for (i, f) in self.frames.iter().enumerate() {
+            let Some(pose) = poses.get(i) else { continue };
+            // Odometry factor between frames i-1 and i.
+            if i > 0
+                && let Some(prev) = poses.get(i - 1)
+            {
+                let (r, ja, jb, info) = match &f.odometry {
+                    Some((mo, info)) => {
+                        let (r, ja, jb) = odometry_residual(prev, pose, mo);
+                        (r, ja, jb, *info)
+                    }
+                    None => {
+                        let (r, ja, jb) = odometry_residual(prev, pose, &Motion::default());
+                        (r, ja, jb, Matrix3::identity() * NO_ODOMETRY_INFORMATION)
+                    }
+                };
+                let kb = i - 1; // variable index of pose i
+                sys.d[kb] += jb.transpose() * info * jb;
+                sys.b[kb] -= jb.transpose() * info * r;
+                if i >= 2 {
+                    let ka = i - 2;
+                    sys.d[ka] += ja.transpose() * info * ja;
+                    sys.e[ka] += ja.transpose() * info * jb;
+                    sys.b[ka] -= ja.transpose() * info * r;
+                }
+            }
+            for (j, zm) in &f.observations {
+                let Some(l) = landmarks.get(*j) else { continue };
+                let Ok((zh, jac)) = project_with_jacobians(camera, pose, l) else {
+                    continue;
+                };
+                let r = zm - zh;
+                let e = r.norm() * libm::sqrt(inv_var);
+                let wgt = if e > self.settings.huber {
+                    sys.outliers += 1;
+                    self.settings.huber / e
+                } else {
+                    1.0
+                };
+                sys.observations += 1;
+                let wi = wgt * inv_var;
+                let jc: SMatrix<f64, 4, N_PARAMS> = jac.camera;
+                let col = m + 3 * j;
+                // Landmark and camera blocks of the arrow.
+                let jl = jac.landmark;
+                let ll = jl.transpose() * jl * wi;
+                let bl = jl.transpose() * r * wi;
+                for a in 0..3 {
+                    sys.bz[col + a] += bl[a];
+                    for b in 0..3 {
+                        sys.z[(col + a, col + b)] += ll[(a, b)];
+                    }
+                }
+                for (a, pa) in self.estimated.iter().enumerate() {
+                    let ca = jc.column(pa.index());
+                    sys.bz[a] += ca.dot(&r) * wi;
+                    for (b, pb) in self.estimated.iter().enumerate() {
+                        sys.z[(a, b)] += ca.dot(&jc.column(pb.index())) * wi;
+                    }
+                    let cl = ca.transpose() * jl * wi;
+                    for b in 0..3 {
+                        sys.z[(a, col + b)] += cl[b];
+                        sys.z[(col + b, a)] += cl[b];
+                    }
+                }
+                if i >= 1 {
+                    let k = i - 1;
+                    let jp = jac.pose;
+                    sys.d[k] += jp.transpose() * jp * wi;
+                    sys.b[k] += jp.transpose() * r * wi;
+                    let pl = jp.transpose() * jl * wi;
+                    let fk = &mut sys.f[k];
+                    for a in 0..3 {
+                        for b in 0..3 {
+                            fk[(a, col + b)] += pl[(a, b)];
+                        }
+                        for (c, pc) in self.estimated.iter().enumerate() {
+                            fk[(a, c)] += jp.column(a).dot(&jc.column(pc.index())) * wi;
+                        }
+                    }
+                }
+            }
+        }
+        // The prior on C.
+        for (a, &p) in self.estimated.iter().enumerate() {
+            let s = self.prior_sigma(p);
+            if s.is_finite() && s > 0.0 {
+                sys.z[(a, a)] += 1.0 / (s * s);
+                sys.bz[a] -= (camera.get(p) - self.rig.nominal.get(p)) / (s * s);
+            }
+        }
+        sys
+    }
+}
+
+fn vec3x3(n: usize) -> Vec<Matrix3<f64>> {
+    alloc::vec![Matrix3::zeros(); n]
+}
+
+fn huber_cost(e: f64, k: f64) -> f64 {
+    if e <= k { e * e } else { 2.0 * k * e - k * k }
+}
+
+/// A step of every unknown.
+#[derive(Debug)]
+struct Step {
+    poses: Vec<Vector3<f64>>,
+    camera: Vec<f64>,
+    landmarks: Vec<Vector3<f64>>,
+}
+
+/// The normal equations: block-tridiagonal poses with an arrow `[C, landmarks]`.
+#[derive(Debug)]
+struct System {
+    d: Vec<Matrix3<f64>>,
+    /// Coupling of pose `k` with pose `k + 1`.
+    e: Vec<Matrix3<f64>>,
+    /// Coupling of pose `k` with the arrow.
+    f: Vec<DMatrix<f64>>,
+    b: Vec<Vector3<f64>>,
+    /// Arrow columns that pose `k` (with the fill of the poses before it) touches: a prefix.
+    active: Vec<usize>,
+    z: DMatrix<f64>,
+    bz: DVector<f64>,
+    m: usize,
+    observations: usize,
+    outliers: usize,
+}
+
+impl System {
+    /// Eliminates the poses but the last in time order (damped by `lambda`); returns the
+    /// reduced system over `[last pose, arrow]` and what back-substitution needs.
+    #[allow(clippy::type_complexity)]
+    fn eliminate(
+        &self,
+        lambda: f64,
+    ) -> Option<(DMatrix<f64>, DVector<f64>, Vec<(Matrix3<f64>, Matrix3<f64>, DMatrix<f64>, Vector3<f64>)>)> {
+        let pv = self.d.len();
+        let w = self.z.nrows();
+        let damp3 = |m: &Matrix3<f64>| {
+            let mut m = *m;
+            for i in 0..3 {
+                m[(i, i)] += lambda * m[(i, i)] + 1e-12;
+            }
+            m
+        };
+        let mut z = self.z.clone();
+        for i in 0..w {
+            z[(i, i)] += lambda * self.z[(i, i)] + 1e-12;
+        }
+        let mut bz = self.bz.clone();
+        let mut d_next = self.d.first().map(&damp3);
+        let mut f_next = self.f.first().cloned();
+        let mut b_next = self.b.first().copied();
+        let mut back = Vec::with_capacity(pv.saturating_sub(1));
+        for k in 0..pv.saturating_sub(1) {
+            let dk = d_next.take()?;
+            let fk = f_next.take()?;
+            let bk = b_next.take()?;
+            let dinv = dk.cholesky()?.inverse();
+            let ek = *self.e.get(k)?;
+            let a = *self.active.get(k)?;
+            let g = dinv * ek; // D^-1 E
+            let h = &dinv * fk.columns(0, a); // D^-1 F (3 x a)
+            let db = dinv * bk;
+            // Next pose.
+            let mut dn = damp3(self.d.get(k + 1)?) - ek.transpose() * g;
+            dn = 0.5 * (dn + dn.transpose());
+            let mut fnx = self.f.get(k + 1)?.clone();
+            {
+                let mut view = fnx.columns_mut(0, a);
+                view.gemm(-1.0, &ek.transpose(), &h, 1.0);
+            }
+            let bn = self.b.get(k + 1)? - ek.transpose() * db;
+            // Arrow.
+            {
+                let fa = fk.columns(0, a);
+                let mut zv = z.view_mut((0, 0), (a, a));
+                zv.gemm_tr(-1.0, &fa, &h, 1.0);
+                let mut bv = bz.rows_mut(0, a);
+                bv.gemv_tr(-1.0, &fa, &db, 1.0);
+            }
+            let mut hfull = DMatrix::zeros(3, a);
+            hfull.copy_from(&h);
+            back.push((dinv, g, hfull, db));
+            d_next = Some(dn);
+            f_next = Some(fnx);
+            b_next = Some(bn);
+        }
+        // Reduced system over [last pose, arrow].
+        let r = 3 + w;
+        let mut big = DMatrix::zeros(r, r);
+        let mut rhs = DVector::zeros(r);
+        if let (Some(dl), Some(fl), Some(bl)) = (d_next, f_next, b_next) {
+            big.view_mut((0, 0), (3, 3)).copy_from(&dl);
+            big.view_mut((0, 3), (3, w)).copy_from(&fl);
+            big.view_mut((3, 0), (w, 3)).copy_from(&fl.transpose());
+            rhs.rows_mut(0, 3).copy_from(&bl);
+        } else {
+            for i in 0..3 {
+                big[(i, i)] = 1.0;
+            }
+        }
+        big.view_mut((3, 3), (w, w)).copy_from(&z);
+        rhs.rows_mut(3, w).copy_from(&bz);
+        Some((big, rhs, back))
+    }
+
+    fn solve(&self, lambda: f64) -> Option<Step> {
+        let (big, rhs, back) = self.eliminate(lambda)?;
+        let pv = self.d.len();
+        let w = self.z.nrows();
+        let sol = big.cholesky()?.solve(&rhs);
+        if !sol.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let zsol = sol.rows(3, w).into_owned();
+        let mut poses = alloc::vec![Vector3::zeros(); pv];
+        if let Some(last) = poses.last_mut() {
+            *last = Vector3::new(sol[0], sol[1], sol[2]);
+        }
+        for k in (0..pv.saturating_sub(1)).rev() {
+            let (_dinv, g, h, db) = back.get(k)?;
+            let next = *poses.get(k + 1)?;
+            let a = h.ncols();
+            let x = db - g * next - h * zsol.rows(0, a);
+            *poses.get_mut(k)? = x;
+        }
+        let camera = zsol.rows(0, self.m).iter().copied().collect();
+        let nl = (w - self.m) / 3;
+        let landmarks = (0..nl)
+            .map(|j| {
+                let o = self.m + 3 * j;
+                Vector3::new(zsol[o], zsol[o + 1], zsol[o + 2])
+            })
+            .collect();
+        Some(Step {
+            poses,
+            camera,
+            landmarks,
+        })
+    }
+
+    /// Joint covariance of `[last pose, C, landmarks]`: the inverse of the reduced system.
+    fn marginal_covariance(&self) -> Option<DMatrix<f64>> {
+        let (big, _, _) = self.eliminate(0.0)?;
+        let mut cov = big.cholesky()?.inverse();
+        if self.d.is_empty() {
+            for i in 0..3 {
+                for j in 0..cov.ncols() {
+                    cov[(i, j)] = 0.0;
+                    cov[(j, i)] = 0.0;
+                }
+            }
+        }
+        let cov = 0.5 * (&cov + cov.transpose());
+        cov.iter().all(|v| v.is_finite()).then_some(cov)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn odometry_jacobians_match_finite_differences() {
+        let a = Pose2::new(0.3, -0.2, 0.7);
+        let b = Pose2::new(0.5, 0.1, 0.9);
+        let m = Motion {
+            dx: 0.1,
+            dy: 0.05,
+            dtheta: 0.1,
+            dt_s: 0.05,
+            samples: 5,
+        };
+        let (r0, ja, jb) = odometry_residual(&a, &b, &m);
+        let h = 1e-7;
+        for k in 0..3 {
+            let mut a2 = a;
+            let mut b2 = b;
+            match k {
+                0 => {
+                    a2.x += h;
+                    b2.x += h;
+                }
+                1 => {
+                    a2.y += h;
+                    b2.y += h;
+                }
+                _ => {
+                    a2.theta += h;
+                    b2.theta += h;
+                }
+            }
+            let (ra, _, _) = odometry_residual(&a2, &b, &m);
+            let (rb, _, _) = odometry_residual(&a, &b2, &m);
+            for i in 0..3 {
+                assert!(((ra[i] - r0[i]) / h - ja[(i, k)]).abs() < 1e-5);
+                assert!(((rb[i] - r0[i]) / h - jb[(i, k)]).abs() < 1e-5);
+            }
+        }
+    }
+}
