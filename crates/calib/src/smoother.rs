@@ -138,7 +138,11 @@ pub struct BatchHandover {
     pub pose: Pose2,
     /// The landmarks.
     pub landmarks: Vec<BatchLandmark>,
-    /// Joint covariance of `[pose (3), estimated C (rig order), landmarks (3 each)]`.
+    /// The parameters in [`Self::covariance`], in its order: the rig's estimated ones that the
+    /// data informed. The others are held at their nominal values (the batch was solved again
+    /// without them) and enter phase 2 with their prior.
+    pub estimated: Vec<Param>,
+    /// Joint covariance of `[pose (3), estimated (in that order), landmarks (3 each)]`.
     pub covariance: DMatrix<f64>,
     /// Every frame's `(t_us, pose)`: the smoothed trajectory of phase 1.
     pub trajectory: Vec<(u64, Pose2)>,
@@ -499,13 +503,31 @@ impl Smoother {
     }
 
     fn hand_over(&mut self, reason: HandoverReason) {
-        let Some(last) = self.frames.last() else {
+        if self.frames.is_empty() {
             return;
-        };
+        }
+        // Parameters the data did not inform are held at nominal, not left where the batch
+        // drifted them, and the batch is solved again without them.
+        let report = self.observability(&self.camera_covariance());
+        let uninformed: Vec<Param> = report
+            .params
+            .iter()
+            .filter(|p| !p.observable)
+            .map(|p| p.param)
+            .collect();
+        if !uninformed.is_empty() {
+            for p in &uninformed {
+                self.camera.set(*p, self.rig.nominal.get(*p));
+            }
+            self.estimated.retain(|p| !uninformed.contains(p));
+            self.last_covariance = None;
+            if self.frames.len() >= 2 {
+                let _ = self.solve();
+            }
+        }
         let m = self.estimated.len();
         let covariance = self.last_covariance.clone().unwrap_or_else(|| {
-            // No solve yet: the prior for C, nothing known of the landmarks beyond their
-            // first triangulation (large), the first pose exact.
+            // No solve: the prior for C, the landmarks known only to within a metre.
             let w = 3 + m + 3 * self.landmarks.len();
             let mut p = DMatrix::zeros(w, w);
             for (a, &pa) in self.estimated.iter().enumerate() {
@@ -518,7 +540,9 @@ impl Smoother {
             p
         });
         let camera_covariance = self.camera_covariance();
-        let observability = self.observability(&camera_covariance);
+        let Some(last) = self.frames.last() else {
+            return;
+        };
         self.handover = Some(BatchHandover {
             t_us: last.t_us,
             reason,
@@ -526,9 +550,10 @@ impl Smoother {
             camera_covariance,
             pose: last.pose,
             landmarks: self.landmarks.clone(),
+            estimated: self.estimated.clone(),
             covariance,
             trajectory: self.frames.iter().map(|f| (f.t_us, f.pose)).collect(),
-            observability,
+            observability: report,
         });
         // The buffer is not needed any more.
         self.frames = Vec::new();

@@ -141,11 +141,15 @@ fn human_summary(log: &std::path::Path, r: &Replay, took: Duration) -> String {
         .count();
     let phases = match (r.phase1_skipped, r.phase_switch_t_us) {
         (true, _) => "phase 1 skipped: phase 2 from the rig's priors".to_string(),
-        (false, Some(t)) => format!(
-            "phase 1 stable at t = {:.2} s: phase 2 for {phase2} frames",
+        (false, Some(t)) if phase2 == 0 => format!(
+            "phase 1 ran to the end of the log (t = {:.2} s): the map is its batch over every frame",
             t as f64 * 1e-6
         ),
-        (false, None) => "phase 1 never became stable: no phase 2".to_string(),
+        (false, Some(t)) => format!(
+            "phase 1 handed over at t = {:.2} s (the first frame's world): phase 2 for {phase2} frames",
+            t as f64 * 1e-6
+        ),
+        (false, None) => "no frame: no map".to_string(),
     };
     let _ = writeln!(s, "{phases}");
     let _ = writeln!(s, "map: {} landmarks", r.landmarks.len());

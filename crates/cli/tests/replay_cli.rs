@@ -112,7 +112,7 @@ fn paper_calibration_reports_the_phase_switch() {
         s(&summary),
     ]);
     let text = ok(&out);
-    assert!(text.contains("phase 1 stable at t = "), "{text}");
+    assert!(text.contains("phase 1 handed over at t = "), "{text}");
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
     assert!(doc["phase_switch_t_us"].as_u64().unwrap() > 1_000_000);
     assert_eq!(doc["landmarks"].as_array().unwrap().len(), 5);

@@ -34,7 +34,8 @@ use pyo3::prelude::*;
 use replay::{
     CameraSample, FrameEstimate, LandmarkEstimate, NavSettings, ParamEstimate, Phase, Replay,
 };
-use track::{PairSettings, Pixel, SettingsError};
+use calib::smoother::SmootherSettings;
+use track::Pixel;
 
 use crate::calibration::replay_error;
 use crate::filter::stereonav_error;
@@ -111,13 +112,13 @@ fn phase_of(phase: nav::Phase) -> Phase {
     }
 }
 
-/// The navigator's settings: the defaults, with phase 1 skipped or not and phase 1's pairs
-/// `stride` frames apart (default when None), checked.
+/// The navigator's settings: the defaults, with phase 1 skipped or not and phase 1's batch
+/// holding at most `phase1_frames` frames (default when None), checked.
 fn nav_settings(
     skip_phase1: bool,
-    stride: Option<usize>,
+    phase1_frames: Option<usize>,
     consider_camera: bool,
-) -> Result<NavSettings, SettingsError> {
+) -> Result<NavSettings, String> {
     let defaults = NavSettings::default();
     let settings = NavSettings {
         skip_phase1,
@@ -129,13 +130,18 @@ fn nav_settings(
             },
             ..defaults.ekf
         },
-        pairs: PairSettings {
-            stride: stride.unwrap_or(defaults.pairs.stride),
-            ..defaults.pairs
+        phase1: SmootherSettings {
+            max_frames: phase1_frames.unwrap_or(defaults.phase1.max_frames),
+            ..defaults.phase1
         },
         ..defaults
     };
-    settings.pairs.validate()?;
+    settings
+        .phase1
+        .validate()
+        .map_err(|(name, value, expected)| {
+            format!("phase-1 setting {name} = {value} must be {expected}")
+        })?;
     Ok(settings)
 }
 
@@ -265,23 +271,23 @@ pub(crate) fn phase_names() -> Vec<&'static str> {
 ///
 /// `rig_json` is a rig file's tables as JSON (`rig_source` names it in errors); None uses the
 /// log's `/rig` message. `skip_phase1` starts phase 2 at the first frame from the rig's
-/// nominal values and priors; `stride` sets the frames between the two of a phase-1 pair
-/// (default when None); `consider_camera` keeps phase 2 from refining the camera parameters
+/// nominal values and priors; `phase1_frames` bounds phase 1's batch (default when None);
+/// `consider_camera` keeps phase 2 from refining the camera parameters
 /// (`vslam_ekf::CameraUpdate::Consider`). Raises `stereonav.InputError` for a log that cannot be read or is not
 /// a vehicle log, a bad rig or a setting out of range; a log cut short is replayed as far as
 /// it goes, with a warning. The GIL is released during the run.
 #[pyfunction]
-#[pyo3(name = "replay", signature = (log_path, rig_json, rig_source, skip_phase1, stride, consider_camera))]
+#[pyo3(name = "replay", signature = (log_path, rig_json, rig_source, skip_phase1, phase1_frames, consider_camera))]
 pub(crate) fn replay_log(
     py: Python<'_>,
     log_path: PathBuf,
     rig_json: Option<&str>,
     rig_source: &str,
     skip_phase1: bool,
-    stride: Option<usize>,
+    phase1_frames: Option<usize>,
     consider_camera: bool,
 ) -> PyResult<ReplayResult> {
-    let settings = nav_settings(skip_phase1, stride, consider_camera)
+    let settings = nav_settings(skip_phase1, phase1_frames, consider_camera)
         .map_err(|e| input_error(py, e.to_string()))?;
     let rig = rig_json
         .map(|text| Rig::from_json_str(text, rig_source))
@@ -558,22 +564,22 @@ impl Navigator {
 impl Navigator {
     /// A navigator for the rig (its file's tables as JSON; `rig_source` names it in errors),
     /// at the world origin. `skip_phase1` starts phase 2 at the first frame from the rig's
-    /// nominal values and priors; `stride` sets the frames between the two of a phase-1 pair
-    /// (default when None); `consider_camera` keeps phase 2 from refining the camera
+    /// nominal values and priors; `phase1_frames` bounds phase 1's batch (default when None);
+    /// `consider_camera` keeps phase 2 from refining the camera
     /// parameters. Raises `stereonav.InputError` for a bad rig or setting.
     #[new]
-    #[pyo3(signature = (rig_json, rig_source, skip_phase1, stride, consider_camera))]
+    #[pyo3(signature = (rig_json, rig_source, skip_phase1, phase1_frames, consider_camera))]
     fn new(
         py: Python<'_>,
         rig_json: &str,
         rig_source: &str,
         skip_phase1: bool,
-        stride: Option<usize>,
+        phase1_frames: Option<usize>,
         consider_camera: bool,
     ) -> PyResult<Self> {
         let rig =
             Rig::from_json_str(rig_json, rig_source).map_err(|e| input_error(py, e.to_string()))?;
-        let settings = nav_settings(skip_phase1, stride, consider_camera)
+        let settings = nav_settings(skip_phase1, phase1_frames, consider_camera)
             .map_err(|e| input_error(py, e.to_string()))?;
         let navigator =
             nav::Navigator::new(rig, settings).map_err(|e| input_error(py, e.to_string()))?;
@@ -708,7 +714,8 @@ impl Navigator {
             ("frames", s.frames),
             ("odometry", s.odometry),
             ("frames_without_odometry", s.frames_without_odometry),
-            ("pairs", s.pairs),
+            ("phase1_solves", s.phase1_solves),
+            ("odometry_dropped", s.odometry_dropped),
             ("rematched", s.rematched),
             ("rejected", s.rejected),
             ("refused_updates", s.refused_updates),
@@ -737,18 +744,16 @@ mod tests {
         let c = nav_settings(false, None, true).expect("consider");
         assert_eq!(c.ekf.camera_update, vslam_ekf::CameraUpdate::Consider);
         assert!(s.skip_phase1);
-        assert_eq!(s.pairs, NavSettings::default().pairs);
+        assert_eq!(s.phase1, NavSettings::default().phase1);
         assert_eq!(
-            nav_settings(false, Some(20), false)
-                .expect("20")
-                .pairs
-                .stride,
-            20
+            nav_settings(false, Some(200), false)
+                .expect("200")
+                .phase1
+                .max_frames,
+            200
         );
-        let err = nav_settings(false, Some(0), false).expect_err("stride 0");
-        assert!(err.to_string().contains("stride = 0"), "{err}");
-        let err = nav_settings(false, Some(1_000_001), false).expect_err("too far");
-        assert!(err.to_string().contains("stride = 1000001"), "{err}");
+        let err = nav_settings(false, Some(1), false).expect_err("one frame");
+        assert!(err.contains("max_frames = 1"), "{err}");
     }
 
     #[test]

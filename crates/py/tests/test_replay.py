@@ -361,12 +361,10 @@ def test_bad_arguments_are_named() -> None:
         replay(EXPERIMENT_LOG, 3.0)  # type: ignore[arg-type]
     with pytest.raises(InputTypeError, match="skip_phase1 must be a bool"):
         replay(EXPERIMENT_LOG, skip_phase1="yes")  # type: ignore[arg-type]
-    with pytest.raises(InputTypeError, match="stride must be an int"):
-        replay(EXPERIMENT_LOG, stride=2.5)  # type: ignore[arg-type]
-    with pytest.raises(InputError, match="stride is 0"):
-        replay(EXPERIMENT_LOG, stride=0)
-    with pytest.raises(InputError, match="stride = 1000001"):
-        replay(EXPERIMENT_LOG, stride=1_000_001)
+    with pytest.raises(InputTypeError, match="phase1_frames must be an int"):
+        replay(EXPERIMENT_LOG, phase1_frames=2.5)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="phase1_frames is 1"):
+        replay(EXPERIMENT_LOG, phase1_frames=1)
     with pytest.raises(TypeError):
         replay(EXPERIMENT_LOG, EXPERIMENT_RIG, True)  # type: ignore[misc]
 
@@ -574,12 +572,10 @@ def test_bad_navigator_settings_raise(tmp_path: pathlib.Path) -> None:
         Navigator(tmp_path / "no-such.rig.toml")
     with pytest.raises(InputTypeError, match="skip_phase1 must be a bool"):
         Navigator(EXPERIMENT_RIG, skip_phase1=1)  # type: ignore[arg-type]
-    with pytest.raises(InputError, match="stride is 0"):
-        Navigator(EXPERIMENT_RIG, stride=0)
-    with pytest.raises(InputError, match="stride = 1000001"):
-        Navigator(EXPERIMENT_RIG, stride=1_000_001)
+    with pytest.raises(InputError, match="phase1_frames is 1"):
+        Navigator(EXPERIMENT_RIG, phase1_frames=1)
     rig = stereonav.load_rig(EXPERIMENT_RIG)
-    assert Navigator(rig, stride=20).phase == "calibrating"
+    assert Navigator(rig, phase1_frames=200).phase == "calibrating"
     with pytest.raises(InputError, match=r"RigConfig: \[prior\] baseline: missing key"):
         Navigator(dataclasses.replace(rig, prior={}))
     assert math.isfinite(Navigator(rig).camera["baseline"].value)

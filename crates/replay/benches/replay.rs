@@ -34,8 +34,7 @@ fn cases() -> Vec<(&'static str, PathBuf, NavSettings)> {
         skip_phase1: true,
         ..NavSettings::default()
     };
-    let mut fast = NavSettings::default();
-    fast.pairs.stride = 10;
+    let fast = NavSettings::default();
     vec![
         ("paper_experiment", fixture("paper-experiment.mcap"), skip),
         ("paper_square", fixture("paper-square.mcap"), skip),

@@ -1303,6 +1303,10 @@ mod schema {
                     "tracker_resets",
                     integer("Frames where every track was restarted"),
                 ),
+                (
+                    "phase1_solves",
+                    integer("Solves of phase 1's batch over every frame"),
+                ),
             ],
         );
         let camera_errors: Vec<(&str, Value)> = Param::ALL

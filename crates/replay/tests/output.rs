@@ -163,6 +163,7 @@ fn synthetic() -> Replay {
             pairs: 3,
             landmark_pairs: 12,
             tracker_resets: 0,
+            phase1_solves: 4,
         },
         truth: Some(TruthErrors {
             landmark_rms: 0.02,
@@ -697,6 +698,7 @@ fn summary_has_the_contract_keys_and_types() {
             "pairs",
             "landmark_pairs",
             "tracker_resets",
+            "phase1_solves",
         ])
     );
     assert!(s["counts"].as_object().unwrap().values().all(Value::is_u64));

@@ -403,19 +403,23 @@ impl Ekf {
         let nl = handover.landmarks.len();
         let n = POSE_DIM + LANDMARK_DIM * nl + m;
         let src = &handover.covariance;
-        if src.nrows() != POSE_DIM + m + LANDMARK_DIM * nl || src.ncols() != src.nrows() {
+        let mb = handover.estimated.len();
+        if src.nrows() != POSE_DIM + mb + LANDMARK_DIM * nl || src.ncols() != src.nrows() {
             return Err(Error::BadCameraCovariance);
         }
-        // Batch order [pose, C, landmarks] -> filter order [pose, landmarks, C].
-        let map = |i: usize| -> usize {
-            if i < POSE_DIM {
-                i
-            } else if i < POSE_DIM + m {
-                POSE_DIM + LANDMARK_DIM * nl + (i - POSE_DIM)
-            } else {
-                i - m
-            }
-        };
+        // Batch order [pose, its estimated C, landmarks] -> filter order [pose, landmarks,
+        // C]; a parameter the batch held at nominal enters with its prior, uncorrelated.
+        let mut map: Vec<usize> = Vec::with_capacity(src.nrows());
+        map.extend(0..POSE_DIM);
+        for pb in &handover.estimated {
+            let a = ekf
+                .estimated
+                .iter()
+                .position(|pa| pa == pb)
+                .ok_or(Error::BadCameraCovariance)?;
+            map.push(POSE_DIM + LANDMARK_DIM * nl + a);
+        }
+        map.extend((0..LANDMARK_DIM * nl).map(|j| POSE_DIM + j));
         let mut x = DVector::zeros(n);
         x[0] = handover.pose.x;
         x[1] = handover.pose.y;
@@ -435,9 +439,16 @@ impl Ekf {
             });
         }
         let mut p = DMatrix::zeros(n, n);
-        for i in 0..n {
-            for j in 0..n {
-                p[(map(i), map(j))] = 0.5 * (src[(i, j)] + src[(j, i)]);
+        for (i, &mi) in map.iter().enumerate() {
+            for (j, &mj) in map.iter().enumerate() {
+                p[(mi, mj)] = 0.5 * (src[(i, j)] + src[(j, i)]);
+            }
+        }
+        for (a, pa) in ekf.estimated.iter().enumerate() {
+            if !handover.estimated.contains(pa) {
+                let sigma = rig.prior[pa.index()].ok_or(Error::MissingPrior { param: *pa })?;
+                let k = POSE_DIM + LANDMARK_DIM * nl + a;
+                p[(k, k)] = sigma * sigma;
             }
         }
         if p.iter().any(|v| !v.is_finite()) {

@@ -464,7 +464,7 @@ def replay(
     rig_json: str | None,
     rig_source: str,
     skip_phase1: bool,
-    stride: int | None,
+    phase1_frames: int | None,
     consider_camera: bool,
 ) -> ReplayResult:
     """The whole stack on a vehicle log; raises ``stereonav.InputError`` naming the file or
@@ -479,7 +479,7 @@ class Navigator:
         rig_json: str,
         rig_source: str,
         skip_phase1: bool,
-        stride: int | None,
+        phase1_frames: int | None,
         consider_camera: bool,
     ) -> Navigator: ...
     def push_odometry(self, t_us: _U64, values: _F64) -> None:

@@ -372,8 +372,8 @@ def _flag(name: str, value: object) -> bool:
     return bool(value)
 
 
-def _stride(value: object) -> Optional[int]:
-    return None if value is None else _count("stride", value, 1)
+def _phase1_frames(value: object) -> Optional[int]:
+    return None if value is None else _count("phase1_frames", value, 2)
 
 
 def _timestamp(name: str, value: object) -> int:
@@ -463,7 +463,7 @@ def replay(
     rig_path: Optional[RigLike] = None,
     *,
     skip_phase1: bool = False,
-    stride: Optional[int] = None,
+    phase1_frames: Optional[int] = None,
     consider_camera: bool = False,
 ) -> Replay:
     """Run the whole stack on a vehicle log, as ``stereonav replay`` does.
@@ -485,10 +485,10 @@ def replay(
     skip_phase1 : bool, keyword-only
         Start phase 2 at the first frame from the rig's nominal values and priors (as in the
         paper's experiment) instead of self-calibrating first.
-    stride : int, keyword-only
-        Frames from the first frame of a phase-1 pair to its second, ``1..=1000000``; lamps
-        must stay in view across a pair, so a fast vehicle needs fewer. Default 40 (2 s at
-        20 Hz).
+    phase1_frames : int, keyword-only
+        Frames phase 1's batch (every pose, every landmark and the camera parameters at once)
+        holds at most, ``>= 2``; when it is full before the calibration is stable, phase 2
+        starts from what the data gave. Default 2000 (100 s at 20 Hz).
     consider_camera : bool, keyword-only
         Keep phase 2 from refining the camera parameters: their covariance is carried into
         the pose and landmark sigmas, their values stay phase 1's (Schmidt-Kalman; for drives
@@ -507,7 +507,7 @@ def replay(
         names it, and the ``OSError`` is the ``__cause__``), is not an MCAP file, is an MCAP
         file without the vehicle topics, or has a malformed vehicle message; there is no rig
         (none given and no ``/rig`` in the log) or it is not valid (the file, the key and the
-        problem are named); ``stride`` is out of range. A log cut short is not an error: it
+        problem are named); ``phase1_frames`` is out of range. A log cut short is not an error: it
         is replayed as far as it goes, and :attr:`Replay.warnings` says so.
 
     Examples
@@ -524,7 +524,7 @@ def replay(
         rig_json,
         rig_source,
         _flag("skip_phase1", skip_phase1),
-        _stride(stride),
+        _phase1_frames(phase1_frames),
         _flag("consider_camera", consider_camera),
     )
     return Replay._from_native(native)
@@ -538,13 +538,14 @@ class Navigator:
     """The method's two phases in one object, fed with odometry and stereo frames.
 
     Phase 1 (``"calibrating"``): each frame goes through the association (left-right
-    matching on the rectified rig, frame-to-frame tracking predicted by the odometry); frame
-    pairs of confirmed tracks feed the incremental self-calibration; the pose is dead
-    reckoning. At the frame where the calibration becomes stable the navigator switches
-    (:attr:`phase_switch_t_us`) to phase 2 (``"navigating"``): the EKF with the camera
-    parameters in the state starts from the hand-over at the dead-reckoned pose; tracks bound
-    to landmarks update it, unbound tracks are matched against the map or confirmed as new
-    landmarks.
+    matching on the rectified rig, frame-to-frame tracking predicted by the odometry); every
+    frame's confirmed tracks and the odometry feed phase 1's batch (every pose, every landmark
+    and the camera parameters solved at once, every half second). At the frame where the
+    calibration becomes stable the navigator switches (:attr:`phase_switch_t_us`) to phase 2
+    (``"navigating"``): the EKF with the camera parameters in the state starts from the
+    batch's joint estimate of the pose, the landmarks and the camera, so that the frames of
+    phase 1 are mapped; tracks bound to landmarks update it, unbound tracks are matched
+    against the map or confirmed as new landmarks.
 
     Feed the odometry up to a frame's time (:meth:`push_odometry`) before the frame
     (:meth:`push_frame`); both must come in time order. The world frame is the robot at the
@@ -557,8 +558,8 @@ class Navigator:
         which parameters to estimate, their priors, the noise model.
     skip_phase1 : bool, keyword-only
         Start phase 2 at the first frame from the rig's nominal values and priors.
-    stride : int, keyword-only
-        Frames between the two frames of a phase-1 pair, ``1..=1000000`` (default 40).
+    phase1_frames : int, keyword-only
+        Frames phase 1's batch holds at most, ``>= 2`` (default 2000; see :func:`replay`).
     consider_camera : bool, keyword-only
         Keep phase 2 from refining the camera parameters (see :func:`replay`).
 
@@ -576,7 +577,7 @@ class Navigator:
         rig: RigLike,
         *,
         skip_phase1: bool = False,
-        stride: Optional[int] = None,
+        phase1_frames: Optional[int] = None,
         consider_camera: bool = False,
     ) -> None:
         rig_json, rig_source = _rig("rig", rig)
@@ -584,7 +585,7 @@ class Navigator:
             rig_json,
             rig_source,
             _flag("skip_phase1", skip_phase1),
-            _stride(stride),
+            _phase1_frames(phase1_frames),
             _flag("consider_camera", consider_camera),
         )
 

@@ -18,10 +18,9 @@ pub(crate) fn simulate_warehouse(tag: &str) -> Result<PathBuf, String> {
     Ok(path)
 }
 
-/// A log replayed with `pairs.stride = 10` (the warehouse's speed needs it) and loaded.
+/// A log replayed with the default settings and loaded.
 pub(crate) fn load(path: &Path) -> Result<Model, String> {
-    let mut settings = NavSettings::default();
-    settings.pairs.stride = 10;
+    let settings = NavSettings::default();
     viewer::load(
         path,
         &LoadOptions {
