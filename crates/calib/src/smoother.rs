@@ -81,14 +81,54 @@ impl SmootherSettings {
     pub fn validate(&self) -> Result<(), (&'static str, f64, &'static str)> {
         #[allow(clippy::cast_precision_loss)]
         let checks: [(&'static str, f64, bool, &'static str); 8] = [
-            ("max_frames", self.max_frames as f64, self.max_frames >= 2, "at least 2"),
-            ("solve_every", self.solve_every as f64, self.solve_every >= 1, "at least 1"),
-            ("max_iterations", self.max_iterations as f64, self.max_iterations >= 1, "at least 1"),
-            ("huber", self.huber, self.huber.is_finite() && self.huber > 0.0, "positive"),
-            ("rebind_px", self.rebind_px, self.rebind_px.is_finite() && self.rebind_px >= 0.0, "finite, >= 0"),
-            ("sigma_fraction", self.sigma_fraction, self.sigma_fraction > 0.0 && self.sigma_fraction <= 1.0, "in (0, 1]"),
-            ("step_fraction", self.step_fraction, self.step_fraction.is_finite() && self.step_fraction > 0.0, "positive"),
-            ("consecutive", self.consecutive as f64, self.consecutive >= 1, "at least 1"),
+            (
+                "max_frames",
+                self.max_frames as f64,
+                self.max_frames >= 2,
+                "at least 2",
+            ),
+            (
+                "solve_every",
+                self.solve_every as f64,
+                self.solve_every >= 1,
+                "at least 1",
+            ),
+            (
+                "max_iterations",
+                self.max_iterations as f64,
+                self.max_iterations >= 1,
+                "at least 1",
+            ),
+            (
+                "huber",
+                self.huber,
+                self.huber.is_finite() && self.huber > 0.0,
+                "positive",
+            ),
+            (
+                "rebind_px",
+                self.rebind_px,
+                self.rebind_px.is_finite() && self.rebind_px >= 0.0,
+                "finite, >= 0",
+            ),
+            (
+                "sigma_fraction",
+                self.sigma_fraction,
+                self.sigma_fraction > 0.0 && self.sigma_fraction <= 1.0,
+                "in (0, 1]",
+            ),
+            (
+                "step_fraction",
+                self.step_fraction,
+                self.step_fraction.is_finite() && self.step_fraction > 0.0,
+                "positive",
+            ),
+            (
+                "consecutive",
+                self.consecutive as f64,
+                self.consecutive >= 1,
+                "at least 1",
+            ),
         ];
         for (name, value, ok, expected) in checks {
             if !ok {
@@ -215,7 +255,11 @@ fn wrap(a: f64) -> f64 {
 
 /// The odometry residual `h(x_a, x_b) - m` with `h = (Rz(-theta_a) (p_b - p_a), theta_b -
 /// theta_a)` and its Jacobians with respect to `x_a` and `x_b`.
-fn odometry_residual(a: &Pose2, b: &Pose2, m: &Motion) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+fn odometry_residual(
+    a: &Pose2,
+    b: &Pose2,
+    m: &Motion,
+) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
     let (s, c) = (libm::sin(a.theta), libm::cos(a.theta));
     let (dx, dy) = (b.x - a.x, b.y - a.y);
     let hx = c * dx + s * dy;
@@ -325,7 +369,9 @@ impl Smoother {
         }
         let odometry = odometry.and_then(|(m, cov)| {
             let info = cov.try_inverse()?;
-            info.iter().all(|v| v.is_finite()).then_some((m, 0.5 * (info + info.transpose())))
+            info.iter()
+                .all(|v| v.is_finite())
+                .then_some((m, 0.5 * (info + info.transpose())))
         });
         let pose = match (self.frames.last(), &odometry) {
             (None, _) => Pose2::default(),
@@ -462,11 +508,16 @@ impl Smoother {
                 let i = p.param.index();
                 p.structural
                     || (p.observable
-                        && libm::fabs(values[i] - prev[i]) <= self.settings.step_fraction * sigmas[i])
+                        && libm::fabs(values[i] - prev[i])
+                            <= self.settings.step_fraction * sigmas[i])
             })
         });
         let any = report.params.iter().any(|p| p.observable) || report.params.is_empty();
-        self.stable_run = if steady && any { self.stable_run + 1 } else { 0 };
+        self.stable_run = if steady && any {
+            self.stable_run + 1
+        } else {
+            0
+        };
         self.history.push((t_us, values, sigmas));
         if self.stable_run >= self.settings.consecutive {
             self.hand_over(HandoverReason::Stable);
@@ -482,8 +533,13 @@ impl Smoother {
             let i = p.index();
             let prior_sigma = self.prior_sigma(p);
             let posterior_sigma = libm::sqrt(cov[(i, i)].max(0.0));
-            let data_info = 1.0 / (posterior_sigma * posterior_sigma) - 1.0 / (prior_sigma * prior_sigma);
-            let data_sigma = if data_info > 0.0 { 1.0 / libm::sqrt(data_info) } else { f64::INFINITY };
+            let data_info =
+                1.0 / (posterior_sigma * posterior_sigma) - 1.0 / (prior_sigma * prior_sigma);
+            let data_sigma = if data_info > 0.0 {
+                1.0 / libm::sqrt(data_info)
+            } else {
+                f64::INFINITY
+            };
             let observable = posterior_sigma <= self.settings.sigma_fraction * prior_sigma;
             let trap = structural_trap(p, tilted, self.total_rotation);
             let reason = (!observable).then_some(trap.unwrap_or(
@@ -849,7 +905,11 @@ impl System {
     fn eliminate(
         &self,
         lambda: f64,
-    ) -> Option<(DMatrix<f64>, DVector<f64>, Vec<(Matrix3<f64>, Matrix3<f64>, DMatrix<f64>, Vector3<f64>)>)> {
+    ) -> Option<(
+        DMatrix<f64>,
+        DVector<f64>,
+        Vec<(Matrix3<f64>, Matrix3<f64>, DMatrix<f64>, Vector3<f64>)>,
+    )> {
         let pv = self.d.len();
         let w = self.z.nrows();
         let damp3 = |m: &Matrix3<f64>| {
@@ -876,7 +936,7 @@ impl System {
             let ek = *self.e.get(k)?;
             let a = *self.active.get(k)?;
             let g = dinv * ek; // D^-1 E
-            let h = &dinv * fk.columns(0, a); // D^-1 F (3 x a)
+            let h = dinv * fk.columns(0, a); // D^-1 F (3 x a)
             let db = dinv * bk;
             // Next pose.
             let mut dn = damp3(self.d.get(k + 1)?) - ek.transpose() * g;

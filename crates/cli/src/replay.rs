@@ -78,7 +78,9 @@ pub(crate) fn nav_settings(
         ..defaults
     };
     if let Err((name, value, expected)) = settings.phase1.validate() {
-        anyhow::bail!("--phase1-frames {phase1_frames}: phase-1 setting {name} = {value} must be {expected}");
+        anyhow::bail!(
+            "--phase1-frames {phase1_frames}: phase-1 setting {name} = {value} must be {expected}"
+        );
     }
     Ok(settings)
 }

@@ -52,10 +52,10 @@ mod error;
 
 use alloc::vec::Vec;
 
+use calib::camera::Param;
 use calib::camera::{CameraParams, Pose2};
 use calib::config::Rig;
 use calib::odometry::OdomSample;
-use calib::camera::Param;
 use calib::selfcal::Handover;
 use calib::smoother::{BatchHandover, HandoverReason, Smoother, SmootherSettings};
 use nalgebra::{Matrix3, Matrix4, Vector4};
@@ -281,7 +281,9 @@ impl Navigator {
 
     /// The smoothed poses of every frame of phase 1, `(t_us, pose)`, once phase 2 started.
     pub fn phase1_trajectory(&self) -> &[(u64, Pose2)] {
-        self.smoother.handover().map_or(&[], |h| h.trajectory.as_slice())
+        self.smoother
+            .handover()
+            .map_or(&[], |h| h.trajectory.as_slice())
     }
 
     /// The estimated parameters phase 1's data did not inform at the hand-over (they entered
@@ -458,9 +460,7 @@ impl Navigator {
             .filter(|o| o.confirmed)
             .map(|o| (o.track.0, o.measurement))
             .collect();
-        outcome.solved = self
-            .smoother
-            .add_frame(tracked.t_us, motion, &observations);
+        outcome.solved = self.smoother.add_frame(tracked.t_us, motion, &observations);
         if outcome.solved {
             self.stats.phase1_solves += 1;
             if let Some(p) = self.smoother.last_pose() {

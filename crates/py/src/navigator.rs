@@ -27,6 +27,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use calib::odometry::OdomSample;
+use calib::smoother::SmootherSettings;
 use calib::{N_PARAMS, Rig};
 use numpy::ndarray::{Array2, Array3, ArrayView1, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
@@ -34,7 +35,6 @@ use pyo3::prelude::*;
 use replay::{
     CameraSample, FrameEstimate, LandmarkEstimate, NavSettings, ParamEstimate, Phase, Replay,
 };
-use calib::smoother::SmootherSettings;
 use track::Pixel;
 
 use crate::calibration::replay_error;

@@ -101,7 +101,11 @@ fn run() -> Result<(), String> {
         lm.push(t.landmark_rms);
         ate.push(t.ate_rms);
         for (k, p) in estimated.iter().enumerate() {
-            let e = t.camera.iter().find(|(q, _)| q == p).map_or(f64::NAN, |(_, e)| *e);
+            let e = t
+                .camera
+                .iter()
+                .find(|(q, _)| q == p)
+                .map_or(f64::NAN, |(_, e)| *e);
             let sigma = r
                 .final_camera
                 .iter()
@@ -131,7 +135,9 @@ fn run() -> Result<(), String> {
                 continue;
             }
             let cov = nalgebra::Matrix3::from_fn(|i, j| l.covariance[i][j]);
-            let d2 = cov.try_inverse().map_or(f64::INFINITY, |ci| e.dot(&(ci * e)));
+            let d2 = cov
+                .try_inverse()
+                .map_or(f64::INFINITY, |ci| e.dot(&(ci * e)));
             lm_total += 1;
             lm_inside += usize::from(d2 <= 14.16);
         }

@@ -196,7 +196,9 @@ pub fn replay_log(
             calib::smoother::HandoverReason::BufferFull => {
                 "phase 1 was not stable when its frame buffer filled"
             }
-            calib::smoother::HandoverReason::Requested => "phase 1 was not stable by the end of the log",
+            calib::smoother::HandoverReason::Requested => {
+                "phase 1 was not stable by the end of the log"
+            }
         };
         let names: Vec<&str> = uninformed.iter().map(|p| p.name()).collect();
         warnings.push(if names.is_empty() {

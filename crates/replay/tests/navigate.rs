@@ -95,7 +95,10 @@ fn paper_experiment_whole_method_by_default() {
     assert!(t.landmark_rms <= 0.002, "{d}");
     assert!(t.ate_rms <= 0.010, "{d}");
     let b = camera_error(&r, Param::Baseline);
-    assert!(b.abs() <= 0.0005 && b.abs() <= 3.0 * sigma(&r, Param::Baseline), "{d}");
+    assert!(
+        b.abs() <= 0.0005 && b.abs() <= 3.0 * sigma(&r, Param::Baseline),
+        "{d}"
+    );
 }
 
 /// A log that ends before phase 1 is stable is still mapped, from the batch of every frame,
@@ -107,7 +110,13 @@ fn a_log_that_ends_in_phase_1_is_still_mapped() {
     // More frames than the log has: the hand-over can only come from the end of the log.
     settings.phase1.max_frames = 100_000;
     settings.phase1.sigma_fraction = 1e-6;
-    let r = replay_log(log("paper-experiment.mcap"), None, &settings, &mut |_, _| {}).unwrap();
+    let r = replay_log(
+        log("paper-experiment.mcap"),
+        None,
+        &settings,
+        &mut |_, _| {},
+    )
+    .unwrap();
     let d = describe(&r);
     assert_eq!(r.landmarks.len(), 5, "{d}");
     assert!(
@@ -116,8 +125,16 @@ fn a_log_that_ends_in_phase_1_is_still_mapped() {
             .any(|w| w.contains("not stable by the end of the log") && w.contains("baseline")),
         "{d}"
     );
-    let b = r.final_camera.iter().find(|c| c.param == Param::Baseline).unwrap();
-    assert_eq!((b.value, b.sigma), (0.12, 0.006), "held at nominal with its prior: {d}");
+    let b = r
+        .final_camera
+        .iter()
+        .find(|c| c.param == Param::Baseline)
+        .unwrap();
+    assert_eq!(
+        (b.value, b.sigma),
+        (0.12, 0.006),
+        "held at nominal with its prior: {d}"
+    );
     assert!(
         r.frames
             .iter()
@@ -125,7 +142,10 @@ fn a_log_that_ends_in_phase_1_is_still_mapped() {
     );
     // The nominal baseline is 3 % off the truth (3.6 mm), inside its prior's 3 sigma, and the
     // map's scale follows it: about 3 % of the lamps' 2 m range.
-    assert!(camera_error(&r, Param::Baseline).abs() <= 3.0 * 0.006, "{d}");
+    assert!(
+        camera_error(&r, Param::Baseline).abs() <= 3.0 * 0.006,
+        "{d}"
+    );
     assert!(r.truth.as_ref().unwrap().landmark_rms <= 0.1, "{d}");
 }
 
@@ -172,11 +192,17 @@ fn paper_calibration_hands_over_from_phase_1() {
         .iter()
         .find(|c| c.t_us == switch && c.phase == replay::Phase::Navigating)
         .unwrap();
-    let truth = [(Param::F, 721.0, 0.0015 * 721.0), (Param::Baseline, 0.1164, 0.00075)];
+    let truth = [
+        (Param::F, 721.0, 0.0015 * 721.0),
+        (Param::Baseline, 0.1164, 0.00075),
+    ];
     for (p, value, bound) in truth {
         let c = at_switch.params.iter().find(|c| c.param == p).unwrap();
         let e = c.value - value;
-        assert!(e.abs() <= bound && e.abs() <= 3.0 * c.sigma, "{p:?} at the switch {c:?}: {d}");
+        assert!(
+            e.abs() <= bound && e.abs() <= 3.0 * c.sigma,
+            "{p:?} at the switch {c:?}: {d}"
+        );
     }
     // Phase 1's estimates are in the camera history before the switch.
     assert!(
