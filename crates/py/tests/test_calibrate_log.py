@@ -46,6 +46,7 @@ COUNTS = {
     "pairs",
     "landmark_pairs",
     "tracker_resets",
+    "phase1_solves",
 }
 
 

@@ -194,14 +194,16 @@ class Replay:
     camera_history : CameraHistory
         The camera parameters after every phase-1 solve, then every phase-2 frame.
     phase_switch_t_us : int or None
-        When phase 2 started: None when phase 1 never became stable or was skipped.
+        When phase 2 started: None when phase 1 was skipped (a log that ends in phase 1 is
+        handed over at its last frame).
     phase1_skipped : bool
         Phase 2 ran from the rig's nominal values and priors.
     counts : dict of str to int
         What was read, decoded and associated: ``frames`` (good packets), ``corrupt``,
         ``lost``, ``bytes_skipped``, ``frames_out_of_order``, ``odometry``,
-        ``stereo_matches``, ``tracks``, ``confirmed_tracks``, ``pairs``, ``landmark_pairs``,
-        ``tracker_resets``.
+        ``stereo_matches``, ``tracks``, ``confirmed_tracks``, ``pairs``, ``landmark_pairs``
+        (frame pairs: ``calibrate_log`` only), ``tracker_resets``, ``phase1_solves`` (solves
+        of phase 1's batch over every frame).
     warnings : tuple of str
         What limits the result without stopping it (a log cut short, phase 1 never stable,
         frames without odometry, updates the filter refused), one line each.
