@@ -20,7 +20,7 @@ type DecodedFrame = (u64, Vec<ImagePoint>, Vec<ImagePoint>);
 pub struct LoadOptions {
     /// The rig file's content; without it, the log's `/rig` message.
     pub rig: Option<Rig>,
-    /// The navigator's settings (phase 1 skipped or not, the pair stride).
+    /// The navigator's settings (phase 1 skipped or not, the size of phase 1's batch).
     pub settings: NavSettings,
 }
 
