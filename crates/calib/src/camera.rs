@@ -81,6 +81,16 @@ impl core::fmt::Display for Param {
     }
 }
 
+/// An angle wrapped into `(-pi, pi]` (exact for angles already inside).
+pub fn wrap_angle(a: f64) -> f64 {
+    use core::f64::consts::PI;
+    if a > -PI && a <= PI {
+        return a;
+    }
+    let w = a - 2.0 * PI * libm::floor((a + PI) / (2.0 * PI));
+    if w <= -PI { w + 2.0 * PI } else { w }
+}
+
 /// The rig's pose in the robot frame: `t = (x, y, z)` and `R_RS = Rz(yaw) Ry(pitch) Rx(roll)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Mount {

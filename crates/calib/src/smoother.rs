@@ -28,7 +28,7 @@ use alloc::vec::Vec;
 
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
-use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, Pose2};
+use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
 use crate::config::Rig;
 use crate::odometry::Motion;
 use crate::rig::{Measurement, project, project_with_jacobians, triangulate};
@@ -76,9 +76,21 @@ impl Default for SmootherSettings {
     }
 }
 
+/// A [`SmootherSettings`] field out of its range.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("phase-1 setting {name} = {value} must be {expected}")]
+pub struct SmootherSettingsError {
+    /// The field.
+    pub name: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// What it must be.
+    pub expected: &'static str,
+}
+
 impl SmootherSettings {
     /// Checks every field.
-    pub fn validate(&self) -> Result<(), (&'static str, f64, &'static str)> {
+    pub fn validate(&self) -> Result<(), SmootherSettingsError> {
         #[allow(clippy::cast_precision_loss)]
         let checks: [(&'static str, f64, bool, &'static str); 8] = [
             (
@@ -132,7 +144,11 @@ impl SmootherSettings {
         ];
         for (name, value, ok, expected) in checks {
             if !ok {
-                return Err((name, value, expected));
+                return Err(SmootherSettingsError {
+                    name,
+                    value,
+                    expected,
+                });
             }
         }
         Ok(())
@@ -246,13 +262,6 @@ pub struct Smoother {
     handover: Option<BatchHandover>,
 }
 
-/// Wraps an angle into `(-pi, pi]`.
-fn wrap(a: f64) -> f64 {
-    use core::f64::consts::PI;
-    let w = a - 2.0 * PI * libm::floor((a + PI) / (2.0 * PI));
-    if w <= -PI { w + 2.0 * PI } else { w }
-}
-
 /// The odometry residual `h(x_a, x_b) - m` with `h = (Rz(-theta_a) (p_b - p_a), theta_b -
 /// theta_a)` and its Jacobians with respect to `x_a` and `x_b`.
 fn odometry_residual(
@@ -264,7 +273,11 @@ fn odometry_residual(
     let (dx, dy) = (b.x - a.x, b.y - a.y);
     let hx = c * dx + s * dy;
     let hy = -s * dx + c * dy;
-    let r = Vector3::new(hx - m.dx, hy - m.dy, wrap(b.theta - a.theta - m.dtheta));
+    let r = Vector3::new(
+        hx - m.dx,
+        hy - m.dy,
+        wrap_angle(b.theta - a.theta - m.dtheta),
+    );
     let ja = Matrix3::new(-c, -s, hy, s, -c, -hx, 0.0, 0.0, -1.0);
     let jb = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
     (r, ja, jb)
@@ -272,6 +285,28 @@ fn odometry_residual(
 
 /// Information of a frame interval without odometry: the pose is free to within metres.
 const NO_ODOMETRY_INFORMATION: f64 = 1e-2;
+
+impl Frame {
+    /// The odometry factor from the previous frame's pose `prev` to this frame's `pose`:
+    /// residual, Jacobians with respect to both poses, information. Without odometry, a weak
+    /// zero-motion factor.
+    fn odometry_factor(
+        &self,
+        prev: &Pose2,
+        pose: &Pose2,
+    ) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>, Matrix3<f64>) {
+        match &self.odometry {
+            Some((m, info)) => {
+                let (r, ja, jb) = odometry_residual(prev, pose, m);
+                (r, ja, jb, *info)
+            }
+            None => {
+                let (r, ja, jb) = odometry_residual(prev, pose, &Motion::default());
+                (r, ja, jb, Matrix3::identity() * NO_ODOMETRY_INFORMATION)
+            }
+        }
+    }
+}
 
 impl Smoother {
     /// A batch for this rig; the first frame's pose is the world origin.
@@ -624,16 +659,8 @@ impl Smoother {
             if i > 0
                 && let Some(prev) = poses.get(i - 1)
             {
-                cost += match &f.odometry {
-                    Some((m, info)) => {
-                        let (r, _, _) = odometry_residual(prev, pose, m);
-                        r.dot(&(info * r))
-                    }
-                    None => {
-                        let (r, _, _) = odometry_residual(prev, pose, &Motion::default());
-                        NO_ODOMETRY_INFORMATION * r.norm_squared()
-                    }
-                };
+                let (r, _, _, info) = f.odometry_factor(prev, pose);
+                cost += r.dot(&(info * r));
             }
             for (j, z) in &f.observations {
                 let Some(l) = landmarks.get(*j) else { continue };
@@ -775,16 +802,7 @@ impl Smoother {
             if i > 0
                 && let Some(prev) = poses.get(i - 1)
             {
-                let (r, ja, jb, info) = match &f.odometry {
-                    Some((mo, info)) => {
-                        let (r, ja, jb) = odometry_residual(prev, pose, mo);
-                        (r, ja, jb, *info)
-                    }
-                    None => {
-                        let (r, ja, jb) = odometry_residual(prev, pose, &Motion::default());
-                        (r, ja, jb, Matrix3::identity() * NO_ODOMETRY_INFORMATION)
-                    }
-                };
+                let (r, ja, jb, info) = f.odometry_factor(prev, pose);
                 let kb = i - 1; // variable index of pose i
                 sys.d[kb] += jb.transpose() * info * jb;
                 sys.b[kb] -= jb.transpose() * info * r;

@@ -12,7 +12,7 @@ use std::io::{self, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use calib::Rig;
 use replay::{NavSettings, Phase, Replay};
 
@@ -77,11 +77,10 @@ pub(crate) fn nav_settings(
         },
         ..defaults
     };
-    if let Err((name, value, expected)) = settings.phase1.validate() {
-        anyhow::bail!(
-            "--phase1-frames {phase1_frames}: phase-1 setting {name} = {value} must be {expected}"
-        );
-    }
+    settings
+        .phase1
+        .validate()
+        .with_context(|| format!("--phase1-frames {phase1_frames}"))?;
     Ok(settings)
 }
 

@@ -161,8 +161,6 @@ pub struct Navigator {
     settings: NavSettings,
     front_end: FrontEnd,
     smoother: Smoother,
-    /// The hand-over in the filter's form (camera and covariance), once it happened.
-    handover: Option<Handover>,
     ekf: Option<Ekf>,
     candidates: Candidates,
     /// Odometry since (and including the last sample before) the previous frame.
@@ -188,11 +186,11 @@ impl Navigator {
                 expected: "strictly between 0 and 1",
             });
         }
-        if let Err((name, value, expected)) = settings.phase1.validate() {
+        if let Err(e) = settings.phase1.validate() {
             return Err(Error::Settings {
-                name,
-                value,
-                expected,
+                name: e.name,
+                value: e.value,
+                expected: e.expected,
             });
         }
         let front_end = FrontEnd::new(Model::from_rig(&rig), settings.front_end)?;
@@ -210,7 +208,6 @@ impl Navigator {
             settings,
             front_end,
             smoother,
-            handover: None,
             ekf,
             candidates,
             odometry: Vec::new(),
@@ -269,9 +266,15 @@ impl Navigator {
         &self.smoother
     }
 
-    /// The hand-over to phase 2 (camera parameters and covariance), once it happened.
-    pub fn handover(&self) -> Option<&Handover> {
-        self.handover.as_ref()
+    /// The hand-over to phase 2 (camera parameters and covariance), once it happened: the
+    /// camera part of [`Self::batch_handover`].
+    pub fn handover(&self) -> Option<Handover> {
+        self.smoother.handover().map(|b| Handover {
+            camera: b.camera,
+            covariance: b.camera_covariance,
+            t_us: b.t_us,
+            observability: b.observability.clone(),
+        })
     }
 
     /// Phase 1's whole hand-over (the batch's joint estimate and smoothed trajectory).
@@ -490,12 +493,6 @@ impl Navigator {
             .with_camera(batch.camera, batch.camera_covariance);
         self.front_end.set_model(model);
         self.pose = batch.pose;
-        self.handover = Some(Handover {
-            camera: batch.camera,
-            covariance: batch.camera_covariance,
-            t_us: batch.t_us,
-            observability: batch.observability.clone(),
-        });
         self.ekf = Some(ekf);
         self.phase_switch_t_us = Some(t_us);
         Ok(())

@@ -136,12 +136,7 @@ fn nav_settings(
         },
         ..defaults
     };
-    settings
-        .phase1
-        .validate()
-        .map_err(|(name, value, expected)| {
-            format!("phase-1 setting {name} = {value} must be {expected}")
-        })?;
+    settings.phase1.validate().map_err(|e| e.to_string())?;
     Ok(settings)
 }
 

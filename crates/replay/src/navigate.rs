@@ -18,7 +18,7 @@ use crate::{
 /// Data time between two map snapshots in the replay, microseconds.
 pub const MAP_SNAPSHOT_US: u64 = 1_000_000;
 
-/// A lamp counts as seen when it is inside both images at this many phase-2 frames (one
+/// A lamp counts as seen when it is inside both images at this many frames (one
 /// second at 20 Hz). A landmark needs the tracker's confirmation (3 frames) and its own (3
 /// consistent triangulations) first; lamps that only cross an image corner at speed are in
 /// view for fewer frames than that, some of them at the border where the stereo match fails
@@ -130,13 +130,9 @@ pub fn replay_log(
         progress(k as u64 + 1, total);
     }
     // A log that ends in phase 1 is still mapped: phase 2 starts from the batch of every frame.
-    let finished_in_phase1 = match navigator.finish() {
-        Ok(switched) => switched,
-        Err(e) => {
-            *refused.entry(e.to_string()).or_default() += 1;
-            false
-        }
-    };
+    if let Err(e) = navigator.finish() {
+        *refused.entry(e.to_string()).or_default() += 1;
+    }
     // The frames of phase 1 take the batch's smoothed poses: the whole trajectory is in the
     // first frame's world frame.
     let smoothed = navigator.phase1_trajectory();
@@ -210,12 +206,10 @@ pub fn replay_log(
             )
         });
     }
-    let _ = finished_in_phase1;
-    let phase2_frames: Vec<u64> = frames.iter().map(|f| f.t_us).collect();
     let truth = input
         .truth
         .as_ref()
-        .map(|t| truth_errors(t, &frames, &landmarks, &final_c, &rig, &phase2_frames));
+        .map(|t| truth_errors(t, &frames, &landmarks, &final_c, &rig));
     Ok(Replay {
         frames,
         camera,
@@ -280,7 +274,6 @@ fn truth_errors(
     landmarks: &[LandmarkEstimate],
     final_camera: &CameraParams,
     rig: &Rig,
-    phase2_frames: &[u64],
 ) -> TruthErrors {
     // Trajectory: frames with a true pose at the same timestamp.
     let mut sq = 0.0;
@@ -370,13 +363,13 @@ fn truth_errors(
             pairs.push((l.position, [t.x, t.y, t.z]));
         }
     }
-    // Lamps in view of both cameras at enough phase-2 frames, with no landmark.
+    // Lamps in view of both cameras at enough frames (both phases are mapped), with no landmark.
     let true_camera = truth.camera.as_ref().map_or(rig.nominal, truth_camera);
     let (w, h) = (f64::from(rig.width), f64::from(rig.height));
     let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
     let mut seen = vec![0usize; truth.landmarks.len()];
-    for t in phase2_frames {
-        let Ok(i) = truth.poses.binary_search_by_key(t, |p| p.t_us) else {
+    for f in frames {
+        let Ok(i) = truth.poses.binary_search_by_key(&f.t_us, |p| p.t_us) else {
             continue;
         };
         let Some(p) = truth.poses.get(i) else {

@@ -34,6 +34,15 @@ fn camera_error(r: &Replay, p: Param) -> f64 {
         .1
 }
 
+/// The camera estimate of the switch's frame: phase 1's hand-over, as phase 2 took it.
+fn camera_at_switch(r: &Replay) -> &replay::CameraSample {
+    let switch = r.phase_switch_t_us.unwrap();
+    r.camera
+        .iter()
+        .find(|c| c.t_us == switch && c.phase == replay::Phase::Navigating)
+        .unwrap()
+}
+
 fn sigma(r: &Replay, p: Param) -> f64 {
     r.final_camera.iter().find(|c| c.param == p).unwrap().sigma
 }
@@ -187,11 +196,7 @@ fn paper_calibration_hands_over_from_phase_1() {
     }
     let t = r.truth.as_ref().unwrap();
     assert!(t.ate_rms <= 0.010, "{d}");
-    let at_switch = r
-        .camera
-        .iter()
-        .find(|c| c.t_us == switch && c.phase == replay::Phase::Navigating)
-        .unwrap();
+    let at_switch = camera_at_switch(&r);
     let truth = [
         (Param::F, 721.0, 0.0015 * 721.0),
         (Param::Baseline, 0.1164, 0.00075),
@@ -258,12 +263,7 @@ fn paper_calibration_with_the_camera_considered_keeps_the_hand_over() {
     .unwrap();
     let d = describe(&r);
     assert_map_complete(&r, 5);
-    let switch = r.phase_switch_t_us.unwrap();
-    let at_switch = r
-        .camera
-        .iter()
-        .find(|c| c.t_us == switch && c.phase == replay::Phase::Navigating)
-        .unwrap();
+    let at_switch = camera_at_switch(&r);
     assert_eq!(at_switch.params, r.final_camera, "{d}");
     for p in [Param::F, Param::Baseline] {
         assert!(

@@ -2,7 +2,7 @@
 
 use alloc::vec::Vec;
 
-use calib::camera::Param;
+use calib::camera::{Param, wrap_angle};
 use calib::odometry::OdomSample;
 use calib::rig::Jac4x3;
 use calib::selfcal::Handover;
@@ -228,15 +228,6 @@ pub struct Ekf {
     /// current pose's frame: the relative pose uncertainty between two frames.
     motion_covariance: Matrix3<f64>,
     workspace: Workspace,
-}
-
-fn wrap_angle(a: f64) -> f64 {
-    use core::f64::consts::PI;
-    if a > -PI && a <= PI {
-        return a;
-    }
-    let w = a - 2.0 * PI * libm::floor((a + PI) / (2.0 * PI));
-    if w <= -PI { w + 2.0 * PI } else { w }
 }
 
 fn check_finite(what: &'static str, value: f64) -> Result<(), Error> {
