@@ -57,6 +57,13 @@ pub struct SmootherSettings {
     pub step_fraction: f64,
     /// Solves in a row that must satisfy both.
     pub consecutive: usize,
+    /// Frames the batch keeps after the hand-over, when it goes on as phase 2's fixed-lag
+    /// smoother ([`Smoother::start_mapping`]): older frames are marginalised into a prior.
+    pub window: usize,
+    /// Landmarks the fixed-lag smoother carries at most: its dense prior over every landmark
+    /// costs `O(w^2)` a frame for `w = 3 x landmarks`; beyond this the smoother stops and the
+    /// filter goes on alone (docs/phase2.md).
+    pub max_landmarks: usize,
 }
 
 impl Default for SmootherSettings {
@@ -72,6 +79,10 @@ impl Default for SmootherSettings {
             sigma_fraction: 0.2,
             step_fraction: 1.0,
             consecutive: 3,
+            // Five seconds at 20 Hz: every pose is re-linearised over 100 frames of data
+            // before it is marginalised.
+            window: 100,
+            max_landmarks: 48,
         }
     }
 }
@@ -92,7 +103,7 @@ impl SmootherSettings {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), SmootherSettingsError> {
         #[allow(clippy::cast_precision_loss)]
-        let checks: [(&'static str, f64, bool, &'static str); 8] = [
+        let checks: [(&'static str, f64, bool, &'static str); 10] = [
             (
                 "max_frames",
                 self.max_frames as f64,
@@ -140,6 +151,18 @@ impl SmootherSettings {
                 self.consecutive as f64,
                 self.consecutive >= 1,
                 "at least 1",
+            ),
+            (
+                "window",
+                self.window as f64,
+                self.window >= 2,
+                "at least 2",
+            ),
+            (
+                "max_landmarks",
+                self.max_landmarks as f64,
+                true,
+                "a count",
             ),
         ];
         for (name, value, ok, expected) in checks {
@@ -219,6 +242,61 @@ impl BatchHandover {
     }
 }
 
+/// The joint estimate of the last solve: what phase 2's filter is re-seeded with while the
+/// batch goes on as a fixed-lag smoother.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointEstimate {
+    /// Time of the frame solved last, microseconds.
+    pub t_us: u64,
+    /// Its pose.
+    pub pose: Pose2,
+    /// The camera parameters.
+    pub camera: CameraParams,
+    /// The parameters in [`Self::covariance`], in its order.
+    pub estimated: Vec<Param>,
+    /// The landmarks, in the batch's order (index = [`Smoother::add_landmark`]'s).
+    pub landmarks: Vec<Vector3<f64>>,
+    /// Joint covariance of `[pose (3), estimated, landmarks (3 each)]`.
+    pub covariance: DMatrix<f64>,
+}
+
+/// What the marginalised frames said: a Gaussian over `[first kept pose, C, landmarks
+/// 0..L0]` in information form, linearised at the estimate when they were marginalised.
+/// Cost `dx^T info dx - 2 eta^T dx` with `dx` the offset from that estimate.
+#[derive(Debug, Clone)]
+struct Prior {
+    info: DMatrix<f64>,
+    eta: DVector<f64>,
+    pose: Pose2,
+    camera: Vec<f64>,
+    landmarks: Vec<Vector3<f64>>,
+}
+
+impl Prior {
+    fn delta(
+        &self,
+        pose: &Pose2,
+        camera: &CameraParams,
+        estimated: &[Param],
+        landmarks: &[Vector3<f64>],
+    ) -> DVector<f64> {
+        let mut dx = DVector::zeros(self.info.nrows());
+        dx[0] = pose.x - self.pose.x;
+        dx[1] = pose.y - self.pose.y;
+        dx[2] = wrap_angle(pose.theta - self.pose.theta);
+        let m = estimated.len();
+        for (a, (p, c0)) in estimated.iter().zip(&self.camera).enumerate() {
+            dx[3 + a] = camera.get(*p) - c0;
+        }
+        for (j, (l, l0)) in landmarks.iter().zip(&self.landmarks).enumerate() {
+            for a in 0..3 {
+                dx[3 + m + 3 * j + a] = l[a] - l0[a];
+            }
+        }
+        dx
+    }
+}
+
 /// The result of one solve.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolveSummary {
@@ -260,6 +338,17 @@ pub struct Smoother {
     last_summary: Option<SolveSummary>,
     stable_run: usize,
     handover: Option<BatchHandover>,
+    /// Phase 2: the batch goes on as a fixed-lag smoother ([`Smoother::start_mapping`]).
+    mapping: bool,
+    /// What the marginalised frames said about the first kept frame's pose, C and the
+    /// landmarks (`None`: nothing marginalised yet, the first frame is the world origin).
+    prior: Option<Prior>,
+    /// Frames marginalised so far: the absolute index of `frames[0]`.
+    dropped: usize,
+    /// Final poses of the marginalised frames, not yet taken.
+    smoothed: Vec<(u64, Pose2)>,
+    /// Frames added since the last solve (mapping).
+    since_solve: usize,
 }
 
 /// The odometry residual `h(x_a, x_b) - m` with `h = (Rz(-theta_a) (p_b - p_a), theta_b -
@@ -281,6 +370,19 @@ fn odometry_residual(
     let ja = Matrix3::new(-c, -s, hy, s, -c, -hx, 0.0, 0.0, -1.0);
     let jb = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
     (r, ja, jb)
+}
+
+/// The odometry motion with its information (inverse covariance); `None` when there is none
+/// or its covariance cannot be inverted.
+fn odometry_information(
+    odometry: Option<(Motion, Matrix3<f64>)>,
+) -> Option<(Motion, Matrix3<f64>)> {
+    odometry.and_then(|(m, cov)| {
+        let info = cov.try_inverse()?;
+        info.iter()
+            .all(|v| v.is_finite())
+            .then_some((m, 0.5 * (info + info.transpose())))
+    })
 }
 
 /// Information of a frame interval without odometry: the pose is free to within metres.
@@ -328,6 +430,11 @@ impl Smoother {
             last_summary: None,
             stable_run: 0,
             handover: None,
+            mapping: false,
+            prior: None,
+            dropped: 0,
+            smoothed: Vec::new(),
+            since_solve: 0,
         }
     }
 
@@ -402,12 +509,7 @@ impl Smoother {
         if self.handover.is_some() {
             return false;
         }
-        let odometry = odometry.and_then(|(m, cov)| {
-            let info = cov.try_inverse()?;
-            info.iter()
-                .all(|v| v.is_finite())
-                .then_some((m, 0.5 * (info + info.transpose())))
-        });
+        let odometry = odometry_information(odometry);
         let pose = match (self.frames.last(), &odometry) {
             (None, _) => Pose2::default(),
             (Some(prev), Some((m, _))) => m.apply(&prev.pose),
@@ -416,7 +518,7 @@ impl Smoother {
         if let Some((m, _)) = &odometry {
             self.total_rotation += libm::fabs(m.dtheta);
         }
-        let k = self.frames.len();
+        let k = self.dropped + self.frames.len();
         let mut used: Vec<(usize, Measurement)> = Vec::with_capacity(observations.len());
         let seen_now: Vec<usize> = observations
             .iter()
@@ -646,8 +748,194 @@ impl Smoother {
             trajectory: self.frames.iter().map(|f| (f.t_us, f.pose)).collect(),
             observability: report,
         });
-        // The buffer is not needed any more.
-        self.frames = Vec::new();
+    }
+
+    /// After the hand-over (or from the first frame, when phase 1 is skipped), the batch goes
+    /// on as phase 2's fixed-lag smoother: the caller adds frames with the filter's
+    /// associations ([`Self::add_landmark`], [`Self::add_mapped_frame`]); every
+    /// [`SmootherSettings::solve_every`] frames it is solved again over the last
+    /// [`SmootherSettings::window`] frames, older frames marginalised into a prior, and the
+    /// filter is re-seeded with [`Self::joint`]. Every estimated parameter of the rig is
+    /// solved for again (the ones phase 1 could not inform start from their prior).
+    pub fn start_mapping(&mut self) {
+        if self.mapping {
+            return;
+        }
+        self.mapping = true;
+        self.estimated = self.rig.estimate.clone();
+        self.last_covariance = None;
+        self.since_solve = 0;
+    }
+
+    /// Whether the batch goes on as phase 2's smoother.
+    pub fn is_mapping(&self) -> bool {
+        self.mapping
+    }
+
+    /// Stops the smoother: the kept frames' poses become final ([`Self::take_smoothed`]),
+    /// the buffers are freed.
+    pub fn stop_mapping(&mut self) {
+        self.mapping = false;
+        let frames = core::mem::take(&mut self.frames);
+        self.smoothed.extend(frames.iter().map(|f| (f.t_us, f.pose)));
+        self.prior = None;
+        self.last_covariance = None;
+    }
+
+    /// A landmark the filter created: its position now; it is observed from the next frame
+    /// added. Returns its index in the batch.
+    pub fn add_landmark(&mut self, position: Vector3<f64>, track: u64) -> usize {
+        self.landmarks.push(BatchLandmark {
+            position,
+            track,
+            first_frame: self.dropped + self.frames.len(),
+            observations: 0,
+        });
+        self.landmarks.len() - 1
+    }
+
+    /// A frame of phase 2: the odometry since the previous frame (as [`Self::add_frame`]),
+    /// the filter's pose for it (the starting guess) and the observations the filter used, by
+    /// batch landmark index. Returns `true` when a solve ran ([`Self::joint`] is then this
+    /// frame's joint estimate). Does nothing unless mapping.
+    pub fn add_mapped_frame(
+        &mut self,
+        t_us: u64,
+        odometry: Option<(Motion, Matrix3<f64>)>,
+        pose: Pose2,
+        observations: &[(usize, Measurement)],
+    ) -> bool {
+        if !self.mapping {
+            return false;
+        }
+        let odometry = odometry_information(odometry);
+        let mut used: Vec<(usize, Measurement)> = Vec::with_capacity(observations.len());
+        for (j, z) in observations {
+            if *j < self.landmarks.len()
+                && z.iter().all(|v| v.is_finite())
+                && !used.iter().any(|(u, _)| u == j)
+            {
+                used.push((*j, *z));
+            }
+        }
+        for (j, _) in &used {
+            if let Some(l) = self.landmarks.get_mut(*j) {
+                l.observations += 1;
+            }
+        }
+        let pose = if pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite() {
+            pose
+        } else {
+            match (self.frames.last(), &odometry) {
+                (Some(prev), Some((m, _))) => m.apply(&prev.pose),
+                (Some(prev), None) => prev.pose,
+                (None, _) => Pose2::default(),
+            }
+        };
+        self.frames.push(Frame {
+            t_us,
+            pose,
+            odometry,
+            observations: used,
+        });
+        self.since_solve += 1;
+        if self.since_solve < self.settings.solve_every || self.frames.len() < 2 {
+            return false;
+        }
+        self.since_solve = 0;
+        if self.solve().is_none() {
+            return false;
+        }
+        let excess = self.frames.len().saturating_sub(self.settings.window);
+        if excess > 0 {
+            self.marginalise(excess);
+        }
+        true
+    }
+
+    /// Solves now when frames came since the last solve (the end of a log, in mapping).
+    /// Returns whether it solved.
+    pub fn flush(&mut self) -> bool {
+        if !self.mapping || self.since_solve == 0 || self.frames.len() < 2 {
+            return false;
+        }
+        self.since_solve = 0;
+        self.solve().is_some()
+    }
+
+    /// The last solve's joint estimate at its last frame.
+    pub fn joint(&self) -> Option<JointEstimate> {
+        let covariance = self.last_covariance.clone()?;
+        let m = self.estimated.len();
+        let nl = covariance.nrows().checked_sub(3 + m)? / 3;
+        let last = self.frames.last()?;
+        Some(JointEstimate {
+            t_us: last.t_us,
+            pose: last.pose,
+            camera: self.camera,
+            estimated: self.estimated.clone(),
+            landmarks: self.landmarks.iter().take(nl).map(|l| l.position).collect(),
+            covariance,
+        })
+    }
+
+    /// The final poses of the frames marginalised since the last call, oldest first.
+    pub fn take_smoothed(&mut self) -> Vec<(u64, Pose2)> {
+        core::mem::take(&mut self.smoothed)
+    }
+
+    /// The kept frames' `(t_us, pose)` (the last solve's, the filter's since).
+    pub fn window_poses(&self) -> Vec<(u64, Pose2)> {
+        self.frames.iter().map(|f| (f.t_us, f.pose)).collect()
+    }
+
+    /// Marginalises the oldest `count` frames (at the current estimate, just solved): the
+    /// poses are eliminated in time order from the factors that involve them (their pixels,
+    /// the odometry up to the first kept frame, the prior), and what remains over the first
+    /// kept pose, C and the landmarks known by then is the new prior.
+    fn marginalise(&mut self, count: usize) {
+        if count == 0 || count >= self.frames.len() {
+            return;
+        }
+        let poses: Vec<Pose2> = self.frames.iter().map(|f| f.pose).collect();
+        let landmarks: Vec<Vector3<f64>> = self.landmarks.iter().map(|l| l.position).collect();
+        let sys = self.normal_equations_upto(&self.camera, &poses, &landmarks, count + 1, false);
+        let Some((big, rhs, _)) = sys.eliminate(0.0) else {
+            return;
+        };
+        let m = self.estimated.len();
+        let l0 = self
+            .landmarks
+            .partition_point(|l| l.first_frame < self.dropped + count);
+        let q = 3 + m + 3 * l0;
+        if big.nrows() < q {
+            return;
+        }
+        let info = big.view((0, 0), (q, q)).into_owned();
+        let info = 0.5 * (&info + info.transpose());
+        let Some(&pose) = poses.get(count) else {
+            return;
+        };
+        self.prior = Some(Prior {
+            info,
+            eta: rhs.rows(0, q).into_owned(),
+            pose,
+            camera: self.estimated.iter().map(|p| self.camera.get(*p)).collect(),
+            landmarks: landmarks.iter().take(l0).copied().collect(),
+        });
+        for f in self.frames.drain(..count) {
+            self.smoothed.push((f.t_us, f.pose));
+        }
+        if let Some(f) = self.frames.first_mut() {
+            f.odometry = None;
+        }
+        self.dropped += count;
+    }
+
+    /// Index of frame `i`'s pose among the unknowns: the first frame is the world origin
+    /// until a prior replaces it.
+    fn first_variable(&self) -> usize {
+        usize::from(self.prior.is_none())
     }
 
     /// Robust cost at the current state.
@@ -671,11 +959,22 @@ impl Smoother {
                 cost += huber_cost(e, self.settings.huber);
             }
         }
-        for &p in &self.estimated {
-            let s = self.prior_sigma(p);
-            if s.is_finite() {
-                let d = (camera.get(p) - self.rig.nominal.get(p)) / s;
-                cost += d * d;
+        match &self.prior {
+            // The rig's prior on C is inside the marginalised frames' prior.
+            Some(prior) => {
+                if let Some(pose) = poses.first() {
+                    let dx = prior.delta(pose, camera, &self.estimated, landmarks);
+                    cost += dx.dot(&(&prior.info * &dx)) - 2.0 * prior.eta.dot(&dx);
+                }
+            }
+            None => {
+                for &p in &self.estimated {
+                    let s = self.prior_sigma(p);
+                    if s.is_finite() {
+                        let d = (camera.get(p) - self.rig.nominal.get(p)) / s;
+                        cost += d * d;
+                    }
+                }
             }
         }
         cost
@@ -751,8 +1050,9 @@ impl Smoother {
             c.set(p, c.get(p) + step.camera.get(a).copied().unwrap_or(0.0));
         }
         let mut p2 = poses.to_vec();
+        let first = self.first_variable();
         for (k, d) in step.poses.iter().enumerate() {
-            if let Some(p) = p2.get_mut(k + 1) {
+            if let Some(p) = p2.get_mut(k + first) {
                 p.x += d.x;
                 p.y += d.y;
                 p.theta += d.z;
@@ -772,10 +1072,24 @@ impl Smoother {
         poses: &[Pose2],
         landmarks: &[Vector3<f64>],
     ) -> System {
-        let n = self.frames.len();
+        self.normal_equations_upto(camera, poses, landmarks, self.frames.len(), true)
+    }
+
+    /// The normal equations of the factors of frames `0..upto` (the pixels of the last one
+    /// only with `last_pixels`), the odometry between them and the prior.
+    fn normal_equations_upto(
+        &self,
+        camera: &CameraParams,
+        poses: &[Pose2],
+        landmarks: &[Vector3<f64>],
+        upto: usize,
+        last_pixels: bool,
+    ) -> System {
+        let n = upto.min(self.frames.len());
         let m = self.estimated.len();
         let w = m + 3 * landmarks.len();
-        let pv = n - 1; // pose variables: frames 1..n-1
+        let first = self.first_variable();
+        let pv = n.saturating_sub(first); // pose variables: frames first..n-1
         let mut sys = System {
             d: vec3x3(pv),
             e: vec3x3(pv),
@@ -791,27 +1105,30 @@ impl Smoother {
         // Landmarks are in first-seen order, so the arrow columns a pose touches (with the
         // fill from the poses before it) are a prefix.
         for (k, a) in sys.active.iter_mut().enumerate() {
-            let frame = k + 1;
+            let frame = self.dropped + k + first;
             let seen = self.landmarks.partition_point(|l| l.first_frame <= frame);
             *a = m + 3 * seen;
         }
         let inv_var = 1.0 / (self.rig.noise.pixel * self.rig.noise.pixel);
-        for (i, f) in self.frames.iter().enumerate() {
+        for (i, f) in self.frames.iter().enumerate().take(n) {
             let Some(pose) = poses.get(i) else { continue };
             // Odometry factor between frames i-1 and i.
             if i > 0
                 && let Some(prev) = poses.get(i - 1)
             {
                 let (r, ja, jb, info) = f.odometry_factor(prev, pose);
-                let kb = i - 1; // variable index of pose i
+                let kb = i - first; // variable index of pose i
                 sys.d[kb] += jb.transpose() * info * jb;
                 sys.b[kb] -= jb.transpose() * info * r;
-                if i >= 2 {
-                    let ka = i - 2;
+                if i > first {
+                    let ka = kb - 1;
                     sys.d[ka] += ja.transpose() * info * ja;
                     sys.e[ka] += ja.transpose() * info * jb;
                     sys.b[ka] -= ja.transpose() * info * r;
                 }
+            }
+            if i + 1 == n && !last_pixels {
+                continue;
             }
             for (j, zm) in &f.observations {
                 let Some(l) = landmarks.get(*j) else { continue };
@@ -852,8 +1169,8 @@ impl Smoother {
                         sys.z[(col + b, a)] += cl[b];
                     }
                 }
-                if i >= 1 {
-                    let k = i - 1;
+                if i >= first {
+                    let k = i - first;
                     let jp = jac.pose;
                     sys.d[k] += jp.transpose() * jp * wi;
                     sys.b[k] += jp.transpose() * r * wi;
@@ -870,12 +1187,44 @@ impl Smoother {
                 }
             }
         }
-        // The prior on C.
-        for (a, &p) in self.estimated.iter().enumerate() {
-            let s = self.prior_sigma(p);
-            if s.is_finite() && s > 0.0 {
-                sys.z[(a, a)] += 1.0 / (s * s);
-                sys.bz[a] -= (camera.get(p) - self.rig.nominal.get(p)) / (s * s);
+        match &self.prior {
+            // The marginalised frames' prior (it holds the rig's prior on C).
+            Some(prior) => {
+                if let (Some(pose), Some(d0), Some(b0), Some(f0)) = (
+                    poses.first(),
+                    sys.d.first_mut(),
+                    sys.b.first_mut(),
+                    sys.f.first_mut(),
+                ) {
+                    let dx = prior.delta(pose, camera, &self.estimated, landmarks);
+                    let g = &prior.eta - &prior.info * &dx;
+                    let q = prior.info.nrows() - 3;
+                    for a in 0..3 {
+                        b0[a] += g[a];
+                        for b in 0..3 {
+                            d0[(a, b)] += prior.info[(a, b)];
+                        }
+                        for c in 0..q {
+                            f0[(a, c)] += prior.info[(a, 3 + c)];
+                        }
+                    }
+                    for r in 0..q {
+                        sys.bz[r] += g[3 + r];
+                        for c in 0..q {
+                            sys.z[(r, c)] += prior.info[(3 + r, 3 + c)];
+                        }
+                    }
+                }
+            }
+            // The prior on C.
+            None => {
+                for (a, &p) in self.estimated.iter().enumerate() {
+                    let s = self.prior_sigma(p);
+                    if s.is_finite() && s > 0.0 {
+                        sys.z[(a, a)] += 1.0 / (s * s);
+                        sys.bz[a] -= (camera.get(p) - self.rig.nominal.get(p)) / (s * s);
+                    }
+                }
             }
         }
         sys

@@ -50,6 +50,7 @@ extern crate std;
 
 mod error;
 
+use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
 
 use calib::camera::Param;
@@ -86,6 +87,11 @@ pub struct NavSettings {
     pub map_match_probability: f64,
     /// Start phase 2 at the first frame from the rig's nominal values and priors.
     pub skip_phase1: bool,
+    /// Phase 2 re-linearised by the batch: after the hand-over the batch goes on as a
+    /// fixed-lag smoother over the last [`SmootherSettings::window`] frames with the filter's
+    /// associations, and the filter is re-seeded with its joint estimate at every solve
+    /// (docs/phase2.md, "Phase 2 re-linearised"). Off with the camera considered.
+    pub smooth_phase2: bool,
 }
 
 impl Default for NavSettings {
@@ -98,6 +104,7 @@ impl Default for NavSettings {
             candidates: CandidateSettings::default(),
             map_match_probability: 0.999,
             skip_phase1: false,
+            smooth_phase2: true,
         }
     }
 }
@@ -152,6 +159,13 @@ pub struct NavStats {
     pub rejected: u64,
     /// Updates the filter refused (state left as it was).
     pub refused_updates: u64,
+    /// Solves of phase 2's fixed-lag smoother.
+    pub phase2_solves: u64,
+    /// Joint estimates of the smoother the filter could not take (it went on without).
+    pub phase2_reseeds_refused: u64,
+    /// The frame count when the smoother stopped because the map outgrew
+    /// [`SmootherSettings::max_landmarks`] (0: it did not).
+    pub phase2_smoother_stopped_at: u64,
 }
 
 /// The two phases of the method in one object (see the crate docs).
@@ -173,6 +187,8 @@ pub struct Navigator {
     phase_switch_t_us: Option<u64>,
     match_gate: f64,
     stats: NavStats,
+    /// Map landmark -> its index in the smoother, while the smoother runs in phase 2.
+    smoothed: BTreeMap<LandmarkId, usize>,
 }
 
 impl Navigator {
@@ -203,7 +219,7 @@ impl Navigator {
             None
         };
         let smoother = Smoother::new(rig.clone(), settings.phase1);
-        Ok(Self {
+        let mut navigator = Self {
             rig,
             settings,
             front_end,
@@ -218,7 +234,12 @@ impl Navigator {
             phase_switch_t_us: None,
             match_gate: chi2_quantile(p, 4.0),
             stats: NavStats::default(),
-        })
+            smoothed: BTreeMap::new(),
+        };
+        if navigator.settings.skip_phase1 && navigator.smooths_phase2() {
+            navigator.smoother.start_mapping();
+        }
+        Ok(navigator)
     }
 
     /// The rig.
@@ -298,8 +319,14 @@ impl Navigator {
     /// Ends phase 1 if it is still running (the end of a log): the batch solves once more and
     /// phase 2 starts from it, so that the frames seen so far are mapped even when the
     /// calibration never became stable. Returns whether the switch happened now.
+    ///
+    /// In phase 2 with the smoother running, the smoother solves once more over the frames
+    /// since its last solve and the filter takes its estimate (the final map is the batch's).
     pub fn finish(&mut self) -> Result<bool, Error> {
         if self.ekf.is_some() || self.settings.skip_phase1 {
+            if self.smoother.is_mapping() && self.smoother.flush() {
+                self.reseed();
+            }
             return Ok(false);
         }
         let Some(t) = self.last_frame_t else {
@@ -310,6 +337,42 @@ impl Navigator {
         }
         self.switch(t)?;
         Ok(true)
+    }
+
+    /// Whether phase 2 runs with the fixed-lag smoother ([`NavSettings::smooth_phase2`]; not
+    /// with the camera considered, whose values must stay phase 1's).
+    fn smooths_phase2(&self) -> bool {
+        self.settings.smooth_phase2
+            && self.settings.ekf.camera_update != vslam_ekf::CameraUpdate::Consider
+    }
+
+    /// Final poses of frames the smoother has marginalised (or of every kept frame when it
+    /// stopped) since the last call, oldest first: the fixed-lag smoothed trajectory.
+    pub fn take_smoothed(&mut self) -> Vec<(u64, Pose2)> {
+        self.smoother.take_smoothed()
+    }
+
+    /// The poses of the frames the smoother still holds (final only at the end of a log).
+    pub fn smoother_window(&self) -> Vec<(u64, Pose2)> {
+        if self.smoother.is_mapping() {
+            self.smoother.window_poses()
+        } else {
+            Vec::new()
+        }
+    }
+
+    /// The filter takes the smoother's last joint estimate.
+    fn reseed(&mut self) {
+        self.stats.phase2_solves += 1;
+        let (Some(ekf), Some(joint)) = (self.ekf.as_mut(), self.smoother.joint()) else {
+            return;
+        };
+        let index = &self.smoothed;
+        if ekf.set_joint(&joint, |id| index.get(&id).copied()).is_err() {
+            self.stats.phase2_reseeds_refused += 1;
+        } else {
+            self.pose = joint.pose;
+        }
     }
 
     /// Counters.
@@ -404,12 +467,18 @@ impl Navigator {
             }
         }
         let mut outcome = FrameOutcome::default();
+        // The motion since the previous frame, for the batch (phase 1, and phase 2's smoother).
         let mut phase1_motion = None;
         // Motion since the previous frame.
         if let Some(t0) = self.last_frame_t {
             let moved = match &mut self.ekf {
-                Some(ekf) => match ekf.predict_odometry(&self.odometry, t0, t_us) {
-                    Ok(()) => true,
+                Some(ekf) => match Increment::from_odometry(&self.odometry, t0, t_us, ekf.noise())
+                {
+                    Ok(inc) => {
+                        ekf.predict_increment(&inc)?;
+                        phase1_motion = Some((inc.motion, inc.covariance));
+                        true
+                    }
                     Err(vslam_ekf::Error::NoOdometry { .. }) => false,
                     Err(e) => return Err(e.into()),
                 },
@@ -444,8 +513,10 @@ impl Navigator {
         if self.ekf.is_none() {
             self.phase1(&tracked, phase1_motion, &mut outcome)?;
         }
-        if self.ekf.is_some() {
+        // The frame of the switch is the batch's last: its pixels are in the hand-over already.
+        if self.ekf.is_some() && !outcome.switched {
             self.phase2(&tracked, &mut outcome)?;
+            self.smooth(&tracked, phase1_motion, &outcome);
         }
         Ok(outcome)
     }
@@ -493,9 +564,80 @@ impl Navigator {
             .with_camera(batch.camera, batch.camera_covariance);
         self.front_end.set_model(model);
         self.pose = batch.pose;
+        self.smoothed = ids.iter().enumerate().map(|(j, id)| (*id, j)).collect();
         self.ekf = Some(ekf);
         self.phase_switch_t_us = Some(t_us);
+        if self.smooths_phase2() {
+            self.smoother.start_mapping();
+        } else {
+            self.smoother.stop_mapping();
+            self.smoother.take_smoothed();
+        }
         Ok(())
+    }
+
+    /// Phase 2's smoother takes the frame with the filter's associations (the observations
+    /// the filter accepted, the landmarks it created), and the filter is re-seeded when it
+    /// solved. The frame of the switch is the batch's last already.
+    fn smooth(
+        &mut self,
+        tracked: &TrackedFrame,
+        motion: Option<(calib::odometry::Motion, Matrix3<f64>)>,
+        outcome: &FrameOutcome,
+    ) {
+        if !self.smoother.is_mapping() || outcome.switched {
+            return;
+        }
+        let Some(ekf) = self.ekf.as_ref() else {
+            return;
+        };
+        for id in &outcome.removed {
+            self.smoothed.remove(id);
+        }
+        let measurement_of = |id: LandmarkId| {
+            let track = self.candidates.track_of(id)?;
+            tracked
+                .observations
+                .iter()
+                .find(|o| o.track.0 == track)
+                .map(|o| (track, o.measurement))
+        };
+        let mut observations: Vec<(usize, calib::Measurement)> = Vec::new();
+        let mut added: Vec<(LandmarkId, u64, calib::Measurement)> = Vec::new();
+        for id in &outcome.added {
+            if let Some((track, z)) = measurement_of(*id) {
+                added.push((*id, track, z));
+            }
+        }
+        for (id, _) in &outcome.accepted {
+            if let (Some(&j), Some((_, z))) = (self.smoothed.get(id), measurement_of(*id)) {
+                observations.push((j, z));
+            }
+        }
+        let pose = ekf.pose();
+        for (id, track, z) in added {
+            let Some(l) = ekf.landmark(id) else {
+                continue;
+            };
+            let j = self.smoother.add_landmark(l.position, track);
+            self.smoothed.insert(id, j);
+            observations.push((j, z));
+        }
+        // Landmarks the filter holds that the smoother does not (created while it was not
+        // told): it cannot re-seed them, so it stops.
+        if ekf.landmark_count() > self.smoothed.len()
+            || self.smoother.landmarks().len() > self.settings.phase1.max_landmarks
+        {
+            self.smoother.stop_mapping();
+            self.stats.phase2_smoother_stopped_at = self.stats.frames;
+            return;
+        }
+        if self
+            .smoother
+            .add_mapped_frame(tracked.t_us, motion, pose, &observations)
+        {
+            self.reseed();
+        }
     }
 
     /// Phase 2: map matching of unbound tracks, then the filter's update and confirmation.

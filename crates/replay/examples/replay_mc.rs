@@ -45,10 +45,12 @@ fn run() -> Result<(), String> {
         .unwrap_or(10);
     let mut settings = NavSettings::default();
     let mut velocity_noise: Option<f64> = None;
+    let mut detail = false;
     let mut rest = args.iter().skip(2);
     while let Some(a) = rest.next() {
         match a.as_str() {
             "--skip-phase1" => settings.skip_phase1 = true,
+            "--detail" => detail = true,
             "--consider-camera" => {
                 settings.ekf.camera_update = vslam_ekf::CameraUpdate::Consider;
             }
@@ -118,6 +120,37 @@ fn run() -> Result<(), String> {
                 && let Some(c) = cam_inside.get_mut(k)
             {
                 *c += 1;
+            }
+        }
+        if detail {
+            let mut last = 0u64;
+            for m in &r.maps {
+                if m.t_us < last + 20_000_000 && !std::ptr::eq(m, r.maps.last().unwrap_or(m)) {
+                    continue;
+                }
+                last = m.t_us;
+                let mut mean = nalgebra::Vector3::zeros();
+                let mut n = 0.0;
+                let mut sz = 0.0;
+                for l in &m.landmarks {
+                    let p = nalgebra::Vector3::from(l.position);
+                    if let Some(lamp) = sim_run.landmarks.iter().min_by(|a, b| {
+                        (a.position - p).norm().total_cmp(&(b.position - p).norm())
+                    }) && (lamp.position - p).norm() < 0.2
+                    {
+                        mean += p - lamp.position;
+                        sz += l.covariance[2][2].sqrt();
+                        n += 1.0;
+                    }
+                }
+                println!(
+                    "seed {seed} t {:.1} s: {n} landmarks, mean error {:.1} {:.1} {:.1} mm, mean sigma z {:.1} mm",
+                    (m.t_us - t0) as f64 * 1e-6,
+                    1e3 * mean.x / n,
+                    1e3 * mean.y / n,
+                    1e3 * mean.z / n,
+                    1e3 * sz / n
+                );
             }
         }
         // Each landmark against its nearest lamp (within 10 cm): its 3-D Mahalanobis distance.

@@ -83,6 +83,8 @@ pub fn replay_log(
     let mut next_snapshot: Option<u64> = None;
     let mut refused: BTreeMap<String, u64> = BTreeMap::new();
     let mut next_odom = input.odometry.iter().peekable();
+    // Final poses from phase 2's fixed-lag smoother, as it marginalises its frames.
+    let mut smoothed_poses: Vec<(u64, Pose2)> = Vec::new();
     for (k, frame) in input.frames.iter().enumerate() {
         while let Some(s) = next_odom.next_if(|s| s.t_us <= frame.t_us) {
             if let Err(e) = navigator.push_odometry(*s) {
@@ -127,6 +129,7 @@ pub fn replay_log(
                 next_snapshot = Some(frame.t_us.saturating_add(MAP_SNAPSHOT_US));
             }
         }
+        smoothed_poses.extend(navigator.take_smoothed());
         progress(k as u64 + 1, total);
     }
     // A log that ends in phase 1 is still mapped: phase 2 starts from the batch of every frame.
@@ -145,6 +148,22 @@ pub fn replay_log(
             if let Some((t, p)) = smoothed.get(i)
                 && *t == f.t_us
                 && f.phase == Phase::Calibrating
+            {
+                f.pose = [p.x, p.y, p.theta];
+            }
+        }
+    }
+    // Every frame phase 2's smoother held takes its smoothed pose.
+    smoothed_poses.extend(navigator.take_smoothed());
+    smoothed_poses.extend(navigator.smoother_window());
+    if !smoothed_poses.is_empty() {
+        let mut i = 0usize;
+        for f in &mut frames {
+            while smoothed_poses.get(i).is_some_and(|(t, _)| *t < f.t_us) {
+                i += 1;
+            }
+            if let Some((t, p)) = smoothed_poses.get(i)
+                && *t == f.t_us
             {
                 f.pose = [p.x, p.y, p.theta];
             }

@@ -6,7 +6,7 @@ use calib::camera::{Param, wrap_angle};
 use calib::odometry::OdomSample;
 use calib::rig::Jac4x3;
 use calib::selfcal::Handover;
-use calib::smoother::BatchHandover;
+use calib::smoother::{BatchHandover, JointEstimate};
 use calib::{CameraParams, Measurement, N_PARAMS, Noise, Pose2, Rig, project_with_jacobians};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, SMatrix, Vector3, Vector4};
 
@@ -459,6 +459,77 @@ impl Ekf {
             ids.push(id);
         }
         Ok((ekf, ids))
+    }
+
+    /// Re-seeds the filter with a joint estimate of the fixed-lag smoother (phase 2's batch,
+    /// [`calib::smoother::Smoother::start_mapping`]): the pose, every landmark the map holds
+    /// (`index(id)` gives its place in the batch) and the estimated camera parameters, with
+    /// their joint covariance. The landmarks' ids and counters stay. Fails, changing nothing,
+    /// when a landmark or parameter is missing from the estimate or a value is not finite.
+    pub fn set_joint(
+        &mut self,
+        joint: &JointEstimate,
+        index: impl Fn(LandmarkId) -> Option<usize>,
+    ) -> Result<(), Error> {
+        let nl = self.landmarks.len();
+        let m = self.estimated.len();
+        let n = POSE_DIM + LANDMARK_DIM * nl + m;
+        let src = &joint.covariance;
+        let mb = joint.estimated.len();
+        let nb = joint.landmarks.len();
+        if src.nrows() != POSE_DIM + mb + LANDMARK_DIM * nb || src.ncols() != src.nrows() {
+            return Err(Error::BadCameraCovariance);
+        }
+        // Filter index -> batch index.
+        let mut map: Vec<usize> = Vec::with_capacity(n);
+        map.extend(0..POSE_DIM);
+        for slot in &self.landmarks {
+            let j = index(slot.id)
+                .filter(|&j| j < nb)
+                .ok_or(Error::UnknownLandmark { id: slot.id })?;
+            map.extend((0..LANDMARK_DIM).map(|a| POSE_DIM + mb + LANDMARK_DIM * j + a));
+        }
+        for pa in &self.estimated {
+            let b = joint
+                .estimated
+                .iter()
+                .position(|pb| pb == pa)
+                .ok_or(Error::MissingPrior { param: *pa })?;
+            map.push(POSE_DIM + b);
+        }
+        let mut x = DVector::zeros(n);
+        x[0] = joint.pose.x;
+        x[1] = joint.pose.y;
+        x[2] = wrap_angle(joint.pose.theta);
+        for (k, slot) in self.landmarks.iter().enumerate() {
+            let j = index(slot.id).ok_or(Error::UnknownLandmark { id: slot.id })?;
+            let l = joint
+                .landmarks
+                .get(j)
+                .ok_or(Error::UnknownLandmark { id: slot.id })?;
+            for a in 0..LANDMARK_DIM {
+                x[POSE_DIM + LANDMARK_DIM * k + a] = l[a];
+            }
+        }
+        for (a, &pa) in self.estimated.iter().enumerate() {
+            x[POSE_DIM + LANDMARK_DIM * nl + a] = joint.camera.get(pa);
+        }
+        if let Some(&value) = x.iter().find(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "smoother state",
+                value,
+            });
+        }
+        let p = DMatrix::from_fn(n, n, |i, j| {
+            let (bi, bj) = (map[i], map[j]);
+            0.5 * (src[(bi, bj)] + src[(bj, bi)])
+        });
+        if p.iter().any(|v| !v.is_finite()) || (0..n).any(|i| p[(i, i)] < 0.0) {
+            return Err(Error::BadCameraCovariance);
+        }
+        self.x = x;
+        self.p = p;
+        Ok(())
     }
 
     /// Sets the start pose and its covariance (symmetric positive semi-definite), before any
