@@ -74,6 +74,10 @@ fn run() -> Result<(), String> {
     let estimated: Vec<Param> = scenario.rig.estimate.clone();
     let mut cam_err: Vec<Vec<f64>> = vec![Vec::new(); estimated.len()];
     let mut cam_inside: Vec<usize> = vec![0; estimated.len()];
+    // Consistency: per run the time-averaged and the final pose NEES, the final full-state
+    // NEES and its degrees of freedom.
+    let (mut nees_time, mut nees_final, mut nees_state, mut dof_state) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for seed in 0..runs {
         let sc = scenario.clone().with_seed(seed);
         let sim_run = sim::simulate(&sc, sim::Mode::Fast).map_err(|e| e.to_string())?;
@@ -97,6 +101,12 @@ fn run() -> Result<(), String> {
         let Some(t) = &r.truth else {
             return Err("the simulated log has no truth".into());
         };
+        if let Some(c) = t.consistency {
+            nees_time.push(c.pose_nees);
+            nees_final.push(c.final_pose_nees);
+            nees_state.push(c.state_nees);
+            dof_state.push(c.state_dof as f64);
+        }
         missed += t.lamps_missed;
         unmatched += t.landmarks_unmatched;
         matched += t.landmarks_matched;
@@ -201,6 +211,34 @@ fn run() -> Result<(), String> {
         1e3 * percentile(&mut ate.clone(), 0.5),
         1e3 * percentile(&mut ate, 1.0)
     );
+    if !nees_final.is_empty() {
+        let n = nees_final.len() as f64;
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let band = |dof: f64| {
+            (
+                vslam_ekf::chi2::chi2_quantile(0.025, dof) / dof,
+                vslam_ekf::chi2::chi2_quantile(0.975, dof) / dof,
+            )
+        };
+        let (lo, hi) = band(3.0 * n);
+        let dof: f64 = dof_state.iter().sum();
+        let (slo, shi) = band(dof);
+        println!(
+            "pose NEES at the last frame: mean {:.2} over {} runs (95 % band {:.2}-{:.2}); averaged over each run's phase-2 frames {:.2}",
+            mean(&nees_final),
+            nees_final.len(),
+            3.0 * lo,
+            3.0 * hi,
+            mean(&nees_time)
+        );
+        println!(
+            "full-state NEES per degree of freedom at the end: {:.3} ({} dof over the runs, 95 % band {:.3}-{:.3})",
+            nees_state.iter().sum::<f64>() / dof,
+            dof,
+            slo,
+            shi
+        );
+    }
     for (k, p) in estimated.iter().enumerate() {
         let scale = if *p == Param::Baseline { 1e3 } else { 1.0 };
         let unit = if *p == Param::Baseline { "mm" } else { "" };

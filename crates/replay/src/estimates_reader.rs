@@ -435,6 +435,7 @@ impl At<'_> {
             ate_max: self.float(t, "ate_max_m")?,
             heading_rms: self.float(t, "heading_rms_rad")?,
             camera,
+            consistency: None,
         })
     }
 

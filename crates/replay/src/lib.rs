@@ -53,7 +53,7 @@ pub use navigate::{
 };
 pub use output::{summary_json, write_estimates, write_summary, write_trajectory};
 pub use types::{
-    CameraSample, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, Replay,
+    CameraSample, Consistency, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, Replay,
     TruthErrors,
 };
 

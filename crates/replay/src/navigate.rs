@@ -85,6 +85,7 @@ pub fn replay_log(
     let mut next_odom = input.odometry.iter().peekable();
     // Final poses from phase 2's fixed-lag smoother, as it marginalises its frames.
     let mut smoothed_poses: Vec<(u64, Pose2)> = Vec::new();
+    let (mut nees_sum, mut nees_frames, mut nees_last) = (0.0, 0usize, f64::NAN);
     for (k, frame) in input.frames.iter().enumerate() {
         while let Some(s) = next_odom.next_if(|s| s.t_us <= frame.t_us) {
             if let Err(e) = navigator.push_odometry(*s) {
@@ -100,6 +101,17 @@ pub fn replay_log(
         };
         let phase = phase_of(navigator.phase());
         let (pose, pose_cov) = navigator.pose();
+        if phase == Phase::Navigating
+            && let Some(t) = input.truth.as_ref().and_then(|t| {
+                let i = t.poses.binary_search_by_key(&frame.t_us, |p| p.t_us).ok()?;
+                t.poses.get(i)
+            })
+            && let Some(v) = pose_nees(&pose, &pose_cov, t)
+        {
+            nees_sum += v;
+            nees_frames += 1;
+            nees_last = v;
+        }
         let landmarks = navigator.ekf().map_or(0, vslam_ekf::Ekf::landmark_count);
         frames.push(FrameEstimate {
             t_us: frame.t_us,
@@ -228,7 +240,28 @@ pub fn replay_log(
     let truth = input
         .truth
         .as_ref()
-        .map(|t| truth_errors(t, &frames, &landmarks, &final_c, &rig));
+        .map(|t| {
+            let mut e = truth_errors(t, &frames, &landmarks, &final_c, &rig);
+            let last = frames.last().and_then(|f| {
+                let i = t.poses.binary_search_by_key(&f.t_us, |p| p.t_us).ok()?;
+                t.poses.get(i)
+            });
+            let state = navigator
+                .ekf()
+                .zip(last)
+                .and_then(|(ekf, pose)| state_nees(ekf, pose, t));
+            if nees_frames > 0 || state.is_some() {
+                let (state_nees, state_dof) = state.unwrap_or((f64::NAN, 0));
+                e.consistency = Some(crate::Consistency {
+                    pose_nees: nees_sum / nees_frames.max(1) as f64,
+                    pose_frames: nees_frames,
+                    final_pose_nees: nees_last,
+                    state_nees,
+                    state_dof,
+                });
+            }
+            e
+        });
     Ok(Replay {
         frames,
         camera,
@@ -436,7 +469,60 @@ fn truth_errors(
             f64::NAN
         },
         camera,
+        consistency: None,
     }
+}
+
+/// Pose NEES of a filtered pose against the truth.
+fn pose_nees(pose: &Pose2, cov: &nalgebra::Matrix3<f64>, t: &TruthPose) -> Option<f64> {
+    let e = nalgebra::Vector3::new(
+        pose.x - t.x,
+        pose.y - t.y,
+        calib::camera::wrap_angle(pose.theta - t.theta),
+    );
+    let v = e.dot(&(cov.try_inverse()? * e));
+    v.is_finite().then_some(v)
+}
+
+/// Full-state NEES of the filter at the end against the truth (pose, the landmarks within
+/// 10 cm of a lamp, the estimated camera parameters) and its degrees of freedom.
+fn state_nees(ekf: &vslam_ekf::Ekf, pose: &TruthPose, truth: &Truth) -> Option<(f64, usize)> {
+    let x = ekf.state();
+    let p = ekf.covariance();
+    let mut index: Vec<usize> = vec![0, 1, 2];
+    let mut err: Vec<f64> = vec![
+        x[0] - pose.x,
+        x[1] - pose.y,
+        calib::camera::wrap_angle(x[2] - pose.theta),
+    ];
+    for l in ekf.landmarks() {
+        let i = ekf.landmark_state_index(l.id)?;
+        let near = truth.landmarks.iter().min_by(|a, b| {
+            let da = distance(l.position.into(), [a.x, a.y, a.z]);
+            let db = distance(l.position.into(), [b.x, b.y, b.z]);
+            da.total_cmp(&db)
+        })?;
+        if distance(l.position.into(), [near.x, near.y, near.z]) > LAMP_MATCH_RADIUS_M {
+            continue;
+        }
+        for (a, t) in [near.x, near.y, near.z].into_iter().enumerate() {
+            index.push(i + a);
+            err.push(x[i + a] - t);
+        }
+    }
+    if let Some(c) = &truth.camera {
+        let c = truth_camera(c);
+        for &param in ekf.estimated_parameters() {
+            let i = ekf.camera_state_index(param)?;
+            index.push(i);
+            err.push(x[i] - c.get(param));
+        }
+    }
+    let n = index.len();
+    let sub = nalgebra::DMatrix::from_fn(n, n, |a, b| p[(index[a], index[b])]);
+    let e = nalgebra::DVector::from_vec(err);
+    let v = e.dot(&(sub.cholesky()?.solve(&e)));
+    v.is_finite().then_some((v, n))
 }
 
 /// A planar rigid motion: rotation about z by `angle`, then translation `(tx, ty)`.

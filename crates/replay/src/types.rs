@@ -159,6 +159,24 @@ pub struct TruthErrors {
     pub heading_rms: f64,
     /// Final camera parameter errors (estimate minus truth), [`Param::ALL`] order.
     pub camera: Vec<(Param, f64)>,
+    /// The filter's consistency against the truth (only from a replay, not in the summary).
+    pub consistency: Option<Consistency>,
+}
+
+/// NEES of phase 2's filter against the truth: how honest its covariance is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Consistency {
+    /// Mean pose NEES (3 degrees of freedom) over the phase-2 frames with a true pose.
+    pub pose_nees: f64,
+    /// Frames in [`Self::pose_nees`].
+    pub pose_frames: usize,
+    /// Pose NEES at the last such frame.
+    pub final_pose_nees: f64,
+    /// Full-state NEES at the end: pose, every landmark within 10 cm of a lamp, the estimated
+    /// camera parameters.
+    pub state_nees: f64,
+    /// Its degrees of freedom.
+    pub state_dof: usize,
 }
 
 /// A whole log replayed.

@@ -176,6 +176,7 @@ fn synthetic() -> Replay {
             ate_max: 0.04,
             heading_rms: 0.002,
             camera: Param::ALL.iter().map(|&p| (p, 1e-3)).collect(),
+            consistency: None,
         }),
         warnings: vec!["mount_yaw is held at its nominal value: test".to_string()],
         frames,
