@@ -317,7 +317,13 @@ struct Frame {
     /// Odometry from the previous frame: motion and its information (inverse covariance).
     odometry: Option<(Motion, Matrix3<f64>)>,
     observations: Vec<(usize, Measurement)>,
+    /// Measurements of tracks not yet confirmed, by track: they join their landmark when
+    /// the track is confirmed (kept for [`TENTATIVE_FRAMES`] frames).
+    tentative: Vec<(u64, Measurement)>,
 }
+
+/// Frames back that a newly confirmed track's earlier measurements are looked for.
+const TENTATIVE_FRAMES: usize = 8;
 
 /// Phase 1 over every frame (see the module docs).
 #[derive(Debug, Clone)]
@@ -497,14 +503,17 @@ impl Smoother {
     }
 
     /// Adds a frame: the odometry motion since the previous frame with its covariance
-    /// (`None` for the first frame, or when no odometry covered the interval), and the
-    /// confirmed tracks' measurements. Returns `true` when a solve ran. Does nothing once the
+    /// (`None` for the first frame, or when no odometry covered the interval), the
+    /// confirmed tracks' measurements and the tentative tracks' (they are used once their
+    /// track is confirmed: the first frames of a track count too, and the first frame's
+    /// lamps anchor the map). Returns `true` when a solve ran. Does nothing once the
     /// hand-over happened.
     pub fn add_frame(
         &mut self,
         t_us: u64,
         odometry: Option<(Motion, Matrix3<f64>)>,
         observations: &[(u64, Measurement)],
+        tentative: &[(u64, Measurement)],
     ) -> bool {
         if self.handover.is_some() {
             return false;
@@ -547,10 +556,12 @@ impl Smoother {
                         });
                         let j = self.landmarks.len() - 1;
                         self.track_landmark.insert(*track, j);
+                        self.backfill(*track, j);
                         used.push((j, *z));
                         continue;
                     };
                     self.track_landmark.insert(*track, j);
+                    self.backfill(*track, j);
                     j
                 }
             };
@@ -567,11 +578,22 @@ impl Smoother {
                 l.observations += 1;
             }
         }
+        let tentative: Vec<(u64, Measurement)> = tentative
+            .iter()
+            .filter(|(_, z)| z.iter().all(|v| v.is_finite()))
+            .copied()
+            .collect();
+        if let Some(old) = self.frames.len().checked_sub(TENTATIVE_FRAMES)
+            && let Some(f) = self.frames.get_mut(old)
+        {
+            f.tentative = Vec::new();
+        }
         self.frames.push(Frame {
             t_us,
             pose,
             odometry,
             observations: used,
+            tentative,
         });
         let n = self.frames.len();
         let due = n >= 2 && (n - 1).is_multiple_of(self.settings.solve_every);
@@ -597,6 +619,44 @@ impl Smoother {
             }
         }
         self.handover.as_ref()
+    }
+
+    /// A track just bound to landmark `j`: its tentative measurements of the frames before
+    /// (consecutive, newest first) become observations of `j`.
+    fn backfill(&mut self, track: u64, j: usize) {
+        let n = self.frames.len();
+        let mut earliest = None;
+        for i in (n.saturating_sub(TENTATIVE_FRAMES)..n).rev() {
+            let Some(f) = self.frames.get_mut(i) else {
+                break;
+            };
+            let Some(&(_, z)) = f.tentative.iter().find(|(t, _)| *t == track) else {
+                break;
+            };
+            if f.observations.iter().any(|(u, _)| *u == j) {
+                break;
+            }
+            f.observations.push((j, z));
+            earliest = Some(i);
+        }
+        if let (Some(i), Some(l)) = (earliest, self.landmarks.get_mut(j)) {
+            l.observations += (n - i) as u64;
+            l.first_frame = l.first_frame.min(self.dropped + i);
+        }
+    }
+
+    /// Landmarks `0..seen(k)` for each absolute frame `k`: a prefix that holds every
+    /// landmark first seen at or before `k` (first frames are in creation order but for the
+    /// few frames a backfill reaches back).
+    fn seen_prefix(&self) -> Vec<usize> {
+        let mut suffix_min: Vec<usize> = Vec::with_capacity(self.landmarks.len());
+        let mut low = usize::MAX;
+        for l in self.landmarks.iter().rev() {
+            low = low.min(l.first_frame);
+            suffix_min.push(low);
+        }
+        suffix_min.reverse();
+        suffix_min
     }
 
     /// The unique landmark, not seen under another track in this frame, that projects close
@@ -837,6 +897,7 @@ impl Smoother {
             pose,
             odometry,
             observations: used,
+            tentative: Vec::new(),
         });
         self.since_solve += 1;
         if self.since_solve < self.settings.solve_every || self.frames.len() < 2 {
@@ -905,8 +966,8 @@ impl Smoother {
         };
         let m = self.estimated.len();
         let l0 = self
-            .landmarks
-            .partition_point(|l| l.first_frame < self.dropped + count);
+            .seen_prefix()
+            .partition_point(|&f| f < self.dropped + count);
         let q = 3 + m + 3 * l0;
         if big.nrows() < q {
             return;
@@ -1104,9 +1165,10 @@ impl Smoother {
         };
         // Landmarks are in first-seen order, so the arrow columns a pose touches (with the
         // fill from the poses before it) are a prefix.
+        let suffix_min = self.seen_prefix();
         for (k, a) in sys.active.iter_mut().enumerate() {
             let frame = self.dropped + k + first;
-            let seen = self.landmarks.partition_point(|l| l.first_frame <= frame);
+            let seen = suffix_min.partition_point(|&f| f <= frame);
             *a = m + 3 * seen;
         }
         let inv_var = 1.0 / (self.rig.noise.pixel * self.rig.noise.pixel);

@@ -534,7 +534,15 @@ impl Navigator {
             .filter(|o| o.confirmed)
             .map(|o| (o.track.0, o.measurement))
             .collect();
-        outcome.solved = self.smoother.add_frame(tracked.t_us, motion, &observations);
+        let tentative: Vec<(u64, calib::Measurement)> = tracked
+            .observations
+            .iter()
+            .filter(|o| !o.confirmed)
+            .map(|o| (o.track.0, o.measurement))
+            .collect();
+        outcome.solved = self
+            .smoother
+            .add_frame(tracked.t_us, motion, &observations, &tentative);
         if outcome.solved {
             self.stats.phase1_solves += 1;
             if let Some(p) = self.smoother.last_pose() {
