@@ -152,18 +152,8 @@ impl SmootherSettings {
                 self.consecutive >= 1,
                 "at least 1",
             ),
-            (
-                "window",
-                self.window as f64,
-                self.window >= 2,
-                "at least 2",
-            ),
-            (
-                "max_landmarks",
-                self.max_landmarks as f64,
-                true,
-                "a count",
-            ),
+            ("window", self.window as f64, self.window >= 2, "at least 2"),
+            ("max_landmarks", self.max_landmarks as f64, true, "a count"),
         ];
         for (name, value, ok, expected) in checks {
             if !ok {
@@ -837,7 +827,8 @@ impl Smoother {
     pub fn stop_mapping(&mut self) {
         self.mapping = false;
         let frames = core::mem::take(&mut self.frames);
-        self.smoothed.extend(frames.iter().map(|f| (f.t_us, f.pose)));
+        self.smoothed
+            .extend(frames.iter().map(|f| (f.t_us, f.pose)));
         self.prior = None;
         self.last_covariance = None;
     }

@@ -472,16 +472,17 @@ impl Navigator {
         // Motion since the previous frame.
         if let Some(t0) = self.last_frame_t {
             let moved = match &mut self.ekf {
-                Some(ekf) => match Increment::from_odometry(&self.odometry, t0, t_us, ekf.noise())
-                {
-                    Ok(inc) => {
-                        ekf.predict_increment(&inc)?;
-                        phase1_motion = Some((inc.motion, inc.covariance));
-                        true
+                Some(ekf) => {
+                    match Increment::from_odometry(&self.odometry, t0, t_us, ekf.noise()) {
+                        Ok(inc) => {
+                            ekf.predict_increment(&inc)?;
+                            phase1_motion = Some((inc.motion, inc.covariance));
+                            true
+                        }
+                        Err(vslam_ekf::Error::NoOdometry { .. }) => false,
+                        Err(e) => return Err(e.into()),
                     }
-                    Err(vslam_ekf::Error::NoOdometry { .. }) => false,
-                    Err(e) => return Err(e.into()),
-                },
+                }
                 None => match Increment::from_odometry(&self.odometry, t0, t_us, &self.rig.noise) {
                     Ok(inc) => {
                         phase1_motion = Some((inc.motion, inc.covariance));

@@ -31,7 +31,8 @@ fn main() -> ExitCode {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: batch_reference SCENARIO.toml RUNS [--velocity-noise MPS] [--window FRAMES]";
+    let usage =
+        "usage: batch_reference SCENARIO.toml RUNS [--velocity-noise MPS] [--window FRAMES]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -67,8 +68,7 @@ fn run() -> Result<(), String> {
         let sc = scenario.clone().with_seed(seed);
         let sim_run = sim::simulate(&sc, sim::Mode::Fast).map_err(|e| e.to_string())?;
         sim_run.write_log(&log).map_err(|e| e.to_string())?;
-        let r = replay_log(&log, None, &nav, &mut |_, _| {})
-            .map_err(|e| e.to_string())?;
+        let r = replay_log(&log, None, &nav, &mut |_, _| {}).map_err(|e| e.to_string())?;
         let lamp_near = |p: [f64; 3]| {
             let p = nalgebra::Vector3::from(p);
             sim_run
@@ -82,9 +82,16 @@ fn run() -> Result<(), String> {
         for l in &r.landmarks {
             if std::env::var_os("BATCH_REF_DEBUG").is_some() {
                 let p = nalgebra::Vector3::from(l.position);
-                if let Some(lamp) = sim_run.landmarks.iter().min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm())) {
+                if let Some(lamp) = sim_run
+                    .landmarks
+                    .iter()
+                    .min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm()))
+                {
                     let e = 1e3 * (p - lamp.position);
-                    println!("  nav lamp {}: {:+.2} {:+.2} {:+.2} mm ({} obs)", lamp.id, e.x, e.y, e.z, l.observations);
+                    println!(
+                        "  nav lamp {}: {:+.2} {:+.2} {:+.2} mm ({} obs)",
+                        lamp.id, e.x, e.y, e.z, l.observations
+                    );
                 }
             }
             if let Some(d) = lamp_near(l.position) {
@@ -133,7 +140,10 @@ fn run() -> Result<(), String> {
             if let Some(lamp) = lamp {
                 if std::env::var_os("BATCH_REF_DEBUG").is_some() {
                     let e = 1e3 * (l.position - lamp.position);
-                    println!("  ref lamp {}: {:+.2} {:+.2} {:+.2} mm ({} obs)", lamp.id, e.x, e.y, e.z, l.observations);
+                    println!(
+                        "  ref lamp {}: {:+.2} {:+.2} {:+.2} mm ({} obs)",
+                        lamp.id, e.x, e.y, e.z, l.observations
+                    );
                 }
                 let d = (lamp.position - l.position).norm();
                 s_ref += d * d;

@@ -144,9 +144,11 @@ fn run() -> Result<(), String> {
                 let mut sz = 0.0;
                 for l in &m.landmarks {
                     let p = nalgebra::Vector3::from(l.position);
-                    if let Some(lamp) = sim_run.landmarks.iter().min_by(|a, b| {
-                        (a.position - p).norm().total_cmp(&(b.position - p).norm())
-                    }) && (lamp.position - p).norm() < 0.2
+                    if let Some(lamp) = sim_run
+                        .landmarks
+                        .iter()
+                        .min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm()))
+                        && (lamp.position - p).norm() < 0.2
                     {
                         mean += p - lamp.position;
                         sz += l.covariance[2][2].sqrt();

@@ -53,8 +53,8 @@ pub use navigate::{
 };
 pub use output::{summary_json, write_estimates, write_summary, write_trajectory};
 pub use types::{
-    CameraSample, Consistency, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, Replay,
-    TruthErrors,
+    CameraSample, Consistency, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
+    Replay, TruthErrors,
 };
 
 /// How the replay associates and calibrates.

@@ -237,31 +237,28 @@ pub fn replay_log(
             )
         });
     }
-    let truth = input
-        .truth
-        .as_ref()
-        .map(|t| {
-            let mut e = truth_errors(t, &frames, &landmarks, &final_c, &rig);
-            let last = frames.last().and_then(|f| {
-                let i = t.poses.binary_search_by_key(&f.t_us, |p| p.t_us).ok()?;
-                t.poses.get(i)
-            });
-            let state = navigator
-                .ekf()
-                .zip(last)
-                .and_then(|(ekf, pose)| state_nees(ekf, pose, t));
-            if nees_frames > 0 || state.is_some() {
-                let (state_nees, state_dof) = state.unwrap_or((f64::NAN, 0));
-                e.consistency = Some(crate::Consistency {
-                    pose_nees: nees_sum / nees_frames.max(1) as f64,
-                    pose_frames: nees_frames,
-                    final_pose_nees: nees_last,
-                    state_nees,
-                    state_dof,
-                });
-            }
-            e
+    let truth = input.truth.as_ref().map(|t| {
+        let mut e = truth_errors(t, &frames, &landmarks, &final_c, &rig);
+        let last = frames.last().and_then(|f| {
+            let i = t.poses.binary_search_by_key(&f.t_us, |p| p.t_us).ok()?;
+            t.poses.get(i)
         });
+        let state = navigator
+            .ekf()
+            .zip(last)
+            .and_then(|(ekf, pose)| state_nees(ekf, pose, t));
+        if nees_frames > 0 || state.is_some() {
+            let (state_nees, state_dof) = state.unwrap_or((f64::NAN, 0));
+            e.consistency = Some(crate::Consistency {
+                pose_nees: nees_sum / nees_frames.max(1) as f64,
+                pose_frames: nees_frames,
+                final_pose_nees: nees_last,
+                state_nees,
+                state_dof,
+            });
+        }
+        e
+    });
     Ok(Replay {
         frames,
         camera,

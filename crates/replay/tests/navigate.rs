@@ -272,3 +272,98 @@ fn paper_calibration_with_the_camera_considered_keeps_the_hand_over() {
         );
     }
 }
+
+/// The whole method, no flag, over seeds of a scenario with realistic odometry (0.02 m/s per
+/// sample): every lamp mapped and nothing else, the map, trajectory and camera within the
+/// issue's bounds, and honest: every estimated camera parameter and at least 90 % of the
+/// landmarks inside 3 sigma, the full-state NEES per degree of freedom near 1 (the 20-seed
+/// Monte Carlo with the 95 % bands is `examples/replay_mc.rs`).
+fn whole_method_is_honest(
+    scenario: &str,
+    seeds: u64,
+    switch_after_motion_s: f64,
+    landmark_rms_bound: f64,
+) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/scenarios")
+        .join(scenario);
+    let sc = sim::Scenario::load(&path).unwrap();
+    let log_path = std::env::temp_dir().join(format!(
+        "navigate-honest-{}-{scenario}.mcap",
+        std::process::id()
+    ));
+    let (mut inside, mut total, mut nees, mut dof) = (0usize, 0usize, 0.0, 0usize);
+    for seed in 0..seeds {
+        let sim_run = sim::simulate(&sc.clone().with_seed(seed), sim::Mode::Fast).unwrap();
+        sim_run.write_log(&log_path).unwrap();
+        let r = replay_log(&log_path, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
+        let d = format!("{scenario} seed {seed}: {}", describe(&r));
+        let t = r.truth.as_ref().unwrap();
+        assert_eq!(t.lamps_missed, 0, "{d}");
+        assert_eq!(t.landmarks_unmatched, 0, "{d}");
+        // With 0.02 m/s odometry the data allow 3-5 mm landmark RMS over runs (the batch
+        // reference over the same frames with the truth's association is as far:
+        // docs/benchmarks.md, "Phase 2 re-linearised"); the bound is the drive's.
+        assert!(t.landmark_rms <= landmark_rms_bound, "{d}");
+        assert!(t.ate_rms <= 0.010, "{d}");
+        let moving = sim_run
+            .odometry_truth
+            .iter()
+            .find(|s| s.vx.abs() + s.vy.abs() > 1e-3 || s.vtheta.abs() > 1e-3)
+            .unwrap()
+            .t_us;
+        let switch = r.phase_switch_t_us.unwrap();
+        assert!(
+            switch.saturating_sub(moving) as f64 * 1e-6 <= switch_after_motion_s,
+            "{d}"
+        );
+        for p in &sc.rig.estimate {
+            assert!(
+                camera_error(&r, *p).abs() <= 3.0 * sigma(&r, *p),
+                "{p:?}: {d}"
+            );
+        }
+        for l in &r.landmarks {
+            let p = nalgebra::Vector3::from(l.position);
+            let lamp = sim_run
+                .landmarks
+                .iter()
+                .min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm()))
+                .unwrap();
+            let e = p - lamp.position;
+            let cov = nalgebra::Matrix3::from_fn(|i, j| l.covariance[i][j]);
+            total += 1;
+            inside += usize::from(e.dot(&(cov.try_inverse().unwrap() * e)) <= 14.16);
+        }
+        let c = t.consistency.unwrap();
+        nees += c.state_nees;
+        dof += c.state_dof;
+    }
+    std::fs::remove_file(&log_path).ok();
+    assert!(
+        10 * inside >= 9 * total,
+        "{scenario}: {inside} of {total} inside 3 sigma"
+    );
+    let per_dof = nees / dof as f64;
+    assert!(
+        (0.7..=1.4).contains(&per_dof),
+        "{scenario}: full-state NEES per dof {per_dof:.3} over {dof} dof"
+    );
+}
+
+#[test]
+fn realistic_odometry_paper_experiment_is_honest() {
+    whole_method_is_honest("paper-experiment-realistic.toml", 10, 15.0, 0.010);
+}
+
+#[test]
+fn realistic_odometry_paper_square_is_honest() {
+    whole_method_is_honest("paper-square-realistic.toml", 10, 30.0, 0.010);
+}
+
+#[test]
+fn realistic_odometry_paper_calibration_is_honest() {
+    // The slow drive informs the scale least: the lamps' heights have sigma 7 mm at the end, and
+    // a run whose baseline is 2 sigma off has its map 16 mm high.
+    whole_method_is_honest("paper-calibration.toml", 10, 30.0, 0.025);
+}
