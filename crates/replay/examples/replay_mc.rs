@@ -1,7 +1,7 @@
 //! The whole stack over many seeds of a scenario: each seed simulated to a vehicle log (the
 //! board's byte stream, link faults and all), replayed, and scored against the truth.
 //!
-//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--consider-camera] [--velocity-noise MPS]`
+//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N]`
 //!
 //! Prints, over the seeds: when phase 1 handed over (time since the first frame, and since the
 //! vehicle first moved), the whole method's errors (landmark RMS, trajectory RMS in the first
@@ -36,7 +36,7 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--consider-camera] [--velocity-noise MPS]";
+    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -51,6 +51,17 @@ fn run() -> Result<(), String> {
         match a.as_str() {
             "--skip-phase1" => settings.skip_phase1 = true,
             "--detail" => detail = true,
+            "--max-landmarks" | "--window" => {
+                let v = rest
+                    .next()
+                    .ok_or("--max-landmarks / --window need a value")?;
+                let n: usize = v.parse().map_err(|_| format!("{a} {v:?}"))?;
+                if a == "--window" {
+                    settings.phase1.window = n;
+                } else {
+                    settings.phase1.max_landmarks = n;
+                }
+            }
             "--consider-camera" => {
                 settings.ekf.camera_update = vslam_ekf::CameraUpdate::Consider;
             }

@@ -435,7 +435,18 @@ impl At<'_> {
             ate_max: self.float(t, "ate_max_m")?,
             heading_rms: self.float(t, "heading_rms_rad")?,
             camera,
-            consistency: None,
+            // Absent from estimates files written before it was reported.
+            consistency: match t.get("consistency") {
+                None | Some(Value::Null) => None,
+                Some(c) => Some(crate::Consistency {
+                    pose_nees: self.float(c, "pose_nees")?,
+                    pose_frames: usize::try_from(self.uint(c, "pose_frames")?)
+                        .unwrap_or(usize::MAX),
+                    final_pose_nees: self.float(c, "final_pose_nees")?,
+                    state_nees: self.float(c, "state_nees")?,
+                    state_dof: usize::try_from(self.uint(c, "state_dof")?).unwrap_or(usize::MAX),
+                }),
+            },
         })
     }
 

@@ -183,13 +183,16 @@ pub fn replay_log(
     }
     let landmarks = map_of(&navigator);
     if let Some(last) = frames.last()
-        && maps.last().is_none_or(|m| m.t_us != last.t_us)
         && navigator.ekf().is_some()
     {
-        maps.push(MapSnapshot {
-            t_us: last.t_us,
-            landmarks: landmarks.clone(),
-        });
+        // The final map (after the smoother's last solve) is the last snapshot.
+        match maps.last_mut() {
+            Some(m) if m.t_us == last.t_us => m.landmarks.clone_from(&landmarks),
+            _ => maps.push(MapSnapshot {
+                t_us: last.t_us,
+                landmarks: landmarks.clone(),
+            }),
+        }
     }
     let (final_c, final_cov) = navigator.camera();
     let final_camera = ParamEstimate::all(&final_c, &final_cov);

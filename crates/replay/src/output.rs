@@ -255,6 +255,13 @@ fn truth_json(t: &TruthErrors) -> Value {
         "ate_max_m": t.ate_max,
         "heading_rms_rad": t.heading_rms,
         "camera": camera,
+        "consistency": t.consistency.map(|c| json!({
+            "pose_nees": c.pose_nees,
+            "pose_frames": c.pose_frames,
+            "final_pose_nees": c.final_pose_nees,
+            "state_nees": c.state_nees,
+            "state_dof": c.state_dof,
+        })),
     })
 }
 
@@ -1348,6 +1355,20 @@ mod schema {
                         "Final camera parameter errors, by name",
                         &camera_errors,
                     ),
+                ),
+                (
+                    "consistency",
+                    json!({"oneOf": [{"type": "null"}, strict_object(
+                        "stereonav.Consistency",
+                        "The filter's NEES against the truth (null without a phase 2)",
+                        &[
+                            ("pose_nees", float("Mean pose NEES over the phase-2 frames (3 dof)")),
+                            ("pose_frames", integer("Frames in pose_nees")),
+                            ("final_pose_nees", float("Pose NEES at the last such frame")),
+                            ("state_nees", float("Full-state NEES at the end")),
+                            ("state_dof", integer("Its degrees of freedom")),
+                        ],
+                    )]}),
                 ),
             ],
         );

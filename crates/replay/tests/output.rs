@@ -720,8 +720,10 @@ fn summary_has_the_contract_keys_and_types() {
             "ate_max_m",
             "heading_rms_rad",
             "camera",
+            "consistency",
         ])
     );
+    assert!(truth["consistency"].is_null());
     for k in [
         "landmark_rms_m",
         "landmark_rms_aligned_m",
