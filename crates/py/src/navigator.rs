@@ -612,6 +612,16 @@ impl Navigator {
         result.map_err(|e| step_error(py, e))
     }
 
+    /// The end of the drive (or of a log): phase 1, if still running, hands over now; in
+    /// phase 2 the smoother solves over its last frames and the filter takes its estimate.
+    /// Returns whether phase 1 handed over now. Raises `stereonav.Error` when phase 2 cannot
+    /// start from the hand-over. The GIL is released.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<bool> {
+        let state = self.state_mut();
+        py.detach(|| state.navigator.finish())
+            .map_err(|e| step_error(py, e))
+    }
+
     /// Processes one stereo frame at `t_us`: the left `(N, 2)` and right `(M, 2)` features
     /// in pixels `u, v`. Returns `(accepted ids, accepted NIS, rejected ids, added ids,
     /// removed ids, rematched (K, 2) (track, landmark), solved, switched, no_odometry)`.

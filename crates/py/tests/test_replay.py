@@ -432,7 +432,10 @@ def drive(
 @functools.lru_cache(maxsize=None)
 def experiment_navigator() -> tuple[Navigator, tuple[FrameOutcome, ...]]:
     nav = Navigator(SCENARIOS / "paper-experiment.rig.toml", skip_phase1=True)
-    return nav, tuple(drive(nav, "paper-experiment"))
+    outcomes = tuple(drive(nav, "paper-experiment"))
+    # The end of the drive, as replay does: phase 2's smoother solves over its last frames.
+    assert nav.finish() is False
+    return nav, outcomes
 
 
 def test_the_navigator_maps_the_experiments_lamps_from_the_priors() -> None:
@@ -499,6 +502,20 @@ def test_the_navigator_switches_to_phase_2_on_the_calibration_drive() -> None:
     assert nav.phase_switch_t_us == calibration().phase_switch_t_us
     assert nav.stats["phase1_solves"] == calibration().counts["phase1_solves"]
     assert len(nav.landmarks) == LAMPS
+
+
+def test_finish_hands_phase_1_over_at_the_end_of_a_short_drive() -> None:
+    """Ten seconds of the calibration drive: not stable yet, so finish() hands over and the
+    lamps seen so far are mapped (never an empty map); a second finish() changes nothing."""
+    nav = Navigator(SCENARIOS / "paper-calibration.rig.toml")
+    drive(nav, "paper-calibration", frames=200)
+    assert nav.phase == "calibrating" and len(nav.landmarks) == 0
+    assert nav.finish() is True
+    assert nav.phase == "navigating" and nav.phase_switch_t_us == nav.last_frame_t_us
+    assert len(nav.landmarks) > 0
+    landmarks = nav.landmarks.copy()
+    assert nav.finish() is False
+    np.testing.assert_array_equal(nav.landmarks, landmarks)
 
 
 def test_odometry_given_as_scalars_or_arrays() -> None:

@@ -5,7 +5,7 @@
 //! handing over) with the association taken from the truth: each feature the simulator made
 //! of a lamp is that lamp's observation, clutter is left out.
 //!
-//! `cargo run --release -p replay --example batch_reference -- SCENARIO.toml RUNS [--velocity-noise MPS] [--window FRAMES]`
+//! `cargo run --release -p replay --example batch_reference -- SCENARIO.toml RUNS [--velocity-noise MPS] [--window FRAMES] [--solve-every FRAMES]`
 //!
 //! Prints, over the seeds, the landmark RMS of both (over every run's landmarks matched to a
 //! lamp) and their ratio, and the baseline error of both.
@@ -31,8 +31,7 @@ fn main() -> ExitCode {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage =
-        "usage: batch_reference SCENARIO.toml RUNS [--velocity-noise MPS] [--window FRAMES]";
+    let usage = "usage: batch_reference SCENARIO.toml RUNS [--velocity-noise MPS] [--window FRAMES] [--solve-every FRAMES]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -41,9 +40,14 @@ fn run() -> Result<(), String> {
         .unwrap_or(10);
     let mut velocity_noise: Option<f64> = None;
     let mut nav = NavSettings::default();
+    let mut solve_every = 20;
     let mut rest = args.iter().skip(2);
     while let Some(a) = rest.next() {
         match a.as_str() {
+            "--solve-every" => {
+                let v = rest.next().ok_or("--solve-every needs a value")?;
+                solve_every = v.parse().map_err(|_| format!("--solve-every {v:?}"))?;
+            }
             "--window" => {
                 let v = rest.next().ok_or("--window needs a value")?;
                 nav.phase1.window = v.parse().map_err(|_| format!("--window {v:?}"))?;
@@ -102,7 +106,7 @@ fn run() -> Result<(), String> {
         // The reference: the frames the replay decoded, associated by the truth.
         let settings = SmootherSettings {
             max_frames: usize::MAX,
-            solve_every: 20,
+            solve_every,
             consecutive: usize::MAX,
             ..SmootherSettings::default()
         };

@@ -196,6 +196,18 @@ pub fn replay_log(
     }
     let (final_c, final_cov) = navigator.camera();
     let final_camera = ParamEstimate::all(&final_c, &final_cov);
+    // The last frame's camera sample and pose covariance are the final ones (after the
+    // smoother's last solve).
+    if let Some(last) = frames.last_mut()
+        && last.phase == Phase::Navigating
+    {
+        last.pose_covariance = matrix3(&navigator.pose().1);
+        if let Some(c) = camera.last_mut()
+            && c.t_us == last.t_us
+        {
+            c.params.clone_from(&final_camera);
+        }
+    }
     let stats = navigator.stats();
     let tracker = navigator.front_end().tracker().stats();
     counts.stereo_matches = navigator.front_end().stereo_stats().matches;

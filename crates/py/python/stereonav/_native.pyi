@@ -486,6 +486,8 @@ class Navigator:
         """Odometry ``(t_us (S,), vx vy vtheta (S, 3))``, sorted, none older than before."""
     def push_frame(self, t_us: int, left: _F64, right: _F64) -> _OutcomeTuple:
         """One stereo frame, features ``(N, 2)`` pixels ``u, v`` a side."""
+    def finish(self) -> bool:
+        """The end of the drive: phase 1 hands over if still running; phase 2's smoother solves."""
     @property
     def phase(self) -> str: ...
     @property

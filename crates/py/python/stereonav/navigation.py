@@ -705,6 +705,26 @@ class Navigator:
             no_odometry=held,
         )
 
+    def finish(self) -> bool:
+        """The end of the drive (or of a log), as :func:`replay` does after the last frame.
+
+        Phase 1, if it is still running, hands over now (so the frames seen so far are
+        mapped even when the calibration never became stable); in phase 2 the fixed-lag
+        smoother solves once more over its last frames and the filter takes its estimate.
+        After it, the navigator's map, pose and camera equal :func:`replay`'s for the same log.
+
+        Returns
+        -------
+        bool
+            Whether phase 1 handed over now.
+
+        Raises
+        ------
+        Error
+            Phase 2 could not start from phase 1's hand-over.
+        """
+        return self._native.finish()
+
     @property
     def phase(self) -> str:
         """``"calibrating"`` (phase 1) or ``"navigating"`` (phase 2); see :data:`PHASES`."""
