@@ -140,6 +140,12 @@ def test_the_experiment_maps_the_lamps_and_learns_the_baseline() -> None:
     assert r.camera["baseline"] == ParamEstimate(**r.summary["camera"]["baseline"])
     assert truth["landmarks_matched"] == LAMPS and truth["landmarks_unmatched"] == 0
     assert truth["lamps_missed"] == 0 and truth["landmark_rms_m"] < 0.005
+    # The filter's NEES against the truth: pose (3 dof) and full state (pose, 5 landmarks, B).
+    consistency = truth["consistency"]
+    assert consistency["state_dof"] == 3 + 3 * LAMPS + 1
+    # Every frame but the first, whose pose is the world origin exactly (zero covariance).
+    assert consistency["pose_frames"] == len(r.trajectory) - 1
+    assert 0 < consistency["pose_nees"] < 3 * 3 and 0 < consistency["state_nees"] < 3 * 19
     assert r.warnings == () and r.phase_switch_t_us is None and r.phase1_skipped
 
 
