@@ -817,6 +817,63 @@ impl Smoother {
         self.since_solve = 0;
     }
 
+    /// Starts the fixed-lag smoother afresh from a joint estimate (the filter's, when the
+    /// smoother could not continue from phase 1's frames: phase 1 skipped, or parameters held
+    /// for a while): its frames and landmarks are replaced by one frame at the estimate's
+    /// pose with the estimate as the prior (information = the inverse of its covariance),
+    /// and the estimate's parameters are the ones solved for. Landmark `j` is the estimate's
+    /// `j`th. Returns `false` (and does not start) when the covariance cannot be inverted.
+    pub fn restart_mapping(&mut self, joint: &JointEstimate) -> bool {
+        // A state known exactly (the start pose) gets a tiny variance: it is pinned.
+        let mut cov = joint.covariance.clone();
+        for i in 0..cov.nrows() {
+            cov[(i, i)] += 1e-14;
+        }
+        let Some(info) = cov.cholesky().map(|c| c.inverse()) else {
+            return false;
+        };
+        if !info.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        self.stop_mapping();
+        self.dropped += 1;
+        self.estimated = joint.estimated.clone();
+        self.camera = joint.camera;
+        self.landmarks = joint
+            .landmarks
+            .iter()
+            .map(|&position| BatchLandmark {
+                position,
+                track: 0,
+                first_frame: self.dropped.saturating_sub(1),
+                observations: 0,
+            })
+            .collect();
+        let q = info.nrows();
+        self.prior = Some(Prior {
+            info: 0.5 * (&info + info.transpose()),
+            eta: DVector::zeros(q),
+            pose: joint.pose,
+            camera: self
+                .estimated
+                .iter()
+                .map(|p| joint.camera.get(*p))
+                .collect(),
+            landmarks: joint.landmarks.clone(),
+        });
+        self.frames = alloc::vec![Frame {
+            t_us: joint.t_us,
+            pose: joint.pose,
+            odometry: None,
+            observations: Vec::new(),
+            tentative: Vec::new(),
+        }];
+        self.mapping = true;
+        self.last_covariance = None;
+        self.since_solve = 0;
+        true
+    }
+
     /// Whether the batch goes on as phase 2's smoother.
     pub fn is_mapping(&self) -> bool {
         self.mapping

@@ -92,6 +92,17 @@ pub struct NavSettings {
     /// associations, and the filter is re-seeded with its joint estimate at every solve
     /// (docs/phase2.md, "Phase 2 re-linearised"). Off with the camera considered.
     pub smooth_phase2: bool,
+    /// Hold (consider, not refine) in phase 2 every estimated camera parameter the motion so
+    /// far cannot inform: all of them until the vehicle has translated
+    /// [`NavSettings::min_translation_m`], and those with a structural trap
+    /// (`calib::selfcal::structural_trap`: f with the head looking straight up, the camera
+    /// height, the offsets before the vehicle turned). Otherwise a model error elsewhere
+    /// (the camera wobbling while the odometry says the vehicle stands) is absorbed by them
+    /// (docs/real-images.md).
+    pub hold_unexcited: bool,
+    /// Distance the odometry must have travelled (counting only its significant motion)
+    /// before the camera parameters are refined in phase 2, metres.
+    pub min_translation_m: f64,
 }
 
 impl Default for NavSettings {
@@ -105,6 +116,8 @@ impl Default for NavSettings {
             map_match_probability: 0.999,
             skip_phase1: false,
             smooth_phase2: true,
+            hold_unexcited: true,
+            min_translation_m: 0.05,
         }
     }
 }
@@ -140,7 +153,7 @@ pub struct FrameOutcome {
 }
 
 /// Counters over the navigator's life.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct NavStats {
     /// Frames processed.
     pub frames: u64,
@@ -166,6 +179,11 @@ pub struct NavStats {
     /// The frame count when the smoother stopped because the map outgrew
     /// [`SmootherSettings::max_landmarks`] (0: it did not).
     pub phase2_smoother_stopped_at: u64,
+    /// Distance the odometry travelled, counting only motion beyond 3 sigma of its noise
+    /// in each frame interval, metres.
+    pub significant_translation_m: f64,
+    /// Rotation the odometry turned, the same way, radians.
+    pub significant_rotation_rad: f64,
 }
 
 /// The two phases of the method in one object (see the crate docs).
@@ -219,7 +237,7 @@ impl Navigator {
             None
         };
         let smoother = Smoother::new(rig.clone(), settings.phase1);
-        let mut navigator = Self {
+        let navigator = Self {
             rig,
             settings,
             front_end,
@@ -236,9 +254,6 @@ impl Navigator {
             stats: NavStats::default(),
             smoothed: BTreeMap::new(),
         };
-        if navigator.settings.skip_phase1 && navigator.smooths_phase2() {
-            navigator.smoother.start_mapping();
-        }
         Ok(navigator)
     }
 
@@ -337,6 +352,40 @@ impl Navigator {
         }
         self.switch(t)?;
         Ok(true)
+    }
+
+    /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
+    /// 3 sigma of its noise: a standing vehicle's noise is not motion).
+    fn excite(&mut self, m: &calib::odometry::Motion, cov: &Matrix3<f64>) {
+        let d = nalgebra::Vector2::new(m.dx, m.dy);
+        let c2 = cov.fixed_view::<2, 2>(0, 0).into_owned();
+        if let Some(inv) = c2.try_inverse()
+            && d.dot(&(inv * d)) > 9.0
+        {
+            self.stats.significant_translation_m += d.norm();
+        }
+        let s = cov[(2, 2)];
+        if s > 0.0 && m.dtheta * m.dtheta > 9.0 * s {
+            self.stats.significant_rotation_rad += m.dtheta.abs();
+        }
+    }
+
+    /// The estimated camera parameters the motion so far cannot inform
+    /// ([`NavSettings::hold_unexcited`]).
+    pub fn unexcited(&self) -> Vec<Param> {
+        if !self.settings.hold_unexcited {
+            return Vec::new();
+        }
+        let c = &self.rig.nominal;
+        let tilted = c.mount.pitch.abs() > 0.05 || c.mount.roll.abs() > 0.05;
+        let rotation = self.stats.significant_rotation_rad;
+        let moved = self.stats.significant_translation_m >= self.settings.min_translation_m;
+        self.rig
+            .estimate
+            .iter()
+            .copied()
+            .filter(|&p| !moved || calib::selfcal::structural_trap(p, tilted, rotation).is_some())
+            .collect()
     }
 
     /// Whether phase 2 runs with the fixed-lag smoother ([`NavSettings::smooth_phase2`]; not
@@ -501,6 +550,9 @@ impl Navigator {
                 self.stats.frames_without_odometry += 1;
             }
         }
+        if let Some((m, cov)) = &phase1_motion {
+            self.excite(m, cov);
+        }
         self.last_frame_t = Some(t_us);
         // Keep the last sample at or before this frame: it is held into the next interval.
         let keep_from = self
@@ -516,6 +568,10 @@ impl Navigator {
         }
         // The frame of the switch is the batch's last: its pixels are in the hand-over already.
         if self.ekf.is_some() && !outcome.switched {
+            let held = self.unexcited();
+            if let Some(ekf) = self.ekf.as_mut() {
+                ekf.set_held(&held);
+            }
             self.phase2(&tracked, &mut outcome)?;
             self.smooth(&tracked, phase1_motion, &outcome);
         }
@@ -594,12 +650,30 @@ impl Navigator {
         motion: Option<(calib::odometry::Motion, Matrix3<f64>)>,
         outcome: &FrameOutcome,
     ) {
-        if !self.smoother.is_mapping() || outcome.switched {
+        if outcome.switched || !self.smooths_phase2() {
             return;
         }
         let Some(ekf) = self.ekf.as_ref() else {
             return;
         };
+        let held = !ekf.held().is_empty();
+        let over_budget = ekf.landmark_count() > self.settings.phase1.max_landmarks;
+        if self.smoother.is_mapping() && held {
+            // A parameter held: the smoother would refine it; the filter goes on alone until
+            // nothing is held, then the smoother starts again from the filter.
+            self.smoother.stop_mapping();
+            return;
+        }
+        if !self.smoother.is_mapping() {
+            if held || over_budget || self.stats.phase2_smoother_stopped_at > 0 {
+                return;
+            }
+            let (joint, ids) = ekf.joint(tracked.t_us);
+            if self.smoother.restart_mapping(&joint) {
+                self.smoothed = ids.iter().enumerate().map(|(j, id)| (*id, j)).collect();
+            }
+            return;
+        }
         for id in &outcome.removed {
             self.smoothed.remove(id);
         }

@@ -178,22 +178,27 @@ pub struct DecodedFrame {
     pub right: Vec<Pixel>,
 }
 
-/// A vehicle log read, decoded and ordered by data time.
+/// A vehicle log read, decoded and ordered by data time: what the navigator is fed with.
 #[derive(Debug, Clone)]
-pub(crate) struct LogInput {
-    pub(crate) rig: Rig,
-    pub(crate) rig_source: RigSource,
+pub struct LogInput {
+    /// The rig (given, or the log's `/rig`).
+    pub rig: Rig,
+    /// Where the rig came from.
+    pub rig_source: RigSource,
     /// Stereo frames sorted by timestamp.
-    pub(crate) frames: Vec<DecodedFrame>,
+    pub frames: Vec<DecodedFrame>,
     /// Odometry sorted by timestamp.
-    pub(crate) odometry: Vec<OdomSample>,
-    pub(crate) counts: Counts,
-    pub(crate) warnings: Vec<String>,
+    pub odometry: Vec<OdomSample>,
+    /// What was read and decoded.
+    pub counts: Counts,
+    /// What limits the input, one line each.
+    pub warnings: Vec<String>,
     pub(crate) truth: Option<navigate::Truth>,
 }
 
-/// Steps 1-3 of the crate docs: read, decode, order by data time.
-pub(crate) fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput, Error> {
+/// Steps 1-3 of the crate docs: read, decode, order by data time (`rig`: instead of the
+/// log's `/rig`).
+pub fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput, Error> {
     let log = vehicle_log::read_log(path)?;
     if !log.has_vehicle_topics() {
         return Err(Error::NotVehicleLog {

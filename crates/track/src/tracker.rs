@@ -521,13 +521,29 @@ impl Tracker {
         // Candidates, grouped by track (the outer loop) with each track's range.
         let mut cands: Vec<Candidate> = Vec::new();
         let mut track_range = Vec::with_capacity(gates.len());
+        // The measurements by left row: a gate scans only the rows its bound can reach
+        // (`|dv| <= |dz| <= sqrt(gate trace)`), so association is O(tracks log m + pairs in
+        // reach), not O(tracks m).
+        let mut by_row: Vec<(f64, usize)> = measurements
+            .iter()
+            .enumerate()
+            .filter(|&(m, z)| valid.get(m) == Some(&true) && z.y.is_finite())
+            .map(|(m, z)| (z.y, m))
+            .collect();
+        by_row.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         for (t, gate) in gates.iter().enumerate() {
             let start = cands.len();
             if let Some(g) = gate {
-                for (m, z) in measurements.iter().enumerate() {
-                    if valid.get(m) != Some(&true) {
-                        continue;
+                let reach = libm::sqrt(gate_chi2 * g.trace);
+                let row = g.z.y;
+                let lo = by_row.partition_point(|(v, _)| *v < row - reach);
+                for &(v, m) in by_row.iter().skip(lo) {
+                    if v > row + reach {
+                        break;
                     }
+                    let Some(z) = measurements.get(m) else {
+                        continue;
+                    };
                     let dz = z - g.z;
                     // NaN-safe: a NaN distance is not inside.
                     let may_be_inside = dz.norm_squared() <= gate_chi2 * g.trace;
@@ -542,6 +558,10 @@ impl Tracker {
                             meas: m,
                         });
                     }
+                }
+                // In measurement order, as a scan of every measurement would give them.
+                if let Some(mine) = cands.get_mut(start..) {
+                    mine.sort_by_key(|c| c.meas);
                 }
             }
             track_range.push(start..cands.len());

@@ -228,6 +228,8 @@ pub struct Ekf {
     /// current pose's frame: the relative pose uncertainty between two frames.
     motion_covariance: Matrix3<f64>,
     workspace: Workspace,
+    /// Estimated camera parameters held this frame ([`Ekf::set_held`]), by [`Param::index`].
+    held: [bool; N_PARAMS],
 }
 
 fn check_finite(what: &'static str, value: f64) -> Result<(), Error> {
@@ -359,6 +361,7 @@ impl Ekf {
             health: HealthState::new(settings.nis_window),
             motion_covariance: Matrix3::zeros(),
             workspace: Workspace::default(),
+            held: [false; N_PARAMS],
         })
     }
 
@@ -530,6 +533,46 @@ impl Ekf {
         self.x = x;
         self.p = p;
         Ok(())
+    }
+
+    /// The filter's joint estimate in the batch's layout (`[pose, estimated C, landmarks]`,
+    /// landmarks in map order), with the landmark ids in that order: what the fixed-lag
+    /// smoother is (re)started from ([`calib::smoother::Smoother::restart_mapping`]).
+    pub fn joint(&self, t_us: u64) -> (JointEstimate, Vec<LandmarkId>) {
+        let nl = self.landmarks.len();
+        let m = self.estimated.len();
+        let c0 = self.camera_offset();
+        // Batch index -> filter index.
+        let mut map: Vec<usize> = (0..POSE_DIM).collect();
+        map.extend(c0..c0 + m);
+        map.extend(POSE_DIM..POSE_DIM + LANDMARK_DIM * nl);
+        let n = map.len();
+        let ps = self.p.as_slice();
+        let nn = self.x.len();
+        let covariance = DMatrix::from_fn(n, n, |i, j| {
+            let (fi, fj) = (
+                map.get(i).copied().unwrap_or(0),
+                map.get(j).copied().unwrap_or(0),
+            );
+            sym(ps, nn, fi, fj)
+        });
+        let landmarks = (0..nl)
+            .map(|k| {
+                let i = POSE_DIM + LANDMARK_DIM * k;
+                Vector3::new(self.x[i], self.x[i + 1], self.x[i + 2])
+            })
+            .collect();
+        (
+            JointEstimate {
+                t_us,
+                pose: self.pose(),
+                camera: self.camera(),
+                estimated: self.estimated.clone(),
+                landmarks,
+                covariance,
+            },
+            self.landmarks.iter().map(|l| l.id).collect(),
+        )
     }
 
     /// Sets the start pose and its covariance (symmetric positive semi-definite), before any
@@ -924,8 +967,44 @@ impl Ekf {
 
     // ---------------------------------------------------------------- update
 
+    /// Holds estimated camera parameters for the updates to come: they are considered, not
+    /// refined (their gain rows are zero, as with [`CameraUpdate::Consider`] for all of them):
+    /// value and variance stay, their covariance is carried into the pose and landmarks. For
+    /// a parameter the data cannot inform yet (the baseline on a vehicle that has not moved:
+    /// docs/real-images.md), so that model errors elsewhere cannot pull it. Parameters not
+    /// estimated are ignored.
+    pub fn set_held(&mut self, params: &[Param]) {
+        self.held = [false; N_PARAMS];
+        for p in params {
+            if self.estimated.contains(p)
+                && let Some(h) = self.held.get_mut(p.index())
+            {
+                *h = true;
+            }
+        }
+    }
+
+    /// The estimated parameters held ([`Ekf::set_held`]).
+    pub fn held(&self) -> Vec<Param> {
+        self.estimated
+            .iter()
+            .copied()
+            .filter(|p| self.held.get(p.index()).copied().unwrap_or(false))
+            .collect()
+    }
+
+    /// Camera state rows whose gain is zero: all with [`CameraUpdate::Consider`], else the
+    /// held ones.
+    fn frozen(&self, k: usize) -> bool {
+        self.settings.camera_update == CameraUpdate::Consider
+            || self
+                .estimated
+                .get(k)
+                .is_some_and(|p| self.held.get(p.index()).copied().unwrap_or(false))
+    }
+
     fn joseph(&self) -> bool {
-        if self.settings.camera_update == CameraUpdate::Consider {
+        if self.settings.camera_update == CameraUpdate::Consider || self.held.iter().any(|h| *h) {
             return true;
         }
         match self.settings.covariance_update {
@@ -1137,11 +1216,11 @@ impl Ekf {
     /// `lhs = [K S - A, -K]`, `rhs = [K, A]` the camera rows become `[-A_c, 0]` and `[0, A_c]`,
     /// so that `P_cc` is left as it was and `P_xc` becomes `P_xc - K_x A_c^T`.
     fn freeze_camera_rows(&self, n: usize, d: usize, ws: &mut Workspace) {
-        if self.settings.camera_update != CameraUpdate::Consider {
-            return;
-        }
         let c0 = self.camera_offset();
-        for i in c0..c0 + self.estimated.len() {
+        for (k, i) in (c0..c0 + self.estimated.len()).enumerate() {
+            if !self.frozen(k) {
+                continue;
+            }
             if let Some(v) = ws.dx.get_mut(i) {
                 *v = 0.0;
             }
