@@ -60,10 +60,15 @@ pub struct SmootherSettings {
     /// Frames the batch keeps after the hand-over, when it goes on as phase 2's fixed-lag
     /// smoother ([`Smoother::start_mapping`]): older frames are marginalised into a prior.
     pub window: usize,
-    /// Landmarks the fixed-lag smoother carries at most: its dense prior over every landmark
-    /// costs `O(w^2)` a frame for `w = 3 x landmarks`; beyond this the smoother stops and the
-    /// filter goes on alone (docs/phase2.md).
+    /// Landmarks the batch carries at most: its cost is `O(n w^2)` a solve for `w = 3 x
+    /// landmarks` (and its dense prior `O(w^2)` a frame in phase 2). In phase 1 a lamp that
+    /// would need one more forces the hand-over (phase 2 maps it); in phase 2 the smoother
+    /// stops and the filter goes on alone (docs/phase2.md).
     pub max_landmarks: usize,
+    /// Landmarks observed in one frame at most: a new track becomes a landmark only while
+    /// fewer are (a textured real scene would otherwise add one for every corner it has;
+    /// docs/real-images.md).
+    pub max_in_view: usize,
 }
 
 impl Default for SmootherSettings {
@@ -83,6 +88,7 @@ impl Default for SmootherSettings {
             // before it is marginalised.
             window: 100,
             max_landmarks: 48,
+            max_in_view: 48,
         }
     }
 }
@@ -103,7 +109,7 @@ impl SmootherSettings {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), SmootherSettingsError> {
         #[allow(clippy::cast_precision_loss)]
-        let checks: [(&'static str, f64, bool, &'static str); 10] = [
+        let checks: [(&'static str, f64, bool, &'static str); 11] = [
             (
                 "max_frames",
                 self.max_frames as f64,
@@ -154,6 +160,12 @@ impl SmootherSettings {
             ),
             ("window", self.window as f64, self.window >= 2, "at least 2"),
             ("max_landmarks", self.max_landmarks as f64, true, "a count"),
+            (
+                "max_in_view",
+                self.max_in_view as f64,
+                self.max_in_view >= 1,
+                "at least 1",
+            ),
         ];
         for (name, value, ok, expected) in checks {
             if !ok {
@@ -186,7 +198,8 @@ pub struct BatchLandmark {
 pub enum HandoverReason {
     /// The stable rule fired.
     Stable,
-    /// The frame buffer was full ([`SmootherSettings::max_frames`]).
+    /// The buffer was full: [`SmootherSettings::max_frames`] frames, or a lamp needed a
+    /// landmark beyond [`SmootherSettings::max_landmarks`].
     BufferFull,
     /// The caller asked for it (the end of a log).
     Requested,
@@ -523,6 +536,8 @@ impl Smoother {
             .iter()
             .filter_map(|(t, _)| self.track_landmark.get(t).copied())
             .collect();
+        let mut created = 0usize;
+        let mut landmarks_full = false;
         for (track, z) in observations {
             if !z.iter().all(|v| v.is_finite()) {
                 continue;
@@ -531,6 +546,14 @@ impl Smoother {
                 Some(&j) => j,
                 None => {
                     let Some(j) = self.rebind(&pose, z, &seen_now, &used) else {
+                        if seen_now.len() + created >= self.settings.max_in_view {
+                            continue;
+                        }
+                        if self.landmarks.len() >= self.settings.max_landmarks {
+                            landmarks_full = true;
+                            continue;
+                        }
+                        created += 1;
                         let Ok(tri) = triangulate(&self.camera, z) else {
                             continue;
                         };
@@ -587,7 +610,7 @@ impl Smoother {
         });
         let n = self.frames.len();
         let due = n >= 2 && (n - 1).is_multiple_of(self.settings.solve_every);
-        let full = n >= self.settings.max_frames;
+        let full = n >= self.settings.max_frames || landmarks_full;
         if !(due || full) {
             return false;
         }

@@ -179,6 +179,10 @@ pub struct NavStats {
     /// The frame count when the smoother stopped because the map outgrew
     /// [`SmootherSettings::max_landmarks`] (0: it did not).
     pub phase2_smoother_stopped_at: u64,
+    /// Bound observations the update's budget left out (`CandidateSettings::max_observations`).
+    pub observations_skipped: u64,
+    /// Brief landmarks removed (`CandidateSettings::brief_observations`).
+    pub landmarks_pruned: u64,
     /// Distance the odometry travelled, counting only motion beyond 3 sigma of its noise
     /// in each frame interval, metres.
     pub significant_translation_m: f64,
@@ -811,6 +815,9 @@ impl Navigator {
         self.stats.rejected += outcome.rejected.len() as u64;
         outcome.added = report.added.iter().map(|(_, id)| *id).collect();
         outcome.removed = report.removed.iter().map(|(_, id)| *id).collect();
+        outcome.removed.extend(report.pruned.iter().copied());
+        self.stats.observations_skipped += report.skipped as u64;
+        self.stats.landmarks_pruned += report.pruned.len() as u64;
         Ok(())
     }
 }

@@ -414,6 +414,7 @@ impl Filter {
         let candidates = Candidates::new(CandidateSettings {
             frames_to_confirm,
             consistency_probability,
+            ..CandidateSettings::default()
         })
         .map_err(|e| filter_error(py, e))?;
         let ekf = Ekf::new(&rig, &start, settings).map_err(|e| filter_error(py, e))?;

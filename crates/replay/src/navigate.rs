@@ -236,7 +236,7 @@ pub fn replay_log(
         let why = match reason {
             calib::smoother::HandoverReason::Stable => "phase 1 became stable",
             calib::smoother::HandoverReason::BufferFull => {
-                "phase 1 was not stable when its frame buffer filled"
+                "phase 1 was not stable when its buffer (frames or landmarks) filled"
             }
             calib::smoother::HandoverReason::Requested => {
                 "phase 1 was not stable by the end of the log"

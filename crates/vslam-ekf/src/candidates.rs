@@ -34,6 +34,38 @@ pub struct CandidateSettings {
     /// Probability mass inside the consistency gate between successive world points (3 dof):
     /// 0.999 gives 16.27.
     pub consistency_probability: f64,
+    /// Observations used in one frame's update at most (0: as many as the cost model allows,
+    /// [`observation_budget`]). The ones kept are spread over the image (a 4 x 4 grid of
+    /// the left image, taken in turn) and, within a cell, the landmarks known longest first.
+    pub max_observations: usize,
+    /// Landmarks predicted inside both images at most: a confirmed candidate waits while
+    /// that many are in view (a textured scene would otherwise add a landmark for every
+    /// corner it has).
+    pub max_in_view: usize,
+    /// While the map holds more than [`CandidateSettings::prune_above`] landmarks, a landmark
+    /// with at most this many observations that has not been observed for
+    /// [`CandidateSettings::brief_frames`] frames is removed: features that come and go do
+    /// not make the state grow without bound, and a lamp passed briefly in a small map stays.
+    pub brief_observations: u64,
+    /// See [`CandidateSettings::brief_observations`].
+    pub prune_above: usize,
+    /// See [`CandidateSettings::brief_observations`].
+    pub brief_frames: u64,
+}
+
+/// Observations one update may use when the state has `n` elements: the batch update costs
+/// about `n^2` per observation (docs/benchmarks.md: 4 ms for 10 observations at 1504 states
+/// on this project's VM), so the budget keeps `n^2 k` near 1e7 (about 2 ms), between 8 and 64
+/// observations; half that with the Joseph form (twice the work).
+pub fn observation_budget(n: usize, joseph: bool) -> usize {
+    #[allow(
+        clippy::cast_precision_loss,
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss
+    )]
+    let k = (1.0e7 / ((n.max(1) * n.max(1)) as f64)) as usize;
+    let k = k.clamp(8, 64);
+    if joseph { (k / 2).max(8) } else { k }
 }
 
 impl Default for CandidateSettings {
@@ -41,8 +73,74 @@ impl Default for CandidateSettings {
         Self {
             frames_to_confirm: 3,
             consistency_probability: 0.999,
+            max_observations: 0,
+            max_in_view: 48,
+            brief_observations: 5,
+            prune_above: 200,
+            brief_frames: 20,
         }
     }
+}
+
+/// At most `budget` of a frame's observations: a 4 x 4 grid over the left image taken in
+/// turn, so that they stay spread over the image (the pose and the camera parameters are
+/// best informed by lamps in every direction), and within a cell the landmarks with the most
+/// observations first (the best known anchor the pose). Keeps the input order otherwise.
+fn select_observations(
+    ekf: &Ekf,
+    batch: Vec<(LandmarkId, Measurement)>,
+    budget: usize,
+) -> Vec<(LandmarkId, Measurement)> {
+    if batch.len() <= budget {
+        return batch;
+    }
+    const CELLS: usize = 4;
+    let (w, h) = ekf.image_size();
+    let (w, h) = (f64::from(w.max(1)), f64::from(h.max(1)));
+    let cell_of = |z: &Measurement| {
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let c = |x: f64, size: f64| ((x / size * CELLS as f64).max(0.0) as usize).min(CELLS - 1);
+        c(z[1], h) * CELLS + c(z[0], w)
+    };
+    let mut cells: Vec<Vec<usize>> = alloc::vec![Vec::new(); CELLS * CELLS];
+    for (i, (_, z)) in batch.iter().enumerate() {
+        if let Some(cell) = cells.get_mut(cell_of(z)) {
+            cell.push(i);
+        }
+    }
+    for cell in &mut cells {
+        cell.sort_by_key(|&i| {
+            let id = batch.get(i).map(|(id, _)| *id);
+            let seen = id.and_then(|id| ekf.observations_of(id)).unwrap_or(0);
+            (core::cmp::Reverse(seen), id)
+        });
+        cell.reverse(); // taken from the back
+    }
+    let mut keep = alloc::vec![false; batch.len()];
+    let mut kept = 0;
+    while kept < budget {
+        let mut any = false;
+        for cell in &mut cells {
+            if kept >= budget {
+                break;
+            }
+            if let Some(i) = cell.pop() {
+                if let Some(k) = keep.get_mut(i) {
+                    *k = true;
+                }
+                kept += 1;
+                any = true;
+            }
+        }
+        if !any {
+            break;
+        }
+    }
+    batch
+        .into_iter()
+        .zip(keep)
+        .filter_map(|(o, k)| k.then_some(o))
+        .collect()
 }
 
 /// A candidate's last sighting.
@@ -68,6 +166,11 @@ pub struct FrameReport {
     pub ignored: usize,
     /// Candidates still waiting for confirmation.
     pub pending: usize,
+    /// Bound observations left out of the update by its budget
+    /// ([`CandidateSettings::max_observations`]).
+    pub skipped: usize,
+    /// Brief landmarks removed ([`CandidateSettings::brief_observations`]).
+    pub pruned: Vec<LandmarkId>,
 }
 
 /// Track-keyed front door of the filter: binds tracks to landmarks, confirms new ones.
@@ -80,6 +183,8 @@ pub struct Candidates {
     landmark_of: BTreeMap<u64, LandmarkId>,
     track_of: BTreeMap<LandmarkId, u64>,
     retired: BTreeSet<u64>,
+    /// The frame each landmark was last observed in (accepted by the gate, or added).
+    last_seen: BTreeMap<LandmarkId, u64>,
 }
 
 impl Candidates {
@@ -108,6 +213,7 @@ impl Candidates {
             landmark_of: BTreeMap::new(),
             track_of: BTreeMap::new(),
             retired: BTreeSet::new(),
+            last_seen: BTreeMap::new(),
         })
     }
 
@@ -208,7 +314,16 @@ impl Candidates {
                 _ => unbound.push((track, z)),
             }
         }
+        let budget = match self.settings.max_observations {
+            0 => observation_budget(ekf.state_len(), ekf.uses_joseph()),
+            k => k,
+        };
+        let batch = select_observations(ekf, batch, budget);
+        report.skipped = frame.len() - report.ignored - unbound.len() - batch.len();
         report.update = ekf.update(&batch)?;
+        for g in &report.update.accepted {
+            self.last_seen.insert(g.id, self.frame + 1);
+        }
         // Bindings to landmarks the caller removed from the filter directly.
         let stale: Vec<u64> = self
             .landmark_of
@@ -226,6 +341,33 @@ impl Candidates {
             }
         }
         self.frame += 1;
+        // Brief landmarks not seen for a while leave the state.
+        let now = self.frame;
+        let crowded = ekf.landmark_count() > self.settings.prune_above;
+        let brief: Vec<LandmarkId> = self
+            .last_seen
+            .iter()
+            .filter(|_| crowded)
+            .filter(|&(&id, &seen)| {
+                now.saturating_sub(seen) > self.settings.brief_frames
+                    && ekf
+                        .observations_of(id)
+                        .is_some_and(|o| o <= self.settings.brief_observations)
+            })
+            .map(|(&id, _)| id)
+            .collect();
+        for id in brief {
+            self.last_seen.remove(&id);
+            if ekf.remove_landmark(id).is_ok() {
+                report.pruned.push(id);
+                if let Some(track) = self.track_of.remove(&id) {
+                    self.landmark_of.remove(&track);
+                    self.retired.insert(track);
+                }
+            }
+        }
+        self.last_seen.retain(|id, _| ekf.contains(*id));
+        let in_view = ekf.visible_landmarks().len();
         let motion = ekf.take_motion_covariance();
         let camera = ekf.camera();
         let pose = ekf.pose();
@@ -250,11 +392,13 @@ impl Candidates {
                 }
                 _ => 1,
             };
-            if hits >= self.settings.frames_to_confirm {
+            let room = in_view + report.added.len() < self.settings.max_in_view;
+            if hits >= self.settings.frames_to_confirm && room {
                 self.pending.remove(&track);
                 if let Ok(id) = ekf.add_landmark(&z) {
                     self.landmark_of.insert(track, id);
                     self.track_of.insert(id, track);
+                    self.last_seen.insert(id, self.frame);
                     report.added.push((track, id));
                 }
             } else {

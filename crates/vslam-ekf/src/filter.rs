@@ -747,6 +747,17 @@ impl Ekf {
         self.landmarks.get(s).map(|slot| self.estimate_at(s, slot))
     }
 
+    /// Measurements a landmark has used (the one that initialised it and every accepted one).
+    pub fn observations_of(&self, id: LandmarkId) -> Option<u64> {
+        let s = self.slot(id)?;
+        self.landmarks.get(s).map(|slot| slot.observations)
+    }
+
+    /// The images' size, pixels.
+    pub fn image_size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
     /// Every landmark's estimate, in state order (increasing id).
     pub fn landmarks(&self) -> impl Iterator<Item = LandmarkEstimate> + '_ {
         self.landmarks
@@ -1001,6 +1012,12 @@ impl Ekf {
                 .estimated
                 .get(k)
                 .is_some_and(|p| self.held.get(p.index()).copied().unwrap_or(false))
+    }
+
+    /// Whether the next update uses the Joseph form (camera considered or held, or a small
+    /// state in [`CovarianceUpdate::Auto`]): it costs about twice the factored form.
+    pub fn uses_joseph(&self) -> bool {
+        self.joseph()
     }
 
     fn joseph(&self) -> bool {
