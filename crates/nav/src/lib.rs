@@ -380,6 +380,31 @@ impl Navigator {
         if !self.settings.hold_unexcited {
             return Vec::new();
         }
+        self.not_excited()
+    }
+
+    /// The health check the hold makes true by construction: estimated camera parameters
+    /// the motion so far cannot inform whose phase-2 sigma is nevertheless below 80 % of
+    /// their prior's, as `(param, sigma, prior sigma)`. Not empty means information came from
+    /// a model error (with [`NavSettings::hold_unexcited`] off, the camera moving while the
+    /// odometry says the vehicle stands shrinks the baseline: docs/real-images.md).
+    pub fn spurious_information(&self) -> Vec<(Param, f64, f64)> {
+        let Some(ekf) = &self.ekf else {
+            return Vec::new();
+        };
+        let cov = ekf.camera_covariance();
+        self.not_excited()
+            .into_iter()
+            .filter_map(|p| {
+                let prior = self.rig.prior[p.index()]?;
+                let sigma = cov.get((p.index(), p.index()))?.max(0.0).sqrt();
+                (sigma < 0.8 * prior).then_some((p, sigma, prior))
+            })
+            .collect()
+    }
+
+    /// The estimated parameters the motion so far cannot inform (whatever the hold).
+    fn not_excited(&self) -> Vec<Param> {
         let c = &self.rig.nominal;
         let tilted = c.mount.pitch.abs() > 0.05 || c.mount.roll.abs() > 0.05;
         let rotation = self.stats.significant_rotation_rad;

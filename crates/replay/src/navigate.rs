@@ -3,6 +3,7 @@
 //! against the simulator's truth when the log carries it.
 
 use std::collections::BTreeMap;
+use std::f64::consts::PI;
 use std::path::Path;
 
 use calib::camera::{CameraParams, Param, Pose2};
@@ -228,6 +229,20 @@ pub fn replay_log(
         warnings.push(format!(
             "{} odometry sample(s) dropped: no stereo frame came for longer than the navigator's odometry buffer",
             stats.odometry_dropped
+        ));
+    }
+    for (p, sigma, prior) in navigator.spurious_information() {
+        let (scale, unit) = match p {
+            Param::F | Param::Cx | Param::Cy => (1.0, "px"),
+            Param::Baseline | Param::MountX | Param::MountY | Param::MountZ => (1e3, "mm"),
+            Param::MountRoll | Param::MountPitch | Param::MountYaw => (180.0 / PI, "deg"),
+        };
+        warnings.push(format!(
+            "the filter holds information on {} (sigma {:.2} {unit}, prior {:.2} {unit}) that the motion cannot give (the odometry travelled {:.3} m significantly): a model error elsewhere, such as the camera moving while the odometry says the vehicle stands",
+            p.name(),
+            scale * sigma,
+            scale * prior,
+            stats.significant_translation_m
         ));
     }
     if let Some((reason, uninformed)) = navigator.uninformed()

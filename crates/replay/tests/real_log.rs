@@ -70,6 +70,11 @@ fn the_standing_euroc_log_with_phase_1_skipped_keeps_the_baseline() {
     };
     let r = replay(&dir, &settings);
     assert_standing(&r, "--skip-phase1");
+    assert!(
+        !r.warnings.iter().any(|w| w.contains("holds information")),
+        "{:?}",
+        r.warnings
+    );
 }
 
 /// Without the hold, the baseline collapses: the camera's own small motion (1.5 px of common
@@ -91,4 +96,12 @@ fn without_the_hold_the_standing_log_collapses_the_baseline() {
         .unwrap();
     assert!(b.value < 0.09, "{b:?}");
     assert!((b.value - 0.110_078).abs() > 10.0 * b.sigma, "{b:?}");
+    // The health check names it.
+    assert!(
+        r.warnings
+            .iter()
+            .any(|w| w.contains("holds information on baseline")),
+        "{:?}",
+        r.warnings
+    );
 }
