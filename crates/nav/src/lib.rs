@@ -396,7 +396,7 @@ impl Navigator {
         self.not_excited()
             .into_iter()
             .filter_map(|p| {
-                let prior = self.rig.prior[p.index()]?;
+                let prior = self.rig.prior.get(p.index()).copied().flatten()?;
                 let sigma = cov.get((p.index(), p.index()))?.max(0.0).sqrt();
                 (sigma < 0.8 * prior).then_some((p, sigma, prior))
             })
