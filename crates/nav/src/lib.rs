@@ -397,7 +397,9 @@ impl Navigator {
             .into_iter()
             .filter_map(|p| {
                 let prior = self.rig.prior.get(p.index()).copied().flatten()?;
-                let sigma = cov.get((p.index(), p.index()))?.max(0.0).sqrt();
+                let sigma = <f64 as nalgebra::ComplexField>::sqrt(
+                    cov.get((p.index(), p.index()))?.max(0.0),
+                );
                 (sigma < 0.8 * prior).then_some((p, sigma, prior))
             })
             .collect()

@@ -370,8 +370,7 @@ fn truth_errors(
         let e2 = (x - p.x).powi(2) + (y - p.y).powi(2);
         sq += e2;
         max = max.max(e2.sqrt());
-        let dh = (theta - p.theta + core::f64::consts::PI).rem_euclid(2.0 * core::f64::consts::PI)
-            - core::f64::consts::PI;
+        let dh = (theta - p.theta + PI).rem_euclid(2.0 * PI) - PI;
         sq_heading += dh * dh;
         n += 1;
     }
