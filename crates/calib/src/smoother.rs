@@ -69,6 +69,9 @@ pub struct SmootherSettings {
     /// fewer are (a textured real scene would otherwise add one for every corner it has;
     /// docs/real-images.md).
     pub max_in_view: usize,
+    /// A new track whose point is closer than this to a landmark becomes none: a second
+    /// feature of the same thing (a tube end's two corners), metres.
+    pub min_separation_m: f64,
 }
 
 impl Default for SmootherSettings {
@@ -89,6 +92,7 @@ impl Default for SmootherSettings {
             window: 100,
             max_landmarks: 48,
             max_in_view: 48,
+            min_separation_m: 0.05,
         }
     }
 }
@@ -109,7 +113,7 @@ impl SmootherSettings {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), SmootherSettingsError> {
         #[allow(clippy::cast_precision_loss)]
-        let checks: [(&'static str, f64, bool, &'static str); 11] = [
+        let checks: [(&'static str, f64, bool, &'static str); 12] = [
             (
                 "max_frames",
                 self.max_frames as f64,
@@ -165,6 +169,12 @@ impl SmootherSettings {
                 self.max_in_view as f64,
                 self.max_in_view >= 1,
                 "at least 1",
+            ),
+            (
+                "min_separation_m",
+                self.min_separation_m,
+                self.min_separation_m.is_finite() && self.min_separation_m >= 0.0,
+                "finite, >= 0",
             ),
         ];
         for (name, value, ok, expected) in checks {
@@ -559,6 +569,12 @@ impl Smoother {
                         };
                         let position = tri.p_in_world(&self.camera, &pose);
                         if !position.iter().all(|v| v.is_finite()) {
+                            continue;
+                        }
+                        if self.landmarks.iter().any(|l| {
+                            (l.position - position).norm() < self.settings.min_separation_m
+                        }) {
+                            created -= 1;
                             continue;
                         }
                         self.landmarks.push(BatchLandmark {

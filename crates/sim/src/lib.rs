@@ -49,4 +49,4 @@ pub use motion::{OdomSample, integrate, integrate_samples, wrap_angle};
 pub use render::{Renderer, Side, StereoImages};
 pub use run::{FrameTruth, Mode, SimRun, simulate, simulate_with_progress};
 pub use scenario::{Scenario, ScenarioSpec};
-pub use world::Lamp;
+pub use world::{Lamp, Panel};

@@ -16,7 +16,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use crate::features::RigFromWorld;
 use crate::scenario::{Beams, Render};
-use crate::world::Lamp;
+use crate::world::{Lamp, Panel};
 
 /// Strips per pixel of a lamp's apparent diameter (the sum along the disk's height).
 const STRIPS_PER_PIXEL: f64 = 8.0;
@@ -155,6 +155,15 @@ impl Renderer {
             let d = (t * inv_spacing - (t * inv_spacing).round()).abs() * p.beam_spacing_m;
             ((half_w - d) / pixel_m + 0.5).clamp(0.0, 1.0)
         };
+        // The reflection along each beam's middle.
+        let half_h = p.beam_highlight_width_m / 2.0;
+        let glint = |t: f64, pixel_m: f64| -> f64 {
+            if p.beam_highlight_dn <= 0.0 {
+                return 0.0;
+            }
+            let d = (t * inv_spacing - (t * inv_spacing).round()).abs() * p.beam_spacing_m;
+            ((half_h - d) / pixel_m + 0.5).clamp(0.0, 1.0)
+        };
         for (row, b) in out.chunks_exact_mut(self.width).zip(&self.ray_y) {
             let base = [ey[0] * b + ez[0], ey[1] * b + ez[1], ey[2] * b + ez[2]];
             for (px, a) in row.iter_mut().zip(&self.ray_x) {
@@ -166,13 +175,16 @@ impl Renderer {
                     let x = o[0] + lambda * (ex[0] * a + base[0]);
                     let y = o[1] + lambda * (ex[1] * a + base[1]);
                     let pixel_m = lambda * soft;
-                    let c = match p.beams {
-                        Beams::X => coverage(y, pixel_m),
-                        Beams::Y => coverage(x, pixel_m),
-                        Beams::Both => coverage(y, pixel_m).max(coverage(x, pixel_m)),
-                        Beams::None => 0.0,
+                    let (c, g) = match p.beams {
+                        Beams::X => (coverage(y, pixel_m), glint(y, pixel_m)),
+                        Beams::Y => (coverage(x, pixel_m), glint(x, pixel_m)),
+                        Beams::Both => (
+                            coverage(y, pixel_m).max(coverage(x, pixel_m)),
+                            glint(y, pixel_m).max(glint(x, pixel_m)),
+                        ),
+                        Beams::None => (0.0, 0.0),
                     };
-                    roof + (beam - roof) * c
+                    roof + (beam - roof) * c + (p.beam_highlight_dn - beam).max(0.0) * g
                 };
                 #[allow(clippy::cast_possible_truncation)] // DN values, far inside f32
                 {
@@ -192,7 +204,15 @@ impl Renderer {
             Side::Left => c.baseline / 2.0,
             Side::Right => -c.baseline / 2.0,
         };
+        let mut panels_drawn: Vec<u32> = Vec::new();
         for lamp in &self.lamps {
+            if let Some(panel) = &lamp.panel {
+                if !panels_drawn.contains(&panel.index) {
+                    panels_drawn.push(panel.index);
+                    self.draw_panel(pose, side, panel, out);
+                }
+                continue;
+            }
             let p = rig_from_world.apply(&lamp.position);
             if p.z <= 1e-3 {
                 continue;
@@ -205,6 +225,150 @@ impl Renderer {
                 continue;
             }
             self.draw_disk(u, v, radius_px, lamp.radiance_dn, out);
+        }
+    }
+
+    /// Adds a panel: each pixel's coverage by the rectangle, from a 4 x 4 grid of rays per
+    /// pixel through the panel's plane, blurred by the optics (a separable Gaussian).
+    /// Supersampled rather than exact like the disk: the panel's edges are long and straight,
+    /// and the corners the detector sees are blurred over pixels anyway.
+    fn draw_panel(&self, pose: &Pose2, side: Side, panel: &Panel, out: &mut [f32]) {
+        const SUB: usize = 4;
+        let c = &self.camera;
+        let rig_from_world = RigFromWorld::new(c, pose);
+        let half_b = match side {
+            Side::Left => c.baseline / 2.0,
+            Side::Right => -c.baseline / 2.0,
+        };
+        #[allow(clippy::cast_precision_loss)]
+        let (w, h) = (self.width as f64, self.height as f64);
+        // The image box of the panel: its corners (and centre) projected.
+        let (s, co) = panel.yaw.sin_cos();
+        let (l, hw) = (panel.half_length_m, panel.half_width_m);
+        let mut bounds = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for (a, b) in [(-l, -hw), (l, -hw), (l, hw), (-l, hw)] {
+            let q = nalgebra::Vector3::new(
+                panel.centre.x + co * a - s * b,
+                panel.centre.y + s * a + co * b,
+                panel.centre.z,
+            );
+            let p = rig_from_world.apply(&q);
+            if p.z <= 1e-3 {
+                return; // partly behind the camera: not drawn
+            }
+            let u = c.cx + c.f * (p.x + half_b) / p.z;
+            let v = c.cy + c.f * p.y / p.z;
+            bounds = (
+                bounds.0.min(u),
+                bounds.1.min(v),
+                bounds.2.max(u),
+                bounds.3.max(v),
+            );
+        }
+        let sigma = self.params.optics_blur_px;
+        let margin = PATCH_SIGMAS * sigma + 1.0;
+        if bounds.2 < -margin
+            || bounds.3 < -margin
+            || bounds.0 > w + margin
+            || bounds.1 > h + margin
+        {
+            return;
+        }
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // clamped
+        let clamp = |x: f64, n: usize| -> usize { x.max(0.0).min(n as f64 - 1.0) as usize };
+        let (x0, y0) = (
+            clamp((bounds.0 - margin).floor(), self.width),
+            clamp((bounds.1 - margin).floor(), self.height),
+        );
+        let (x1, y1) = (
+            clamp((bounds.2 + margin).ceil(), self.width),
+            clamp((bounds.3 + margin).ceil(), self.height),
+        );
+        let (cols, rows) = (x1 - x0 + 1, y1 - y0 + 1);
+        let (o, [ex, ey, ez]) = self.rays(pose, side);
+        let mut cover = vec![0.0f64; cols * rows];
+        for k in 0..rows {
+            for i in 0..cols {
+                let mut hits = 0usize;
+                for sy in 0..SUB {
+                    #[allow(clippy::cast_precision_loss)]
+                    let vv = (y0 + k) as f64 - 0.5 + (sy as f64 + 0.5) / SUB as f64;
+                    let b = (vv - c.cy) / c.f;
+                    for sx in 0..SUB {
+                        #[allow(clippy::cast_precision_loss)]
+                        let uu = (x0 + i) as f64 - 0.5 + (sx as f64 + 0.5) / SUB as f64;
+                        let a = (uu - c.cx) / c.f;
+                        let dz = ex[2] * a + ey[2] * b + ez[2];
+                        if dz <= 1e-9 {
+                            continue;
+                        }
+                        let lambda = (panel.centre.z - o[2]) / dz;
+                        let x = o[0] + lambda * (ex[0] * a + ey[0] * b + ez[0]);
+                        let y = o[1] + lambda * (ex[1] * a + ey[1] * b + ez[1]);
+                        if lambda > 0.0 && panel.contains(x, y) {
+                            hits += 1;
+                        }
+                    }
+                }
+                if let Some(cv) = cover.get_mut(k * cols + i) {
+                    #[allow(clippy::cast_precision_loss)]
+                    {
+                        *cv = hits as f64 / (SUB * SUB) as f64;
+                    }
+                }
+            }
+        }
+        // The optics: a separable Gaussian over the patch.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let reach = (PATCH_SIGMAS * sigma).ceil() as usize;
+        #[allow(clippy::cast_precision_loss)]
+        let kernel: Vec<f64> = (0..=2 * reach)
+            .map(|t| {
+                let x = t as f64 - reach as f64;
+                phi((x + 0.5) / sigma.max(1e-6)) - phi((x - 0.5) / sigma.max(1e-6))
+            })
+            .collect();
+        let blur = |src: &[f64], n: usize, stride: usize, count: usize, step: usize| {
+            let mut dst = vec![0.0f64; src.len()];
+            for line in 0..count {
+                for t in 0..n {
+                    let mut acc = 0.0;
+                    for (j, kv) in kernel.iter().enumerate() {
+                        let q = t + j;
+                        if q < reach || q - reach >= n {
+                            continue;
+                        }
+                        if let Some(v) = src.get(line * stride + (q - reach) * step) {
+                            acc += kv * v;
+                        }
+                    }
+                    if let Some(d) = dst.get_mut(line * stride + t * step) {
+                        *d = acc;
+                    }
+                }
+            }
+            dst
+        };
+        let across = blur(&cover, cols, cols, rows, 1);
+        let both = blur(&across, rows, 1, cols, cols);
+        for k in 0..rows {
+            let start = (y0 + k) * self.width + x0;
+            if let (Some(dst), Some(src)) = (
+                out.get_mut(start..start + cols),
+                both.get(k * cols..(k + 1) * cols),
+            ) {
+                for (d, &p) in dst.iter_mut().zip(src) {
+                    #[allow(clippy::cast_possible_truncation)] // DN values, far inside f32
+                    {
+                        *d += (p * panel.radiance_dn) as f32;
+                    }
+                }
+            }
         }
     }
 

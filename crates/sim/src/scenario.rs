@@ -201,6 +201,33 @@ pub struct World {
     /// Regular grids of lamps.
     #[serde(default)]
     pub grids: Vec<GridSpec>,
+    /// Lamps that are not points: rectangular panels and tubes, flat on the ceiling.
+    #[serde(default)]
+    pub panels: Vec<PanelSpec>,
+}
+
+/// A rectangular lamp flat on the ceiling (a panel, or a tube when it is narrow): rendered as
+/// it is, and seen by the detector at its corners. Its landmarks (and truth) are its four
+/// corners, or a tube's two ends (the middle of each end) when it is less than a seventh as
+/// wide as it is long.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PanelSpec {
+    /// Centre, metres.
+    pub x_m: f64,
+    /// Centre, metres.
+    pub y_m: f64,
+    /// Height above the floor, metres.
+    pub z_m: f64,
+    /// Along its axis, metres.
+    pub length_m: f64,
+    /// Across, metres.
+    pub width_m: f64,
+    /// Its axis from the world's x axis, degrees.
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Brightness, DN (default `world.lamp_radiance_dn`).
+    pub radiance_dn: Option<f64>,
 }
 
 fn default_lamp_radius() -> f64 {
@@ -514,6 +541,11 @@ pub struct Render {
     pub beam_width_m: f64,
     /// Beam brightness, DN.
     pub beam_dn: f64,
+    /// A bright reflection along the middle of each beam (a lamp mirrored in a metal beam),
+    /// DN; 0: none.
+    pub beam_highlight_dn: f64,
+    /// Width of the reflection, metres.
+    pub beam_highlight_width_m: f64,
 }
 
 impl Default for Render {
@@ -528,6 +560,8 @@ impl Default for Render {
             beam_spacing_m: 3.0,
             beam_width_m: 0.3,
             beam_dn: 70.0,
+            beam_highlight_dn: 0.0,
+            beam_highlight_width_m: 0.02,
         }
     }
 }
@@ -793,10 +827,10 @@ impl ScenarioSpec {
             1.0,
             f64::from(i32::MAX),
         );
-        if w.lamps.is_empty() && w.grids.is_empty() {
+        if w.lamps.is_empty() && w.grids.is_empty() && w.panels.is_empty() {
             v.fail(
                 "world",
-                "no lamps: give world.lamps or world.grids".to_string(),
+                "no lamps: give world.lamps, world.grids or world.panels".to_string(),
             );
         }
         for (i, l) in w.lamps.iter().enumerate() {
@@ -834,6 +868,19 @@ impl ScenarioSpec {
                 v.positive(&k("radiance_dn"), r);
             }
             total = total.saturating_add(g.nx.saturating_mul(g.ny));
+        }
+        for (i, q) in w.panels.iter().enumerate() {
+            let k = |name: &str| format!("world.panels[{i}].{name}");
+            v.finite(&k("x_m"), q.x_m);
+            v.finite(&k("y_m"), q.y_m);
+            v.finite(&k("z_m"), q.z_m);
+            v.within(&k("length_m"), q.length_m, 1e-3, 10.0);
+            v.within(&k("width_m"), q.width_m, 1e-3, 10.0);
+            v.finite(&k("yaw_deg"), q.yaw_deg);
+            if let Some(r) = q.radiance_dn {
+                v.positive(&k("radiance_dn"), r);
+            }
+            total = total.saturating_add(4);
         }
         if total > 1_000_000 {
             v.fail("world", format!("{total} lamps; at most 1000000"));

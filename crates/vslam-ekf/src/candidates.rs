@@ -51,6 +51,10 @@ pub struct CandidateSettings {
     pub prune_above: usize,
     /// See [`CandidateSettings::brief_observations`].
     pub brief_frames: u64,
+    /// A confirmed candidate closer than this to a landmark is not added, and its track is
+    /// retired: it is a second feature of the same thing (the two corners of a tube's end,
+    /// a blurred corner's two maxima), metres.
+    pub min_separation_m: f64,
 }
 
 /// Observations one update may use when the state has `n` elements: the batch update costs
@@ -78,6 +82,7 @@ impl Default for CandidateSettings {
             brief_observations: 5,
             prune_above: 200,
             brief_frames: 20,
+            min_separation_m: 0.05,
         }
     }
 }
@@ -171,6 +176,9 @@ pub struct FrameReport {
     pub skipped: usize,
     /// Brief landmarks removed ([`CandidateSettings::brief_observations`]).
     pub pruned: Vec<LandmarkId>,
+    /// Confirmed candidates not added for being closer than
+    /// [`CandidateSettings::min_separation_m`] to a landmark (their tracks retired).
+    pub merged: usize,
 }
 
 /// Track-keyed front door of the filter: binds tracks to landmarks, confirms new ones.
@@ -393,6 +401,17 @@ impl Candidates {
                 _ => 1,
             };
             let room = in_view + report.added.len() < self.settings.max_in_view;
+            if hits >= self.settings.frames_to_confirm
+                && ekf
+                    .landmarks()
+                    .any(|l| (l.position - point).norm() < self.settings.min_separation_m)
+            {
+                // A second feature of something already mapped.
+                self.pending.remove(&track);
+                self.retired.insert(track);
+                report.merged += 1;
+                continue;
+            }
             if hits >= self.settings.frames_to_confirm && room {
                 self.pending.remove(&track);
                 if let Ok(id) = ekf.add_landmark(&z) {
