@@ -367,3 +367,29 @@ fn realistic_odometry_paper_calibration_is_honest() {
     // a run whose baseline is 2 sigma off has its map 16 mm high.
     whole_method_is_honest("paper-calibration.toml", 10, 30.0, 0.025);
 }
+
+/// The issue's third kind of drive: a 40-lamp aisle at 1 m/s with 0.02 m/s odometry, clutter
+/// and a lossy link, no flags: at least 90 % of its lamps mapped and no clutter landmark, the
+/// map within 20 mm and the trajectory within 40 mm (RMS, the first frame's world), the
+/// baseline inside 3 sigma.
+#[test]
+fn the_aisle_maps_within_the_issue_bounds() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/aisle.toml");
+    let sc = sim::Scenario::load(&path).unwrap();
+    let sim_run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
+    let log_path = std::env::temp_dir().join(format!("navigate-aisle-{}.mcap", std::process::id()));
+    sim_run.write_log(&log_path).unwrap();
+    let r = replay_log(&log_path, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
+    std::fs::remove_file(&log_path).ok();
+    let d = describe(&r);
+    let t = r.truth.as_ref().unwrap();
+    assert!(t.landmarks_matched >= 36, "{d}");
+    assert_eq!(t.landmarks_unmatched, 0, "{d}");
+    assert!(t.landmark_rms <= 0.020, "{d}");
+    assert!(t.ate_rms <= 0.040, "{d}");
+    assert!(
+        camera_error(&r, Param::Baseline).abs() <= 3.0 * sigma(&r, Param::Baseline),
+        "{d}"
+    );
+    assert!(r.counts.corrupt > 0 || r.counts.lost > 0, "{d}");
+}

@@ -151,3 +151,72 @@ fn clean_images_are_what_the_sensor_would_give() {
         "the two cameras see the lamps at different columns"
     );
 }
+
+/// Real lamps (issue 16): a panel is drawn as a bright rectangle (its inside at the panel's
+/// brightness, its outside at the roof's), and the board's detector finds a feature within
+/// 3 px of every panel corner in view; a panel's landmarks are its corners, a tube's its ends.
+#[test]
+fn panels_are_rectangles_seen_at_their_corners() {
+    let mut s = common::noise_off(common::load("real-lamps"));
+    s.spec.render.beams = Beams::None;
+    let regs = s.registers();
+    let run = sim::simulate(&s, Mode::Fast).unwrap();
+    // 2 discs, 3 panels x 4 corners, 2 tubes x 2 ends.
+    assert_eq!(run.landmarks.len(), 2 + 12 + 4);
+    let tubes = run
+        .landmarks
+        .iter()
+        .filter(|l| l.panel.is_some_and(|p| p.is_tube()))
+        .count();
+    assert_eq!(tubes, 4);
+    let renderer = Renderer::new(s.true_camera(), &regs, s.spec.render, run.landmarks.clone());
+    let (w, h) = (regs.width as f64, regs.height as f64);
+    let mut corners_checked = 0;
+    for f in run.frames.iter().step_by(40) {
+        let images = renderer.render::<ChaCha8Rng>(&f.pose, None);
+        let detection = harris_core::detect(&images.left, &regs).unwrap();
+        for view in &f.views {
+            let Some(lamp) = run.landmarks.iter().find(|l| l.id == view.id) else {
+                continue;
+            };
+            let Some(panel) = lamp.panel else { continue };
+            let (u, v) = (view.u_left, view.v_left);
+            if panel.is_tube() || u < 12.0 || v < 12.0 || u > w - 13.0 || v > h - 13.0 {
+                continue;
+            }
+            let nearest = detection
+                .features
+                .iter()
+                .map(|p| (p.u() - u).hypot(p.v() - v))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                nearest <= 3.0,
+                "corner {} at ({u:.1}, {v:.1}): nearest {nearest:.2} px",
+                lamp.id
+            );
+            corners_checked += 1;
+        }
+    }
+    assert!(corners_checked >= 10, "{corners_checked}");
+    // The panel's inside is bright and the roof dark: the centre of the first panel in view.
+    let f = &run.frames[0];
+    let images = renderer.render::<ChaCha8Rng>(&f.pose, None);
+    let corners: Vec<_> = f
+        .views
+        .iter()
+        .filter(|v| {
+            run.landmarks
+                .iter()
+                .any(|l| l.id == v.id && l.panel.is_some_and(|p| p.index == 0))
+        })
+        .collect();
+    assert_eq!(corners.len(), 4, "the first panel is in view at the start");
+    let (cu, cv) = (
+        corners.iter().map(|v| v.u_left).sum::<f64>() / 4.0,
+        corners.iter().map(|v| v.v_left).sum::<f64>() / 4.0,
+    );
+    let at = |u: f64, v: f64| images.left[(v.round() as usize) * regs.width + u.round() as usize];
+    assert!(at(cu, cv) >= 200, "inside {}", at(cu, cv));
+    let roof = at(cu, cv - 200.0_f64.min(cv - 1.0));
+    assert!(roof <= 80, "outside {roof}");
+}
