@@ -19,6 +19,7 @@ extern crate alloc;
 pub mod camera;
 #[cfg(feature = "alloc")]
 pub mod config;
+pub mod lens;
 pub mod odometry;
 pub mod rig;
 #[cfg(feature = "std")]
