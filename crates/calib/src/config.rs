@@ -32,4 +32,8 @@ pub struct Rig {
     pub prior: [Option<f64>; N_PARAMS],
     /// Noise model.
     pub noise: Noise,
+    /// The raw cameras' lenses (`[lens.left]`, `[lens.right]`, vehicle-interfaces.md 1.1):
+    /// the board's features are raw and are mapped into the rectified model; `None`: they
+    /// are rectified already.
+    pub lens: Option<crate::lens::StereoLens>,
 }

@@ -11,6 +11,7 @@ use toml::{Table, Value};
 
 use crate::camera::{CameraParams, Mount, N_PARAMS, Param};
 use crate::config::{Noise, Rig};
+use crate::lens::{Lens, LensModel, StereoLens};
 
 /// A rig file that cannot be used; the message names the file, the key and the problem.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -44,7 +45,7 @@ pub enum RigFileError {
     },
 }
 
-const TABLES: [&str; 5] = ["camera", "mount", "estimate", "prior", "noise"];
+const TABLES: [&str; 6] = ["camera", "mount", "estimate", "prior", "noise", "lens"];
 
 struct Reader<'a> {
     source: &'a str,
@@ -132,6 +133,177 @@ impl Reader<'_> {
             )),
             None => Err(self.error(name, "missing key".to_string())),
         }
+    }
+}
+
+/// `[lens.left]` and `[lens.right]` (vehicle-interfaces.md section 3): both or neither.
+fn lenses(r: &Reader<'_>) -> Result<Option<StereoLens>, RigFileError> {
+    let Some(value) = r.root.get("lens") else {
+        return Ok(None);
+    };
+    let Value::Table(lens) = value else {
+        return Err(r.error(
+            "[lens]".to_string(),
+            format!(
+                "expected tables [lens.left] and [lens.right], found {}",
+                describe(value)
+            ),
+        ));
+    };
+    for key in lens.keys() {
+        if key != "left" && key != "right" {
+            return Err(r.error(
+                format!("[lens.{}]", key.escape_debug()),
+                "unknown table (known: lens.left, lens.right)".to_string(),
+            ));
+        }
+    }
+    let sub = Reader {
+        source: r.source,
+        root: lens,
+    };
+    // Errors name the table as the file does.
+    let named = |e: RigFileError| match e {
+        RigFileError::Key {
+            source_name,
+            key,
+            problem,
+        } => RigFileError::Key {
+            source_name,
+            key: key.replacen('[', "[lens.", 1),
+            problem,
+        },
+        other => other,
+    };
+    let side = |name: &str| -> Result<Lens, RigFileError> {
+        sub.check_keys(
+            name,
+            &[
+                "model",
+                "fx",
+                "fy",
+                "cx",
+                "cy",
+                "coefficients",
+                "rectification",
+            ],
+        )?;
+        let t = sub.table(name)?;
+        let numbers = |key: &str, lens_of: &[usize]| -> Result<Vec<f64>, RigFileError> {
+            let found = t
+                .get(key)
+                .ok_or_else(|| sub.error(format!("[{name}] {key}"), "missing key".to_string()))?;
+            let Value::Array(items) = found else {
+                return Err(sub.error(
+                    format!("[{name}] {key}"),
+                    format!("expected an array of numbers, found {}", describe(found)),
+                ));
+            };
+            let mut out = Vec::with_capacity(items.len());
+            for item in items {
+                let x = match item {
+                    Value::Float(x) => *x,
+                    #[allow(clippy::cast_precision_loss)]
+                    Value::Integer(i) => *i as f64,
+                    other => {
+                        return Err(sub.error(
+                            format!("[{name}] {key}"),
+                            format!("expected numbers, found {}", describe(other)),
+                        ));
+                    }
+                };
+                if !x.is_finite() {
+                    return Err(sub.error(
+                        format!("[{name}] {key}"),
+                        format!("{x} is not a finite number"),
+                    ));
+                }
+                out.push(x);
+            }
+            if !lens_of.contains(&out.len()) {
+                return Err(sub.error(
+                    format!("[{name}] {key}"),
+                    format!(
+                        "{} numbers; expected {}",
+                        out.len(),
+                        lens_of
+                            .iter()
+                            .map(ToString::to_string)
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    ),
+                ));
+            }
+            Ok(out)
+        };
+        let model_name = match t.get("model") {
+            Some(Value::String(m)) => m.as_str(),
+            Some(other) => {
+                return Err(sub.error(
+                    format!("[{name}] model"),
+                    format!("expected a string, found {}", describe(other)),
+                ));
+            }
+            None => return Err(sub.error(format!("[{name}] model"), "missing key".to_string())),
+        };
+        let model = match model_name {
+            "plumb_bob" => {
+                let k = numbers("coefficients", &[4, 5])?;
+                let at = |i: usize| k.get(i).copied().unwrap_or(0.0);
+                LensModel::PlumbBob {
+                    k1: at(0),
+                    k2: at(1),
+                    p1: at(2),
+                    p2: at(3),
+                    k3: at(4),
+                }
+            }
+            "equidistant" => {
+                let k = numbers("coefficients", &[4])?;
+                let at = |i: usize| k.get(i).copied().unwrap_or(0.0);
+                LensModel::Equidistant {
+                    k1: at(0),
+                    k2: at(1),
+                    k3: at(2),
+                    k4: at(3),
+                }
+            }
+            other => {
+                return Err(sub.error(
+                    format!("[{name}] model"),
+                    format!("unknown lens model {other:?} (known: plumb_bob, equidistant)"),
+                ));
+            }
+        };
+        let rect = numbers("rectification", &[9])?;
+        let rectification = nalgebra::Matrix3::from_row_slice(&rect);
+        // A rotation: orthonormal with determinant +1.
+        let off =
+            (rectification * rectification.transpose() - nalgebra::Matrix3::identity()).amax();
+        if off > 1e-5 || rectification.determinant() < 0.0 {
+            return Err(sub.error(
+                format!("[{name}] rectification"),
+                format!("not a rotation matrix (R R^T differs from I by {off:.1e})"),
+            ));
+        }
+        Ok(Lens {
+            model,
+            fx: sub.positive(name, "fx")?,
+            fy: sub.positive(name, "fy")?,
+            cx: sub.number(name, "cx")?,
+            cy: sub.number(name, "cy")?,
+            rectification,
+        })
+    };
+    match (lens.contains_key("left"), lens.contains_key("right")) {
+        (true, true) => Ok(Some(StereoLens {
+            left: side("left").map_err(named)?,
+            right: side("right").map_err(named)?,
+        })),
+        (l, _) => Err(r.error(
+            format!("[lens.{}]", if l { "right" } else { "left" }),
+            "missing table: [lens.left] and [lens.right] come together or not at all".to_string(),
+        )),
     }
 }
 
@@ -298,6 +470,7 @@ impl Rig {
             velocity: r.positive("noise", "velocity")?,
             yaw_rate: r.positive("noise", "yaw_rate")?,
         };
+        let lens = lenses(&r)?;
         Ok(Self {
             width: r.size("width")?,
             height: r.size("height")?,
@@ -305,6 +478,7 @@ impl Rig {
             estimate,
             prior,
             noise,
+            lens,
         })
     }
 
@@ -318,14 +492,35 @@ impl Rig {
                 prior.insert(p.name().to_string(), s.into());
             }
         }
-        serde_json::json!({
+        let mut json = serde_json::json!({
             "camera": {"width": self.width, "height": self.height, "f": c.f, "cx": c.cx, "cy": c.cy, "baseline": c.baseline},
             "mount": {"x": m.x, "y": m.y, "z": m.z, "roll": m.roll, "pitch": m.pitch, "yaw": m.yaw},
             "estimate": {"parameters": self.estimate.iter().map(|p| p.name()).collect::<Vec<_>>()},
             "prior": prior,
             "noise": {"pixel": self.noise.pixel, "velocity": self.noise.velocity, "yaw_rate": self.noise.yaw_rate},
-        })
-        .to_string()
+        });
+        if let (Some(l), Some(obj)) = (&self.lens, json.as_object_mut()) {
+            let side = |lens: &Lens| {
+                let (model, coefficients) = match lens.model {
+                    LensModel::PlumbBob { k1, k2, p1, p2, k3 } => {
+                        ("plumb_bob", vec![k1, k2, p1, p2, k3])
+                    }
+                    LensModel::Equidistant { k1, k2, k3, k4 } => {
+                        ("equidistant", vec![k1, k2, k3, k4])
+                    }
+                };
+                let r = &lens.rectification;
+                let rect: Vec<f64> = (0..3)
+                    .flat_map(|i| (0..3).map(move |j| r[(i, j)]))
+                    .collect();
+                serde_json::json!({"model": model, "fx": lens.fx, "fy": lens.fy, "cx": lens.cx, "cy": lens.cy, "coefficients": coefficients, "rectification": rect})
+            };
+            obj.insert(
+                "lens".to_string(),
+                serde_json::json!({"left": side(&l.left), "right": side(&l.right)}),
+            );
+        }
+        json.to_string()
     }
 
     /// The rig file as TOML text.

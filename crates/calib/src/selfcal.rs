@@ -1067,6 +1067,7 @@ mod tests {
         prior[Param::F.index()] = Some(30.0);
         prior[Param::Baseline.index()] = Some(0.01);
         Rig {
+            lens: None,
             width: 752,
             height: 480,
             nominal: camera(),

@@ -170,6 +170,7 @@ fn example_rig() -> Rig {
     prior[Param::F.index()] = Some(30.0);
     prior[Param::Baseline.index()] = Some(0.01);
     Rig {
+        lens: None,
         width: 752,
         height: 480,
         nominal: common::nominal_camera(),
@@ -350,8 +351,14 @@ fn integers_are_accepted_for_numbers() {
 
 #[test]
 fn unknown_tables_and_keys_are_named() {
+    let text = render(&example_tables()) + "[lenses]\nk1 = 0.1\n";
+    expect_key_error(&text, "[lenses]", "unknown table");
     let text = render(&example_tables()) + "[lens]\nk1 = 0.1\n";
-    expect_key_error(&text, "[lens]", "unknown table");
+    expect_key_error(
+        &text,
+        "[lens.k1]",
+        "unknown table (known: lens.left, lens.right)",
+    );
     for table in ["camera", "mount", "estimate", "noise"] {
         expect_key_error(
             &with(table, "k1", "0.1"),
@@ -680,6 +687,7 @@ fn rig_strategy_with(
                     }
                 }
                 Rig {
+                    lens: None,
                     width,
                     height,
                     nominal: CameraParams {
@@ -797,5 +805,88 @@ fn json_null_is_named_at_its_key() {
     assert!(
         matches!(&err, RigFileError::Key { key, .. } if key == "[camera] f"),
         "{err}"
+    );
+}
+
+/// The `[lens.left]` and `[lens.right]` tables of vehicle-interfaces.md section 3 (v2).
+const LENSES: &str = "
+[lens.left]
+model = \"plumb_bob\"
+fx = 458.654
+fy = 457.296
+cx = 367.215
+cy = 248.375
+coefficients = [-0.2834, 0.07396, 0.00019, 1.76e-05]
+rectification = [1.0, 0.0, 0.0,  0.0, 1.0, 0.0,  0.0, 0.0, 1.0]
+
+[lens.right]
+model = \"equidistant\"
+fx = 457.587
+fy = 456.134
+cx = 379.999
+cy = 255.238
+coefficients = [-0.01, 0.002, 0.0, 0.0]
+rectification = [0.9999006, -0.01409953, 0.0, 0.01409953, 0.9999006, 0.0, 0.0, 0.0, 1.0]
+";
+
+#[test]
+fn lens_tables_are_read_and_written() {
+    use calib::lens::LensModel;
+    let text = render(&example_tables()) + LENSES;
+    let rig = Rig::from_toml_str(&text, NAME).unwrap();
+    let lens = rig.lens.unwrap();
+    assert_eq!(
+        lens.left.model,
+        LensModel::PlumbBob {
+            k1: -0.2834,
+            k2: 0.07396,
+            p1: 0.00019,
+            p2: 1.76e-05,
+            k3: 0.0
+        }
+    );
+    assert!(matches!(lens.right.model, LensModel::Equidistant { k1, .. } if k1 == -0.01));
+    assert_eq!((lens.left.fx, lens.left.cy), (458.654, 248.375));
+    assert!((lens.right.rectification[(0, 1)] + 0.014_099_53).abs() < 1e-12);
+    // The JSON form (a log's /rig) carries them.
+    let back = Rig::from_json_str(&rig.to_json(), "json").unwrap();
+    assert_eq!(back, rig);
+    // Without them, none.
+    assert!(
+        Rig::from_toml_str(&render(&example_tables()), NAME)
+            .unwrap()
+            .lens
+            .is_none()
+    );
+}
+
+#[test]
+fn bad_lens_tables_are_named() {
+    let base = render(&example_tables());
+    let left_only = LENSES.split("[lens.right]").next().unwrap();
+    expect_key_error(&(base.clone() + left_only), "[lens.right]", "come together");
+    expect_key_error(
+        &(base.clone() + &LENSES.replace("\"equidistant\"", "\"kannala\"")),
+        "[lens.right] model",
+        "unknown lens model \"kannala\"",
+    );
+    expect_key_error(
+        &(base.clone()
+            + &LENSES.replace(
+                "0.0, 0.0, 1.0]\n\n[lens.right]",
+                "0.0, 0.0, 2.0]\n\n[lens.right]",
+            )),
+        "[lens.left] rectification",
+        "not a rotation matrix",
+    );
+    expect_key_error(
+        &(base.clone() + &LENSES.replace("[-0.01, 0.002, 0.0, 0.0]", "[-0.01, 0.002]")),
+        "[lens.right] coefficients",
+        "2 numbers; expected 4",
+    );
+    expect_key_error(
+        &(base + &LENSES.replace("fx = 458.654", "fx = -1.0")),
+        "[lens.left] fx",
+        "must be positive",
     );
 }

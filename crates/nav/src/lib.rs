@@ -179,6 +179,8 @@ pub struct NavStats {
     /// The frame count when the smoother stopped because the map outgrew
     /// [`SmootherSettings::max_landmarks`] (0: it did not).
     pub phase2_smoother_stopped_at: u64,
+    /// Board features the lens model could not map into the rectified image (dropped).
+    pub features_unmapped: u64,
     /// Bound observations the update's budget left out (`CandidateSettings::max_observations`).
     pub observations_skipped: u64,
     /// Brief landmarks removed (`CandidateSettings::brief_observations`).
@@ -593,6 +595,35 @@ impl Navigator {
         self.odometry.drain(..keep_from);
         self.stats.frames += 1;
 
+        // Real lenses (vehicle-interfaces.md 1.1): the board's raw features into the rectified
+        // model; a feature that cannot be mapped is dropped and counted.
+        let rectified = self.rig.lens.map(|lens| {
+            let c = &self.rig.nominal;
+            let map = |lens: &calib::lens::Lens, side: &[Pixel], dropped: &mut u64| -> Vec<Pixel> {
+                side.iter()
+                    .filter_map(|p| {
+                        let r = lens
+                            .rectify(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
+                            .map(|(q, _)| Pixel { u: q.x, v: q.y });
+                        if r.is_none() {
+                            *dropped += 1;
+                        }
+                        r
+                    })
+                    .collect()
+            };
+            let mut dropped = 0;
+            let l = map(&lens.left, left, &mut dropped);
+            let r = map(&lens.right, right, &mut dropped);
+            (l, r, dropped)
+        });
+        let (left, right) = match &rectified {
+            Some((l, r, dropped)) => {
+                self.stats.features_unmapped += dropped;
+                (l.as_slice(), r.as_slice())
+            }
+            None => (left, right),
+        };
         let tracked = self.front_end.push_frame(t_us, left, right);
         if self.ekf.is_none() {
             self.phase1(&tracked, phase1_motion, &mut outcome)?;

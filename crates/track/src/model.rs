@@ -86,6 +86,7 @@ pub(crate) mod tests {
         prior[Param::F.index()] = Some(30.0);
         prior[Param::Baseline.index()] = Some(0.006);
         Rig {
+            lens: None,
             width: 752,
             height: 480,
             nominal: CameraParams {

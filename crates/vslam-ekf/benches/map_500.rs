@@ -21,6 +21,7 @@ fn rig() -> Rig {
     prior[Param::F.index()] = Some(20.0);
     prior[Param::Baseline.index()] = Some(0.006);
     Rig {
+        lens: None,
         width: 752,
         height: 480,
         nominal: CameraParams {

@@ -18,6 +18,7 @@ fn rig() -> Rig {
     let mut prior = [None; N_PARAMS];
     prior[Param::Baseline.index()] = Some(0.006);
     Rig {
+        lens: None,
         width: 752,
         height: 480,
         nominal: CameraParams {

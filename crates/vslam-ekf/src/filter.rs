@@ -1498,6 +1498,7 @@ mod tests {
         let mut prior = [None; N_PARAMS];
         prior[Param::Baseline.index()] = Some(0.005);
         Rig {
+            lens: None,
             width: 752,
             height: 480,
             nominal: CameraParams {

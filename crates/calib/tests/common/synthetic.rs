@@ -38,6 +38,7 @@ pub fn rig(nominal: CameraParams, estimate: &[Param]) -> Rig {
         });
     }
     Rig {
+        lens: None,
         width: 752,
         height: 480,
         nominal,

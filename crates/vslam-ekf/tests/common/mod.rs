@@ -51,6 +51,7 @@ pub fn rig(nominal: CameraParams, estimate: &[Param]) -> Rig {
         prior[p.index()] = Some(prior_sigma(p));
     }
     Rig {
+        lens: None,
         width: 752,
         height: 480,
         nominal,
