@@ -222,6 +222,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rig::project, m)?)?;
     m.add_function(wrap_pyfunction!(rig::triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(rig::load_rig, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::rectify_points, m)?)?;
     m.add_function(wrap_pyfunction!(rig::camera_parameter_names, m)?)?;
     m.add_class::<simulation::SimRun>()?;
     m.add_function(wrap_pyfunction!(simulation::simulate, m)?)?;

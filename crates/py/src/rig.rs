@@ -173,6 +173,56 @@ pub(crate) fn triangulate<'py>(
     ))
 }
 
+/// Raw pixels `(N, 2)` of one camera (`"left"` or `"right"`) into the rectified rig model of
+/// a rig file's `[lens.*]` tables (vehicle-interfaces.md 1.1): `(N, 2)`, NaN rows for points
+/// that cannot be mapped; the input unchanged without lens tables. Raises
+/// `stereonav.InputError` for a bad file, shape or camera name. The GIL is released.
+#[pyfunction]
+pub(crate) fn rectify_points<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    path: std::path::PathBuf,
+    camera: &str,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let rig = Rig::load(&path).map_err(|e| input_error(py, e.to_string()))?;
+    let p = points.as_array();
+    if p.ncols() != 2 {
+        return Err(input_error(
+            py,
+            format!("points has shape {:?}, expected (N, 2)", p.shape()),
+        ));
+    }
+    let lens = match (&rig.lens, camera) {
+        (_, "left" | "right") => rig
+            .lens
+            .map(|l| if camera == "left" { l.left } else { l.right }),
+        _ => {
+            return Err(input_error(
+                py,
+                format!("camera {camera:?}: expected \"left\" or \"right\""),
+            ));
+        }
+    };
+    let owned = p.to_owned();
+    let c = rig.nominal;
+    let out = py.detach(move || {
+        let Some(lens) = lens else {
+            return owned;
+        };
+        let mut out = owned;
+        for mut row in out.rows_mut() {
+            let raw = nalgebra::Vector2::new(row[0], row[1]);
+            let (u, v) = lens
+                .rectify(raw, c.f, c.cx, c.cy)
+                .map_or((f64::NAN, f64::NAN), |(q, _)| (q.x, q.y));
+            row[0] = u;
+            row[1] = v;
+        }
+        out
+    });
+    Ok(out.into_pyarray(py))
+}
+
 /// Reads a rig file (TOML). Returns `(width, height, nominal camera (10 values), estimated
 /// parameter names, prior sigmas {name: sigma}, noise (pixel, velocity, yaw_rate))`; raises
 /// `stereonav.InputError` naming the file, the key and the problem.

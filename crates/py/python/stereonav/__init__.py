@@ -105,6 +105,7 @@ from .rig import (
     Triangulated,
     load_rig,
     project,
+    rectify_points,
     triangulate,
 )
 
@@ -161,6 +162,7 @@ __all__ = [
     "RigConfig",
     "Triangulated",
     "load_rig",
+    "rectify_points",
     "project",
     "triangulate",
     "DEFAULT_MAX_FEATURES",

@@ -35,6 +35,7 @@ __all__ = [
     "simulate",
     "camera_parameter_names",
     "load_rig",
+    "rectify_points",
     "project",
     "triangulate",
     "encode_packet",
@@ -97,6 +98,9 @@ def triangulate(
     measurements: _F64, pose_xyt: _F64, camera_params: _F64, sigma_px: float
 ) -> tuple[_F64, _F64, _F64, _F64]:
     """``(p_in_rig, p_in_robot, p_in_world, cov_in_world)``."""
+
+def rectify_points(points: _F64, path: str, camera: str) -> _F64:
+    """Raw pixels of one camera into the rectified rig model (NaN rows: not mappable)."""
 
 def load_rig(
     path: str,

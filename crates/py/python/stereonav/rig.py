@@ -203,6 +203,42 @@ def triangulate(
     )
 
 
+def rectify_points(
+    points: npt.ArrayLike, rig_path: Union[str, os.PathLike[str]], camera: str = "left"
+) -> npt.NDArray[np.float64]:
+    """Raw pixel coordinates of one camera into the rectified rig model.
+
+    ``vehicle-interfaces.md`` section 1.1: each point is undistorted with the rig file's
+    ``[lens.left]`` or ``[lens.right]`` model (``plumb_bob`` or ``equidistant``, inverted
+    exactly, not OpenCV's five fixed-point iterations), rotated by its rectification and
+    projected with the ``[camera]`` table's ``f, cx, cy``.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 2)
+        Raw pixels ``u, v`` of that camera.
+    rig_path : path
+        The rig file (TOML).
+    camera : {"left", "right"}
+        Which camera the points are of.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, 2)
+        The rectified pixels; ``NaN`` rows for points whose undistortion does not converge or
+        whose ray points behind the camera. Without ``[lens]`` tables, the input.
+
+    Raises
+    ------
+    InputError
+        A bad rig file, a shape that is not ``(N, 2)``, a camera name not ``left``/``right``.
+    """
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise InputError(f"points has shape {array.shape}, expected (N, 2)")
+    return _native.rectify_points(np.ascontiguousarray(array), os.fspath(rig_path), str(camera))
+
+
 def load_rig(path: Union[str, os.PathLike[str]]) -> RigConfig:
     """Read a rig file (TOML, ``vehicle-interfaces.md`` section 3).
 
