@@ -127,3 +127,33 @@ fn features_a_lens_cannot_map_are_dropped_and_counted() {
     nav.push_frame(1, &corner, &corner).unwrap();
     assert_eq!(nav.stats().features_unmapped, 2);
 }
+
+/// A log through EuRoC's real radtan lenses (the simulator carries each lamp's projection to
+/// the raw image; the rig's [lens.*] map the board's raw features back), no flags: every lamp
+/// mapped, within the 5 mm (landmarks) and 0.5 mm (baseline).
+#[test]
+fn a_log_through_real_radtan_lenses_maps() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/scenarios/paper-experiment-radtan.toml");
+    let sc = sim::Scenario::load(&path).unwrap();
+    assert!(sc.rig.lens.is_some());
+    let log = std::env::temp_dir().join(format!("lens-radtan-{}.mcap", std::process::id()));
+    for seed in 0..2 {
+        let run = sim::simulate(&sc.clone().with_seed(seed), sim::Mode::Fast).unwrap();
+        run.write_log(&log).unwrap();
+        let r = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
+        let t = r.truth.as_ref().unwrap();
+        let b = t
+            .camera
+            .iter()
+            .find(|(p, _)| *p == calib::Param::Baseline)
+            .unwrap()
+            .1;
+        let d = format!("seed {seed}: {t:?}");
+        assert_eq!((t.lamps_missed, t.landmarks_unmatched), (0, 0), "{d}");
+        assert_eq!(t.landmarks_matched, 5, "{d}");
+        assert!(t.landmark_rms <= 0.005, "{d}");
+        assert!(b.abs() <= 0.0005, "{d}");
+    }
+    std::fs::remove_file(&log).ok();
+}

@@ -192,15 +192,28 @@ pub fn quantise_q4(u: f64) -> Option<u16> {
     }
 }
 
-/// The fast mode's features of one stereo frame from the lamps in view.
+/// The fast mode's features of one stereo frame from the lamps in view. With `lens` (the rig
+/// file's `[lens.*]` tables, taken as the truth, and the true camera), each lamp's rectified
+/// projection is carried to the raw image of its camera before the pixel noise (the board sees
+/// raw pixels: vehicle-interfaces.md 1.1).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn fast_frame(
     views: &[LampView],
     noise: &NoiseSpec,
     clutter: &Clutter,
     lamp_response: f64,
     regs: &Registers,
+    lens: Option<(&calib::lens::StereoLens, &CameraParams)>,
     rng: &mut impl Rng,
 ) -> (ImageFeatures, ImageFeatures) {
+    let raw = |side: usize, u: f64, v: f64| -> Option<(f64, f64)> {
+        let Some((l, c)) = lens else {
+            return Some((u, v));
+        };
+        let lens = if side == 0 { &l.left } else { &l.right };
+        lens.unrectify(nalgebra::Vector2::new(u, v), c.f, c.cx, c.cy)
+            .map(|p| (p.x, p.y))
+    };
     let mut left = Vec::new();
     let mut right = Vec::new();
     let (w, h) = (regs.width, regs.height);
@@ -215,18 +228,24 @@ pub(crate) fn fast_frame(
         let n = [normal(), normal(), normal(), normal()];
         let (z_left, z_right) = (normal(), normal());
         let sigma = noise.pixel_px;
+        let (Some((ul, vl)), Some((ur, vr))) = (
+            raw(0, view.u_left, view.v_left),
+            raw(1, view.u_right, view.v_right),
+        ) else {
+            continue;
+        };
         let sides = [
             (
                 view.in_left,
-                view.u_left + sigma * n[0],
-                view.v_left + sigma * n[1],
+                ul + sigma * n[0],
+                vl + sigma * n[1],
                 z_left,
                 &mut left,
             ),
             (
                 view.in_right,
-                view.u_right + sigma * n[2],
-                view.v_right + sigma * n[3],
+                ur + sigma * n[2],
+                vr + sigma * n[3],
                 z_right,
                 &mut right,
             ),

@@ -138,6 +138,7 @@ pub fn simulate_with_progress(
                 &spec.clutter,
                 spec.world.lamp_response,
                 &regs,
+                scenario.rig.lens.as_ref().map(|l| (l, &camera)),
                 &mut stream_rng(seed, Stream::Features, index as u64),
             ),
             Some(renderer) => {
