@@ -127,8 +127,12 @@ impl LensModel {
             return None;
         }
         match *self {
-            Self::PlumbBob { .. } => {
-                let mut p = d;
+            Self::PlumbBob { k1, k2, k3, .. } => {
+                // Start from one fixed-point step of the radial part (OpenCV's first step):
+                // Newton then needs two or three iterations.
+                let r2 = d.x * d.x + d.y * d.y;
+                let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+                let mut p = if radial > 0.1 { d / radial } else { d };
                 for _ in 0..MAX_ITERATIONS {
                     let (f, j) = self.distort(p);
                     let residual = f - d;
@@ -186,6 +190,23 @@ fn equidistant_theta_d(theta: f64, k1: f64, k2: f64, k3: f64, k4: f64) -> (f64, 
 }
 
 impl Lens {
+    /// [`Lens::rectify`] without the Jacobian (what the navigator needs for a feature).
+    pub fn rectify_point(
+        &self,
+        raw: Vector2<f64>,
+        f: f64,
+        cx: f64,
+        cy: f64,
+    ) -> Option<Vector2<f64>> {
+        let d = Vector2::new((raw.x - self.cx) / self.fx, (raw.y - self.cy) / self.fy);
+        let p = self.model.undistort(d)?;
+        let ray = self.rectification * Vector3::new(p.x, p.y, 1.0);
+        if !(ray.z > 1e-9 && ray.iter().all(|v| v.is_finite())) {
+            return None;
+        }
+        Some(Vector2::new(cx + f * ray.x / ray.z, cy + f * ray.y / ray.z))
+    }
+
     /// A raw pixel of this camera in the rectified image of focal length `f` and principal
     /// point `(cx, cy)`, with the Jacobian `d rectified / d raw` (to carry the raw pixel
     /// noise); `None` when the undistortion does not converge or the rectified ray points

@@ -603,8 +603,8 @@ impl Navigator {
                 side.iter()
                     .filter_map(|p| {
                         let r = lens
-                            .rectify(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
-                            .map(|(q, _)| Pixel { u: q.x, v: q.y });
+                            .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
+                            .map(|q| Pixel { u: q.x, v: q.y });
                         if r.is_none() {
                             *dropped += 1;
                         }
