@@ -141,6 +141,7 @@ fn rig() -> Rig {
         estimate: alloc::vec![Param::F, Param::Baseline],
         prior,
         noise: Noise { pixel: 0.3, velocity: 0.02, yaw_rate: 0.01 },
+        lens: None,
     }
 }
 
