@@ -109,6 +109,12 @@ pub struct Mount {
 }
 
 impl Mount {
+    /// The head is tilted (pitch or roll beyond 0.05 rad): what makes `f` observable from
+    /// planar motion (`crate::selfcal::structural_trap`).
+    pub fn is_tilted(&self) -> bool {
+        libm::fabs(self.pitch) > 0.05 || libm::fabs(self.roll) > 0.05
+    }
+
     /// `robot_from_rig` rotation `R_RS = Rz(yaw) Ry(pitch) Rx(roll)`.
     pub fn robot_from_rig_rotation(&self) -> Matrix3<f64> {
         rot_z(self.yaw) * rot_y(self.pitch) * rot_x(self.roll)

@@ -89,22 +89,25 @@ impl Reader<'_> {
             .table(table)?
             .get(key)
             .ok_or_else(|| self.error(format!("[{table}] {key}"), "missing key".to_string()))?;
+        self.finite(&format!("[{table}] {key}"), value, "a number")
+    }
+
+    /// A finite number (an integer counts), or an error naming `key`; `expected` says what a
+    /// value of another type should have been.
+    fn finite(&self, key: &str, value: &Value, expected: &str) -> Result<f64, RigFileError> {
         let x = match value {
             Value::Float(x) => *x,
             #[allow(clippy::cast_precision_loss)] // rig values are far below 2^53
             Value::Integer(i) => *i as f64,
             other => {
                 return Err(self.error(
-                    format!("[{table}] {key}"),
-                    format!("expected a number, found {}", describe(other)),
+                    key.to_string(),
+                    format!("expected {expected}, found {}", describe(other)),
                 ));
             }
         };
         if !x.is_finite() {
-            return Err(self.error(
-                format!("[{table}] {key}"),
-                format!("{x} is not a finite number"),
-            ));
+            return Err(self.error(key.to_string(), format!("{x} is not a finite number")));
         }
         Ok(x)
     }
@@ -199,27 +202,10 @@ fn lenses(r: &Reader<'_>) -> Result<Option<StereoLens>, RigFileError> {
                     format!("expected an array of numbers, found {}", describe(found)),
                 ));
             };
-            let mut out = Vec::with_capacity(items.len());
-            for item in items {
-                let x = match item {
-                    Value::Float(x) => *x,
-                    #[allow(clippy::cast_precision_loss)]
-                    Value::Integer(i) => *i as f64,
-                    other => {
-                        return Err(sub.error(
-                            format!("[{name}] {key}"),
-                            format!("expected numbers, found {}", describe(other)),
-                        ));
-                    }
-                };
-                if !x.is_finite() {
-                    return Err(sub.error(
-                        format!("[{name}] {key}"),
-                        format!("{x} is not a finite number"),
-                    ));
-                }
-                out.push(x);
-            }
+            let out = items
+                .iter()
+                .map(|item| sub.finite(&format!("[{name}] {key}"), item, "numbers"))
+                .collect::<Result<Vec<f64>, RigFileError>>()?;
             if !lens_of.contains(&out.len()) {
                 return Err(sub.error(
                     format!("[{name}] {key}"),

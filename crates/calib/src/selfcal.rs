@@ -679,7 +679,7 @@ fn observability(
     let prior = prior_precision(rig, &estimated);
     let posterior = covariance(&(h_data + Mat10::from_diagonal(&prior)), &estimated);
     let total_rotation: f64 = pairs.iter().map(|p| libm::fabs(p.motion.dtheta)).sum();
-    let tilted = libm::fabs(c.mount.pitch) > 0.05 || libm::fabs(c.mount.roll) > 0.05;
+    let tilted = c.mount.is_tilted();
     let mut report = ObservabilityReport::default();
     // Information in prior-sigma units: S H S with S = diag(prior sigma).
     let mut scaled = Mat10::identity();

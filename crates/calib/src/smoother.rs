@@ -753,7 +753,7 @@ impl Smoother {
     /// Which estimated parameters the data informed.
     fn observability(&self, cov: &Mat10) -> ObservabilityReport {
         let c = &self.camera;
-        let tilted = libm::fabs(c.mount.pitch) > 0.05 || libm::fabs(c.mount.roll) > 0.05;
+        let tilted = c.mount.is_tilted();
         let mut report = ObservabilityReport::default();
         for &p in &self.estimated {
             let i = p.index();

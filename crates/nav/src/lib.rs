@@ -409,8 +409,7 @@ impl Navigator {
 
     /// The estimated parameters the motion so far cannot inform (whatever the hold).
     fn not_excited(&self) -> Vec<Param> {
-        let c = &self.rig.nominal;
-        let tilted = c.mount.pitch.abs() > 0.05 || c.mount.roll.abs() > 0.05;
+        let tilted = self.rig.nominal.mount.is_tilted();
         let rotation = self.stats.significant_rotation_rad;
         let moved = self.stats.significant_translation_m >= self.settings.min_translation_m;
         self.rig

@@ -103,10 +103,7 @@ pub fn replay_log(
         let phase = phase_of(navigator.phase());
         let (pose, pose_cov) = navigator.pose();
         if phase == Phase::Navigating
-            && let Some(t) = input.truth.as_ref().and_then(|t| {
-                let i = t.poses.binary_search_by_key(&frame.t_us, |p| p.t_us).ok()?;
-                t.poses.get(i)
-            })
+            && let Some(t) = input.truth.as_ref().and_then(|t| t.pose_at(frame.t_us))
             && let Some(v) = pose_nees(&pose, &pose_cov, t)
         {
             nees_sum += v;
@@ -151,37 +148,15 @@ pub fn replay_log(
     }
     // The frames of phase 1 take the batch's smoothed poses: the whole trajectory is in the
     // first frame's world frame.
-    let smoothed = navigator.phase1_trajectory();
-    if !smoothed.is_empty() {
-        let mut i = 0usize;
-        for f in &mut frames {
-            while smoothed.get(i).is_some_and(|(t, _)| *t < f.t_us) {
-                i += 1;
-            }
-            if let Some((t, p)) = smoothed.get(i)
-                && *t == f.t_us
-                && f.phase == Phase::Calibrating
-            {
-                f.pose = [p.x, p.y, p.theta];
-            }
-        }
-    }
+    set_poses(
+        &mut frames,
+        navigator.phase1_trajectory(),
+        Some(Phase::Calibrating),
+    );
     // Every frame phase 2's smoother held takes its smoothed pose.
     smoothed_poses.extend(navigator.take_smoothed());
     smoothed_poses.extend(navigator.smoother_window());
-    if !smoothed_poses.is_empty() {
-        let mut i = 0usize;
-        for f in &mut frames {
-            while smoothed_poses.get(i).is_some_and(|(t, _)| *t < f.t_us) {
-                i += 1;
-            }
-            if let Some((t, p)) = smoothed_poses.get(i)
-                && *t == f.t_us
-            {
-                f.pose = [p.x, p.y, p.theta];
-            }
-        }
-    }
+    set_poses(&mut frames, &smoothed_poses, None);
     let landmarks = map_of(&navigator);
     if let Some(last) = frames.last()
         && navigator.ekf().is_some()
@@ -269,10 +244,7 @@ pub fn replay_log(
     }
     let truth = input.truth.as_ref().map(|t| {
         let mut e = truth_errors(t, &frames, &landmarks, &final_c, &rig);
-        let last = frames.last().and_then(|f| {
-            let i = t.poses.binary_search_by_key(&f.t_us, |p| p.t_us).ok()?;
-            t.poses.get(i)
-        });
+        let last = frames.last().and_then(|f| t.pose_at(f.t_us));
         let state = navigator
             .ekf()
             .zip(last)
@@ -327,6 +299,12 @@ impl Truth {
         t.poses.sort_by_key(|p| p.t_us);
         any.then_some(t)
     }
+
+    /// The true pose at exactly `t_us`, if the log has one.
+    pub(crate) fn pose_at(&self, t_us: u64) -> Option<&TruthPose> {
+        let i = self.poses.binary_search_by_key(&t_us, |p| p.t_us).ok()?;
+        self.poses.get(i)
+    }
 }
 
 /// The camera parameters of the simulator's truth (`/truth/camera`).
@@ -360,10 +338,7 @@ fn truth_errors(
     let mut max: f64 = 0.0;
     let mut n = 0usize;
     for f in frames {
-        let Ok(i) = truth.poses.binary_search_by_key(&f.t_us, |p| p.t_us) else {
-            continue;
-        };
-        let Some(p) = truth.poses.get(i) else {
+        let Some(p) = truth.pose_at(f.t_us) else {
             continue;
         };
         let [x, y, theta] = f.pose;
@@ -384,10 +359,7 @@ fn truth_errors(
     let phase2: Vec<(&FrameEstimate, &TruthPose)> = frames
         .iter()
         .filter(|f| f.phase == Phase::Navigating)
-        .filter_map(|f| {
-            let i = truth.poses.binary_search_by_key(&f.t_us, |p| p.t_us).ok()?;
-            Some((f, truth.poses.get(i)?))
-        })
+        .filter_map(|f| Some((f, truth.pose_at(f.t_us)?)))
         .collect();
     let gauge = if phase2.is_empty() {
         Planar::IDENTITY
@@ -447,10 +419,7 @@ fn truth_errors(
     let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
     let mut seen = vec![0usize; truth.landmarks.len()];
     for f in frames {
-        let Ok(i) = truth.poses.binary_search_by_key(&f.t_us, |p| p.t_us) else {
-            continue;
-        };
-        let Some(p) = truth.poses.get(i) else {
+        let Some(p) = truth.pose_at(f.t_us) else {
             continue;
         };
         let pose = Pose2::new(p.x, p.y, p.theta);
@@ -496,6 +465,23 @@ fn truth_errors(
         },
         camera,
         consistency: None,
+    }
+}
+
+/// Each frame (of `phase` only, when given) with a pose in `poses` (sorted by time) at its
+/// timestamp takes it.
+fn set_poses(frames: &mut [FrameEstimate], poses: &[(u64, Pose2)], phase: Option<Phase>) {
+    let mut i = 0usize;
+    for f in frames {
+        while poses.get(i).is_some_and(|(t, _)| *t < f.t_us) {
+            i += 1;
+        }
+        if let Some((t, p)) = poses.get(i)
+            && *t == f.t_us
+            && phase.is_none_or(|ph| ph == f.phase)
+        {
+            f.pose = [p.x, p.y, p.theta];
+        }
     }
 }
 

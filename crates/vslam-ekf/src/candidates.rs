@@ -375,7 +375,8 @@ impl Candidates {
             }
         }
         self.last_seen.retain(|id, _| ekf.contains(*id));
-        let in_view = ekf.visible_landmarks().len();
+        // Counted once, when the first candidate is ready (a projection of every landmark).
+        let mut in_view: Option<usize> = None;
         let motion = ekf.take_motion_covariance();
         let camera = ekf.camera();
         let pose = ekf.pose();
@@ -400,8 +401,12 @@ impl Candidates {
                 }
                 _ => 1,
             };
-            let room = in_view + report.added.len() < self.settings.max_in_view;
-            if hits >= self.settings.frames_to_confirm
+            let ready = hits >= self.settings.frames_to_confirm;
+            let room = ready && {
+                let seen = *in_view.get_or_insert_with(|| ekf.visible_landmarks().len());
+                seen + report.added.len() < self.settings.max_in_view
+            };
+            if ready
                 && ekf
                     .landmarks()
                     .any(|l| (l.position - point).norm() < self.settings.min_separation_m)
@@ -412,7 +417,7 @@ impl Candidates {
                 report.merged += 1;
                 continue;
             }
-            if hits >= self.settings.frames_to_confirm && room {
+            if room {
                 self.pending.remove(&track);
                 if let Ok(id) = ekf.add_landmark(&z) {
                     self.landmark_of.insert(track, id);
