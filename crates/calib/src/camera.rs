@@ -1,14 +1,23 @@
-//! The camera parameters `C` (vehicle-interfaces.md section 1) and the robot pose.
+//! The calibration: the camera parameters `C` (vehicle-interfaces.md section 1), the
+//! vehicle's own parameters `V` (section 1.2), and the robot pose.
+//!
+//! `C` and `V` share one parameter list ([`Param`]) so that every estimator (phase 1's batch,
+//! phase 2's filter, the smoother) treats "a parameter to estimate, with a prior" alike: the
+//! projection does not depend on `V` (its columns are zero) and the odometry does not depend
+//! on `C`.
 
 use nalgebra::{Matrix3, SVector, Vector3};
 
-/// Number of camera parameters in `C`.
-pub const N_PARAMS: usize = 10;
+/// Number of parameters in `C` and `V` together.
+pub const N_PARAMS: usize = 14;
 
-/// The camera parameters as a vector, in [`Param::ALL`] order.
+/// Number of camera parameters in `C` (the first of [`Param::ALL`]).
+pub const N_CAMERA: usize = 10;
+
+/// Every parameter of `C` and `V` as a vector, in [`Param::ALL`] order.
 pub type ParamVector = SVector<f64, N_PARAMS>;
 
-/// One camera parameter of `C`, any subset of which may be estimated.
+/// One parameter of the camera `C` or of the vehicle `V`, any subset of which may be estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Param {
     /// Focal length, pixels (both cameras).
@@ -31,10 +40,18 @@ pub enum Param {
     MountPitch,
     /// Rig yaw about z, radians.
     MountYaw,
+    /// `V`: reported `vx, vy` = `odom_scale` x true (vehicle-interfaces.md 1.2).
+    OdomScale,
+    /// `V`: reported `vtheta` = `odom_yaw_scale` x true + `odom_yaw_bias`.
+    OdomYawScale,
+    /// `V`: rad/s added to every reported `vtheta`.
+    OdomYawBias,
+    /// `V`: seconds; a board timestamp `t` was exposed at odometry-clock time `t - time_offset`.
+    TimeOffset,
 }
 
 impl Param {
-    /// Every parameter, in the order of [`ParamVector`].
+    /// Every parameter of `C` then `V`, in the order of [`ParamVector`].
     pub const ALL: [Self; N_PARAMS] = [
         Self::F,
         Self::Cx,
@@ -46,7 +63,53 @@ impl Param {
         Self::MountRoll,
         Self::MountPitch,
         Self::MountYaw,
+        Self::OdomScale,
+        Self::OdomYawScale,
+        Self::OdomYawBias,
+        Self::TimeOffset,
     ];
+
+    /// The camera's parameters `C` (SUMMARY.json's `camera`).
+    pub const CAMERA: [Self; N_CAMERA] = [
+        Self::F,
+        Self::Cx,
+        Self::Cy,
+        Self::Baseline,
+        Self::MountX,
+        Self::MountY,
+        Self::MountZ,
+        Self::MountRoll,
+        Self::MountPitch,
+        Self::MountYaw,
+    ];
+
+    /// The vehicle's parameters `V` (SUMMARY.json's `vehicle`), in [`Vehicle::to_array`] order.
+    pub const VEHICLE: [Self; N_PARAMS - N_CAMERA] = [
+        Self::OdomScale,
+        Self::OdomYawScale,
+        Self::OdomYawBias,
+        Self::TimeOffset,
+    ];
+
+    /// How a person reads the parameter's value (or sigma): the factor from its SI unit and
+    /// the unit's name (`px`, `mm`, `deg`, `%`, `mrad/s`, `ms`).
+    pub const fn display_unit(self) -> (f64, &'static str) {
+        match self {
+            Self::F | Self::Cx | Self::Cy => (1.0, "px"),
+            Self::Baseline | Self::MountX | Self::MountY | Self::MountZ => (1e3, "mm"),
+            Self::MountRoll | Self::MountPitch | Self::MountYaw => {
+                (180.0 / core::f64::consts::PI, "deg")
+            }
+            Self::OdomScale | Self::OdomYawScale => (100.0, "%"),
+            Self::OdomYawBias => (1e3, "mrad/s"),
+            Self::TimeOffset => (1e3, "ms"),
+        }
+    }
+
+    /// A parameter of the vehicle `V` (1.2), not of the camera.
+    pub const fn is_vehicle(self) -> bool {
+        self.index() >= N_CAMERA
+    }
 
     /// The parameter's name in rig files and summaries (`f`, `cx`, ..., `mount_yaw`).
     pub const fn name(self) -> &'static str {
@@ -61,6 +124,10 @@ impl Param {
             Self::MountRoll => "mount_roll",
             Self::MountPitch => "mount_pitch",
             Self::MountYaw => "mount_yaw",
+            Self::OdomScale => "odom_scale",
+            Self::OdomYawScale => "odom_yaw_scale",
+            Self::OdomYawBias => "odom_yaw_bias",
+            Self::TimeOffset => "time_offset",
         }
     }
 
@@ -126,8 +193,82 @@ impl Mount {
     }
 }
 
-/// The camera parameters `C`: shared intrinsics of the two rectified cameras, the baseline
-/// and the mount.
+/// The vehicle's own parameters `V` (vehicle-interfaces.md 1.2): how the odometry and the
+/// board's clock differ from the truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vehicle {
+    /// Reported `vx, vy` = `odom_scale` x true.
+    pub odom_scale: f64,
+    /// Reported `vtheta` = `odom_yaw_scale` x true + `odom_yaw_bias`.
+    pub odom_yaw_scale: f64,
+    /// Rad/s added to every reported `vtheta`.
+    pub odom_yaw_bias: f64,
+    /// Seconds: a board timestamp `t` was exposed at odometry-clock time `t - time_offset`.
+    pub time_offset: f64,
+}
+
+impl Vehicle {
+    /// The nominal vehicle: odometry and clock as reported.
+    pub const NOMINAL: Self = Self {
+        odom_scale: 1.0,
+        odom_yaw_scale: 1.0,
+        odom_yaw_bias: 0.0,
+        time_offset: 0.0,
+    };
+
+    /// The true robot-frame velocities from reported ones: `(vx, vy) / odom_scale`,
+    /// `(vtheta - odom_yaw_bias) / odom_yaw_scale`.
+    pub fn true_velocities(&self, vx: f64, vy: f64, vtheta: f64) -> (f64, f64, f64) {
+        (
+            vx / self.odom_scale,
+            vy / self.odom_scale,
+            (vtheta - self.odom_yaw_bias) / self.odom_yaw_scale,
+        )
+    }
+
+    /// The reported velocities of true ones (the inverse of [`Self::true_velocities`]).
+    pub fn reported_velocities(&self, vx: f64, vy: f64, vtheta: f64) -> (f64, f64, f64) {
+        (
+            vx * self.odom_scale,
+            vy * self.odom_scale,
+            vtheta * self.odom_yaw_scale + self.odom_yaw_bias,
+        )
+    }
+
+    /// The odometry-clock time (microseconds, rounded) at which a frame stamped `t_us` by the
+    /// board was exposed: `t_us - time_offset` (0 at the earliest).
+    pub fn odometry_time_us(&self, t_us: u64) -> u64 {
+        let shift = libm::round(self.time_offset * 1e6);
+        #[allow(clippy::cast_precision_loss, clippy::cast_possible_truncation)]
+        let t = t_us as f64 - shift;
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        if t <= 0.0 { 0 } else { t as u64 }
+    }
+
+    /// Every parameter, in [`Param::VEHICLE`] order.
+    pub const fn to_array(&self) -> [f64; 4] {
+        [
+            self.odom_scale,
+            self.odom_yaw_scale,
+            self.odom_yaw_bias,
+            self.time_offset,
+        ]
+    }
+
+    /// Whether every parameter is at its nominal value.
+    pub fn is_nominal(&self) -> bool {
+        *self == Self::NOMINAL
+    }
+}
+
+impl Default for Vehicle {
+    fn default() -> Self {
+        Self::NOMINAL
+    }
+}
+
+/// The calibration: the camera parameters `C` (shared intrinsics of the two rectified
+/// cameras, the baseline and the mount) and the vehicle's parameters `V`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraParams {
     /// Focal length, pixels.
@@ -140,6 +281,8 @@ pub struct CameraParams {
     pub baseline: f64,
     /// Rig pose in the robot frame.
     pub mount: Mount,
+    /// The vehicle's parameters `V` (odometry scale and bias, clock offset).
+    pub vehicle: Vehicle,
 }
 
 impl CameraParams {
@@ -156,6 +299,10 @@ impl CameraParams {
             Param::MountRoll => self.mount.roll,
             Param::MountPitch => self.mount.pitch,
             Param::MountYaw => self.mount.yaw,
+            Param::OdomScale => self.vehicle.odom_scale,
+            Param::OdomYawScale => self.vehicle.odom_yaw_scale,
+            Param::OdomYawBias => self.vehicle.odom_yaw_bias,
+            Param::TimeOffset => self.vehicle.time_offset,
         }
     }
 
@@ -172,6 +319,10 @@ impl CameraParams {
             Param::MountRoll => &mut self.mount.roll,
             Param::MountPitch => &mut self.mount.pitch,
             Param::MountYaw => &mut self.mount.yaw,
+            Param::OdomScale => &mut self.vehicle.odom_scale,
+            Param::OdomYawScale => &mut self.vehicle.odom_yaw_scale,
+            Param::OdomYawBias => &mut self.vehicle.odom_yaw_bias,
+            Param::TimeOffset => &mut self.vehicle.time_offset,
         };
         *slot = value;
     }
@@ -189,6 +340,7 @@ impl CameraParams {
             cy: 0.0,
             baseline: 0.0,
             mount: Mount::default(),
+            vehicle: Vehicle::NOMINAL,
         };
         for (i, p) in Param::ALL.into_iter().enumerate() {
             c.set(p, v[i]);

@@ -29,7 +29,7 @@ pub mod selfcal;
 #[cfg(feature = "alloc")]
 pub mod smoother;
 
-pub use camera::{CameraParams, Mount, N_PARAMS, Param, ParamVector, Pose2};
+pub use camera::{CameraParams, Mount, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, Vehicle};
 #[cfg(feature = "alloc")]
 pub use config::{Noise, Rig};
 pub use rig::{

@@ -428,6 +428,7 @@ mod tests {
     #[test]
     fn reduced_measurement_triangulates_as_triangulate_does() {
         let c = CameraParams {
+            vehicle: Default::default(),
             f: 702.0,
             cx: 376.0,
             cy: 240.0,

@@ -9,7 +9,7 @@ use std::vec::Vec;
 
 use toml::{Table, Value};
 
-use crate::camera::{CameraParams, Mount, N_PARAMS, Param};
+use crate::camera::{CameraParams, Mount, N_PARAMS, Param, Vehicle};
 use crate::config::{Noise, Rig};
 use crate::lens::{Lens, LensModel, StereoLens};
 
@@ -45,7 +45,12 @@ pub enum RigFileError {
     },
 }
 
-const TABLES: [&str; 6] = ["camera", "mount", "estimate", "prior", "noise", "lens"];
+const TABLES: [&str; 7] = [
+    "camera", "mount", "estimate", "prior", "noise", "vehicle", "lens",
+];
+
+/// `[vehicle]`'s keys: the parameters of `V` (vehicle-interfaces.md 1.2).
+const VEHICLE_KEYS: [&str; 4] = ["odom_scale", "odom_yaw_scale", "odom_yaw_bias", "time_offset"];
 
 struct Reader<'a> {
     source: &'a str,
@@ -137,6 +142,32 @@ impl Reader<'_> {
             None => Err(self.error(name, "missing key".to_string())),
         }
     }
+}
+
+/// The optional `[vehicle]` table (vehicle-interfaces.md 1.2, 3): each key defaults to its
+/// nominal value; the scales must be positive.
+fn vehicle(r: &Reader<'_>) -> Result<Vehicle, RigFileError> {
+    let mut v = Vehicle::NOMINAL;
+    if !r.root.contains_key("vehicle") {
+        return Ok(v);
+    }
+    r.check_keys("vehicle", &VEHICLE_KEYS)?;
+    let t = r.table("vehicle")?;
+    for (key, slot, positive) in [
+        ("odom_scale", &mut v.odom_scale, true),
+        ("odom_yaw_scale", &mut v.odom_yaw_scale, true),
+        ("odom_yaw_bias", &mut v.odom_yaw_bias, false),
+        ("time_offset", &mut v.time_offset, false),
+    ] {
+        if t.contains_key(key) {
+            *slot = if positive {
+                r.positive("vehicle", key)?
+            } else {
+                r.number("vehicle", key)?
+            };
+        }
+    }
+    Ok(v)
 }
 
 /// `[lens.left]` and `[lens.right]` (vehicle-interfaces.md section 3): both or neither.
@@ -344,7 +375,7 @@ impl Rig {
         let Some(Value::Table(root)) = json_to_toml(&json) else {
             return Err(RigFileError::Syntax {
                 source_name: source_name.to_string(),
-                reason: "expected a JSON object of tables (camera, mount, estimate, prior, noise)"
+                reason: "expected a JSON object of tables (camera, mount, estimate, prior, noise, ...)"
                     .to_string(),
             });
         };
@@ -378,6 +409,7 @@ impl Rig {
                 pitch: r.number("mount", "pitch")?,
                 yaw: r.number("mount", "yaw")?,
             },
+            vehicle: vehicle(&r)?,
         };
         let list = match r.table("estimate")?.get("parameters") {
             Some(Value::Array(a)) => a,
@@ -485,6 +517,15 @@ impl Rig {
             "prior": prior,
             "noise": {"pixel": self.noise.pixel, "velocity": self.noise.velocity, "yaw_rate": self.noise.yaw_rate},
         });
+        if let Some(obj) = json.as_object_mut()
+            && !c.vehicle.is_nominal()
+        {
+            let v = &c.vehicle;
+            obj.insert(
+                "vehicle".to_string(),
+                serde_json::json!({"odom_scale": v.odom_scale, "odom_yaw_scale": v.odom_yaw_scale, "odom_yaw_bias": v.odom_yaw_bias, "time_offset": v.time_offset}),
+            );
+        }
         if let (Some(l), Some(obj)) = (&self.lens, json.as_object_mut()) {
             let side = |lens: &Lens| {
                 let (model, coefficients) = match lens.model {
@@ -545,6 +586,44 @@ impl Rig {
             "\n[noise]\npixel = {:?}\nvelocity = {:?}\nyaw_rate = {:?}\n",
             self.noise.pixel, self.noise.velocity, self.noise.yaw_rate
         ));
+        if !c.vehicle.is_nominal() {
+            let v = &c.vehicle;
+            out.push_str(&format!(
+                "\n[vehicle]\nodom_scale = {:?}\nodom_yaw_scale = {:?}\nodom_yaw_bias = {:?}\ntime_offset = {:?}\n",
+                v.odom_scale, v.odom_yaw_scale, v.odom_yaw_bias, v.time_offset
+            ));
+        }
+        if let Some(l) = &self.lens {
+            for (name, lens) in [("left", &l.left), ("right", &l.right)] {
+                let coefficients: Vec<f64> = match lens.model {
+                    LensModel::PlumbBob { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
+                    LensModel::Equidistant { k1, k2, k3, k4 } => vec![k1, k2, k3, k4],
+                };
+                let model = match lens.model {
+                    LensModel::PlumbBob { .. } => "plumb_bob",
+                    LensModel::Equidistant { .. } => "equidistant",
+                };
+                let list = |v: &[f64]| {
+                    v.iter()
+                        .map(|x| format!("{x:?}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                let r = &lens.rectification;
+                let rect: Vec<f64> = (0..3)
+                    .flat_map(|i| (0..3).map(move |j| r[(i, j)]))
+                    .collect();
+                out.push_str(&format!(
+                    "\n[lens.{name}]\nmodel = {model:?}\nfx = {:?}\nfy = {:?}\ncx = {:?}\ncy = {:?}\ncoefficients = [{}]\nrectification = [{}]\n",
+                    lens.fx,
+                    lens.fy,
+                    lens.cx,
+                    lens.cy,
+                    list(&coefficients),
+                    list(&rect)
+                ));
+            }
+        }
         out
     }
 }

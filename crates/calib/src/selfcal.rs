@@ -648,9 +648,23 @@ fn covariance(h: &Mat10, active: &[bool; N_PARAMS]) -> Mat10 {
 /// The known trap of the rig and the path that makes `p` unobservable, if any: an upward head
 /// (`tilted` false) for `f`, planar motion for the camera height, a straight path
 /// (`total_rotation_rad`, the sum of the odometry's absolute yaw changes, under 0.3 rad) for
-/// the mounting offsets and angles. Anything else is a lack of data so far.
-pub fn structural_trap(p: Param, tilted: bool, total_rotation_rad: f64) -> Option<&'static str> {
+/// the mounting offsets and angles and the odometry's yaw scale, and a path without changes
+/// of speed or heading (`speed_change_mps`, the sum of the absolute changes of speed between
+/// frames, under 0.2 m/s, and no turn) for the clock offset (vehicle-interfaces.md 1.2).
+/// Anything else is a lack of data so far.
+pub fn structural_trap(
+    p: Param,
+    tilted: bool,
+    total_rotation_rad: f64,
+    speed_change_mps: f64,
+) -> Option<&'static str> {
     match p {
+        Param::OdomYawScale if total_rotation_rad < 0.3 => Some(
+            "the odometry's yaw scale needs turns: on a straight path the yaw rate is zero whatever its scale",
+        ),
+        Param::TimeOffset if total_rotation_rad < 0.3 && speed_change_mps < 0.2 => Some(
+            "the clock offset needs changes of speed or heading: at a constant velocity it only shifts the path",
+        ),
         Param::F if !tilted => Some(
             "with the camera looking straight up and planar motion, f and every landmark depth scale together: f is not observable unless the camera is tilted or a lamp height is known",
         ),
@@ -707,7 +721,8 @@ fn observability(
         let observable = posterior_sigma <= settings.observable_ratio * prior_sigma;
         // The known traps are properties of the rig and the path; anything else is a lack of
         // data so far, which more driving may cure.
-        let trap = structural_trap(*p, tilted, total_rotation);
+        // The pair solver does not model V (its motions are fixed): no speed term.
+        let trap = structural_trap(*p, tilted, total_rotation, f64::INFINITY);
         let reason = (!observable).then_some(trap.unwrap_or(
             "the data so far constrain it less than its prior: more motion (turns, speed) or more landmarks are needed",
         ));
@@ -1047,6 +1062,7 @@ mod tests {
     /// closed-form covariance vanishes.
     fn camera() -> CameraParams {
         CameraParams {
+            vehicle: Default::default(),
             f: 702.0,
             cx: 376.0,
             cy: 240.0,

@@ -28,9 +28,9 @@ use alloc::vec::Vec;
 
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
-use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
+use crate::camera::{CameraParams, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
 use crate::config::Rig;
-use crate::odometry::Motion;
+use crate::odometry::{Motion, OdometryFactor};
 use crate::rig::{Measurement, project, project_with_jacobians, triangulate};
 use crate::selfcal::{Mat10, ObservabilityReport, ParamObservability, structural_trap};
 
@@ -327,13 +327,18 @@ pub struct SolveSummary {
 struct Frame {
     t_us: u64,
     pose: Pose2,
-    /// Odometry from the previous frame: motion and its information (inverse covariance).
-    odometry: Option<(Motion, Matrix3<f64>)>,
+    /// Odometry from the previous frame: the motion (with its dependence on `V`) and its
+    /// information (inverse covariance).
+    odometry: Option<(OdometryFactor, Matrix3<f64>)>,
     observations: Vec<(usize, Measurement)>,
     /// Measurements of tracks not yet confirmed, by track: they join their landmark when
     /// the track is confirmed (kept for [`TENTATIVE_FRAMES`] frames).
     tentative: Vec<(u64, Measurement)>,
 }
+
+/// A change of speed that counts as excitation for the clock offset, m/s: well above the
+/// odometry noise of a frame interval.
+const SPEED_STEP_MPS: f64 = 0.05;
 
 /// Frames back that a newly confirmed track's earlier measurements are looked for.
 const TENTATIVE_FRAMES: usize = 8;
@@ -350,6 +355,11 @@ pub struct Smoother {
     track_landmark: BTreeMap<u64, usize>,
     lambda: f64,
     total_rotation: f64,
+    /// Sum of the absolute changes of speed between frames, m/s (the clock offset's
+    /// excitation).
+    speed_change: f64,
+    /// The last frame interval's speed, m/s.
+    last_speed: Option<f64>,
     /// `(t_us, values, sigmas)` of C after each solve.
     history: Vec<(u64, ParamVector, ParamVector)>,
     /// Joint covariance `[last pose, C, landmarks]` of the last solve.
@@ -394,13 +404,12 @@ fn odometry_residual(
 /// The odometry motion with its information (inverse covariance); `None` when there is none
 /// or its covariance cannot be inverted.
 fn odometry_information(
-    odometry: Option<(Motion, Matrix3<f64>)>,
-) -> Option<(Motion, Matrix3<f64>)> {
-    odometry.and_then(|(m, cov)| {
-        let info = cov.try_inverse()?;
-        info.iter()
-            .all(|v| v.is_finite())
-            .then_some((m, 0.5 * (info + info.transpose())))
+    odometry: Option<OdometryFactor>,
+) -> Option<(OdometryFactor, Matrix3<f64>)> {
+    odometry.and_then(|o| {
+        let info = o.covariance.try_inverse()?;
+        (info.iter().all(|v| v.is_finite()) && o.vehicle_jacobian.iter().all(|v| v.is_finite()))
+            .then_some((o, 0.5 * (info + info.transpose())))
     })
 }
 
@@ -408,22 +417,54 @@ fn odometry_information(
 const NO_ODOMETRY_INFORMATION: f64 = 1e-2;
 
 impl Frame {
-    /// The odometry factor from the previous frame's pose `prev` to this frame's `pose`:
-    /// residual, Jacobians with respect to both poses, information. Without odometry, a weak
-    /// zero-motion factor.
+    /// The odometry factor from the previous frame's pose `prev` to this frame's `pose`, for
+    /// the vehicle parameters of `camera`: residual, Jacobians with respect to both poses,
+    /// information, and the residual's Jacobian with respect to `V` ([`Param::VEHICLE`]
+    /// order). Without odometry, a weak zero-motion factor.
+    ///
+    /// The residual is in the reported odometry's units, `D (h(x_a, x_b) - m(V))` with
+    /// `D = diag(odom_scale, odom_scale, odom_yaw_scale)`: the odometry's noise is that of the
+    /// reported velocities, whatever the true motion. A residual in true-motion units with the
+    /// reported noise would shrink with the map (baseline and odometry scale along their
+    /// product, vehicle-interfaces.md 1.2: the one direction the data cannot see), and the
+    /// batch would drift along it, the odometry cost falling as the square of the scale.
     fn odometry_factor(
         &self,
         prev: &Pose2,
         pose: &Pose2,
-    ) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>, Matrix3<f64>) {
+        camera: &CameraParams,
+    ) -> (
+        Vector3<f64>,
+        Matrix3<f64>,
+        Matrix3<f64>,
+        Matrix3<f64>,
+        nalgebra::Matrix3x4<f64>,
+    ) {
         match &self.odometry {
-            Some((m, info)) => {
-                let (r, ja, jb) = odometry_residual(prev, pose, m);
-                (r, ja, jb, *info)
+            Some((o, info)) => {
+                let (r0, ja, jb) = odometry_residual(prev, pose, &o.motion_at(&camera.vehicle));
+                let v = &camera.vehicle;
+                let d = Matrix3::from_diagonal(&Vector3::new(
+                    v.odom_scale,
+                    v.odom_scale,
+                    v.odom_yaw_scale,
+                ));
+                let mut jv = -(d * o.vehicle_jacobian);
+                // d D / d odom_scale and d D / d odom_yaw_scale times the true-units residual.
+                jv[(0, 0)] += r0.x;
+                jv[(1, 0)] += r0.y;
+                jv[(2, 1)] += r0.z;
+                (d * r0, d * ja, d * jb, *info, jv)
             }
             None => {
                 let (r, ja, jb) = odometry_residual(prev, pose, &Motion::default());
-                (r, ja, jb, Matrix3::identity() * NO_ODOMETRY_INFORMATION)
+                (
+                    r,
+                    ja,
+                    jb,
+                    Matrix3::identity() * NO_ODOMETRY_INFORMATION,
+                    nalgebra::Matrix3x4::zeros(),
+                )
             }
         }
     }
@@ -444,6 +485,8 @@ impl Smoother {
             track_landmark: BTreeMap::new(),
             lambda: 1e-4,
             total_rotation: 0.0,
+            speed_change: 0.0,
+            last_speed: None,
             history: Vec::new(),
             last_covariance: None,
             last_summary: None,
@@ -524,7 +567,7 @@ impl Smoother {
     pub fn add_frame(
         &mut self,
         t_us: u64,
-        odometry: Option<(Motion, Matrix3<f64>)>,
+        odometry: Option<OdometryFactor>,
         observations: &[(u64, Measurement)],
         tentative: &[(u64, Measurement)],
     ) -> bool {
@@ -534,11 +577,24 @@ impl Smoother {
         let odometry = odometry_information(odometry);
         let pose = match (self.frames.last(), &odometry) {
             (None, _) => Pose2::default(),
-            (Some(prev), Some((m, _))) => m.apply(&prev.pose),
+            (Some(prev), Some((o, _))) => o.motion_at(&self.camera.vehicle).apply(&prev.pose),
             (Some(prev), None) => prev.pose,
         };
-        if let Some((m, _)) = &odometry {
-            self.total_rotation += libm::fabs(m.dtheta);
+        if let Some((o, _)) = &odometry {
+            self.total_rotation += libm::fabs(o.motion.dtheta);
+            if o.motion.dt_s > 0.0 {
+                // Changes beyond SPEED_STEP_MPS from the last counted speed: the odometry's
+                // noise is not a change of speed.
+                let speed = libm::hypot(o.motion.dx, o.motion.dy) / o.motion.dt_s;
+                match self.last_speed {
+                    Some(last) if libm::fabs(speed - last) >= SPEED_STEP_MPS => {
+                        self.speed_change += libm::fabs(speed - last);
+                        self.last_speed = Some(speed);
+                    }
+                    Some(_) => {}
+                    None => self.last_speed = Some(speed),
+                }
+            }
         }
         let k = self.dropped + self.frames.len();
         let mut used: Vec<(usize, Measurement)> = Vec::with_capacity(observations.len());
@@ -715,6 +771,18 @@ impl Smoother {
         found
     }
 
+    /// Baseline and odometry scale both estimated: only their product is observable (stereo
+    /// and odometry are the run's only metric scales, vehicle-interfaces.md 1.2), so the one
+    /// with the looser prior follows the other's prior and is not held against the stable rule.
+    fn scale_pair_trap(&self, p: Param) -> Option<&'static str> {
+        (matches!(p, Param::Baseline | Param::OdomScale)
+            && self.estimated.contains(&Param::Baseline)
+            && self.estimated.contains(&Param::OdomScale))
+        .then_some(
+            "only the product baseline x odom_scale is observable: each is known only as well as the other's prior",
+        )
+    }
+
     fn prior_sigma(&self, p: Param) -> f64 {
         self.rig.prior[p.index()].unwrap_or(f64::INFINITY)
     }
@@ -767,7 +835,8 @@ impl Smoother {
                 f64::INFINITY
             };
             let observable = posterior_sigma <= self.settings.sigma_fraction * prior_sigma;
-            let trap = structural_trap(p, tilted, self.total_rotation);
+            let trap = structural_trap(p, tilted, self.total_rotation, self.speed_change)
+                .or_else(|| self.scale_pair_trap(p));
             let reason = (!observable).then_some(trap.unwrap_or(
                 "the data so far constrain it less than its prior: more motion (turns, speed) or more landmarks are needed",
             ));
@@ -948,7 +1017,7 @@ impl Smoother {
     pub fn add_mapped_frame(
         &mut self,
         t_us: u64,
-        odometry: Option<(Motion, Matrix3<f64>)>,
+        odometry: Option<OdometryFactor>,
         pose: Pose2,
         observations: &[(usize, Measurement)],
     ) -> bool {
@@ -974,7 +1043,7 @@ impl Smoother {
             pose
         } else {
             match (self.frames.last(), &odometry) {
-                (Some(prev), Some((m, _))) => m.apply(&prev.pose),
+                (Some(prev), Some((o, _))) => o.motion_at(&self.camera.vehicle).apply(&prev.pose),
                 (Some(prev), None) => prev.pose,
                 (None, _) => Pose2::default(),
             }
@@ -1095,7 +1164,7 @@ impl Smoother {
             if i > 0
                 && let Some(prev) = poses.get(i - 1)
             {
-                let (r, _, _, info) = f.odometry_factor(prev, pose);
+                let (r, _, _, info, _) = f.odometry_factor(prev, pose, camera);
                 cost += r.dot(&(info * r));
             }
             for (j, z) in &f.observations {
@@ -1265,7 +1334,7 @@ impl Smoother {
             if i > 0
                 && let Some(prev) = poses.get(i - 1)
             {
-                let (r, ja, jb, info) = f.odometry_factor(prev, pose);
+                let (r, ja, jb, info, jv) = f.odometry_factor(prev, pose, camera);
                 let kb = i - first; // variable index of pose i
                 sys.d[kb] += jb.transpose() * info * jb;
                 sys.b[kb] -= jb.transpose() * info * r;
@@ -1274,6 +1343,35 @@ impl Smoother {
                     sys.d[ka] += ja.transpose() * info * ja;
                     sys.e[ka] += ja.transpose() * info * jb;
                     sys.b[ka] -= ja.transpose() * info * r;
+                }
+                // The estimated vehicle parameters move the motion (vehicle-interfaces.md
+                // 1.2): they join the arrow's C block through this factor.
+                for (a, pa) in self.estimated.iter().enumerate() {
+                    if !pa.is_vehicle() {
+                        continue;
+                    }
+                    let ca: Vector3<f64> = jv.column(pa.index() - N_CAMERA).into_owned();
+                    if ca.iter().all(|v| *v == 0.0) {
+                        continue;
+                    }
+                    let wa = info * ca;
+                    sys.bz[a] -= wa.dot(&r);
+                    for (b, pb) in self.estimated.iter().enumerate() {
+                        if pb.is_vehicle() {
+                            let cb = jv.column(pb.index() - N_CAMERA);
+                            sys.z[(a, b)] += wa.dot(&cb);
+                        }
+                    }
+                    let fb = jb.transpose() * wa;
+                    for row in 0..3 {
+                        sys.f[kb][(row, a)] += fb[row];
+                    }
+                    if i > first {
+                        let fa = ja.transpose() * wa;
+                        for row in 0..3 {
+                            sys.f[kb - 1][(row, a)] += fa[row];
+                        }
+                    }
                 }
             }
             if i + 1 == n && !last_pixels {

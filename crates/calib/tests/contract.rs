@@ -15,6 +15,7 @@ use std::f64::consts::FRAC_PI_2;
 
 fn mount(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> CameraParams {
     CameraParams {
+        vehicle: Default::default(),
         mount: Mount {
             x,
             y,
@@ -99,10 +100,24 @@ fn parameter_names_follow_the_contract() {
             "mount_z",
             "mount_roll",
             "mount_pitch",
-            "mount_yaw"
+            "mount_yaw",
+            "odom_scale",
+            "odom_yaw_scale",
+            "odom_yaw_bias",
+            "time_offset"
         ]
     );
-    assert_eq!(calib::N_PARAMS, 10);
+    assert_eq!(calib::N_PARAMS, 14);
+    assert!(Param::CAMERA.iter().all(|p| !p.is_vehicle()));
+    assert!(Param::VEHICLE.iter().all(|p| p.is_vehicle()));
+    assert_eq!(
+        Param::CAMERA
+            .iter()
+            .chain(&Param::VEHICLE)
+            .copied()
+            .collect::<Vec<_>>(),
+        Param::ALL
+    );
 }
 
 /// All mount angles zero: optical axis straight up and rig x = robot x. A point straight
@@ -356,7 +371,7 @@ proptest! {
     /// or an error.
     #[test]
     fn nan_and_extreme_inputs_never_panic(
-        cam in proptest::collection::vec(any_f64(), 10),
+        cam in proptest::collection::vec(any_f64(), calib::N_PARAMS),
         pose in proptest::collection::vec(any_f64(), 3),
         l in proptest::collection::vec(any_f64(), 3),
         z in proptest::collection::vec(any_f64(), 4),
@@ -375,7 +390,7 @@ proptest! {
                 let _ = tri.covariance_in_robot(&c, sigma);
                 let _ = tri.p_in_world(&c, &pose);
                 let pc = nalgebra::Matrix3::from_element(sigma);
-                let cc = nalgebra::SMatrix::<f64, 10, 10>::from_element(sigma);
+                let cc = nalgebra::SMatrix::<f64, { calib::N_PARAMS }, { calib::N_PARAMS }>::from_element(sigma);
                 let _ = tri.covariance_in_world(&c, &pose, sigma, Some(&pc), Some(&cc));
             }
         }

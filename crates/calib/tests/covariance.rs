@@ -22,6 +22,7 @@ const ABS_CORR: f64 = 0.03;
 fn scenes() -> Vec<(&'static str, CameraParams, Pose2, Vector3<f64>)> {
     let nominal = common::nominal_camera();
     let tilted = CameraParams {
+        vehicle: Default::default(),
         mount: Mount {
             x: 0.3,
             y: -0.2,
@@ -105,11 +106,12 @@ fn pose_covariance() -> Matrix3<f64> {
     Matrix3::from_diagonal(&s) * r * Matrix3::from_diagonal(&s)
 }
 
-/// A 10x10 camera covariance: f 5 px, cx/cy 2 px, baseline 2 mm, mount 1 cm and 5 mrad, with
-/// f and baseline correlated.
+/// A camera covariance: f 5 px, cx/cy 2 px, baseline 2 mm, mount 1 cm and 5 mrad, with
+/// f and baseline correlated; the vehicle's parameters (which a triangulation does not use)
+/// with small variances too.
 fn camera_covariance() -> SMatrix<f64, N_PARAMS, N_PARAMS> {
     let s = SVector::<f64, N_PARAMS>::from_column_slice(&[
-        5.0, 2.0, 2.0, 0.002, 0.01, 0.01, 0.01, 0.005, 0.005, 0.005,
+        5.0, 2.0, 2.0, 0.002, 0.01, 0.01, 0.01, 0.005, 0.005, 0.005, 0.01, 0.01, 0.001, 0.01,
     ]);
     let mut r = SMatrix::<f64, N_PARAMS, N_PARAMS>::identity();
     let (f, b) = (Param::F.index(), Param::Baseline.index());

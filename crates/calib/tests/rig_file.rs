@@ -691,6 +691,7 @@ fn rig_strategy_with(
                     width,
                     height,
                     nominal: CameraParams {
+                        vehicle: Default::default(),
                         f,
                         cx,
                         cy,

@@ -56,7 +56,7 @@ use alloc::vec::Vec;
 use calib::camera::Param;
 use calib::camera::{CameraParams, Pose2};
 use calib::config::Rig;
-use calib::odometry::OdomSample;
+use calib::odometry::{OdomSample, OdometryFactor};
 use calib::selfcal::Handover;
 use calib::smoother::{BatchHandover, HandoverReason, Smoother, SmootherSettings};
 use nalgebra::{Matrix3, Matrix4, Vector4};
@@ -71,6 +71,11 @@ pub use error::Error;
 /// Odometry samples the navigator holds at most between two frames (100 s at 100 Hz): a live
 /// stream with odometry and no frames does not grow it without bound.
 pub const MAX_ODOMETRY_BUFFER: usize = 10_000;
+
+/// Odometry kept before a frame's odometry-clock time beyond the one sample held into the
+/// next interval, microseconds: the clock offset's estimate may move the next interval's
+/// start back by this much (vehicle-interfaces.md 1.2).
+const ODOMETRY_MARGIN_US: u64 = 200_000;
 
 /// The navigator's tuning.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -190,6 +195,9 @@ pub struct NavStats {
     pub significant_translation_m: f64,
     /// Rotation the odometry turned, the same way, radians.
     pub significant_rotation_rad: f64,
+    /// Changes of speed between frame intervals, summed, counting a change only once it
+    /// exceeds 0.05 m/s from the last counted speed (the clock offset's excitation), m/s.
+    pub significant_speed_change_mps: f64,
 }
 
 /// The two phases of the method in one object (see the crate docs).
@@ -204,6 +212,8 @@ pub struct Navigator {
     /// Odometry since (and including the last sample before) the previous frame.
     odometry: Vec<OdomSample>,
     last_odometry_t: Option<u64>,
+    /// The speed at the last counted change ([`NavStats::significant_speed_change_mps`]).
+    counted_speed: Option<f64>,
     last_frame_t: Option<u64>,
     /// Dead reckoning (phase 1).
     pose: Pose2,
@@ -252,6 +262,7 @@ impl Navigator {
             candidates,
             odometry: Vec::new(),
             last_odometry_t: None,
+            counted_speed: None,
             last_frame_t: None,
             pose: Pose2::default(),
             pose_covariance: Matrix3::zeros(),
@@ -374,6 +385,17 @@ impl Navigator {
         if s > 0.0 && m.dtheta * m.dtheta > 9.0 * s {
             self.stats.significant_rotation_rad += m.dtheta.abs();
         }
+        if m.dt_s > 0.0 {
+            let speed = d.norm() / m.dt_s;
+            match self.counted_speed {
+                Some(last) if (speed - last).abs() >= 0.05 => {
+                    self.stats.significant_speed_change_mps += (speed - last).abs();
+                    self.counted_speed = Some(speed);
+                }
+                Some(_) => {}
+                None => self.counted_speed = Some(speed),
+            }
+        }
     }
 
     /// The estimated camera parameters the motion so far cannot inform
@@ -407,7 +429,11 @@ impl Navigator {
             .collect()
     }
 
-    /// The estimated parameters the motion so far cannot inform (whatever the hold).
+    /// The estimated camera parameters the motion so far cannot inform (whatever the hold).
+    /// The vehicle's parameters are never held: a parameter of V the motion does not excite
+    /// has no effect on the prediction (the yaw scale without turns, the odometry scale
+    /// standing), so it cannot take information from a model error the way C can, and
+    /// holding it would stop the smoother until the first turn.
     fn not_excited(&self) -> Vec<Param> {
         let tilted = self.rig.nominal.mount.is_tilted();
         let rotation = self.stats.significant_rotation_rad;
@@ -416,7 +442,17 @@ impl Navigator {
             .estimate
             .iter()
             .copied()
-            .filter(|&p| !moved || calib::selfcal::structural_trap(p, tilted, rotation).is_some())
+            .filter(|p| !p.is_vehicle())
+            .filter(|&p| {
+                !moved
+                    || calib::selfcal::structural_trap(
+                        p,
+                        tilted,
+                        rotation,
+                        self.stats.significant_speed_change_mps,
+                    )
+                    .is_some()
+            })
             .collect()
     }
 
@@ -548,48 +584,87 @@ impl Navigator {
             }
         }
         let mut outcome = FrameOutcome::default();
-        // The motion since the previous frame, for the batch (phase 1, and phase 2's smoother).
+        // The motion since the previous frame, for the batch (phase 1, and phase 2's smoother),
+        // integrated for the current estimate of the vehicle's parameters V (1.2): over the
+        // odometry-clock interval the frames were exposed in, with the true velocities.
         let mut phase1_motion = None;
-        // Motion since the previous frame.
+        let estimates_vehicle = self.rig.estimate.iter().any(|p| p.is_vehicle());
         if let Some(t0) = self.last_frame_t {
             let moved = match &mut self.ekf {
                 Some(ekf) => {
-                    match Increment::from_odometry(&self.odometry, t0, t_us, ekf.noise()) {
-                        Ok(inc) => {
-                            ekf.predict_increment(&inc)?;
-                            phase1_motion = Some((inc.motion, inc.covariance));
+                    let vehicle = ekf.camera().vehicle;
+                    match Increment::from_odometry_vehicle(
+                        &self.odometry,
+                        t0,
+                        t_us,
+                        ekf.noise(),
+                        &vehicle,
+                        estimates_vehicle,
+                    ) {
+                        Ok((inc, reported, jv)) => {
+                            ekf.predict_increment_vehicle(&inc, &jv)?;
+                            phase1_motion = Some(OdometryFactor {
+                                motion: inc.motion,
+                                covariance: reported,
+                                vehicle,
+                                vehicle_jacobian: jv,
+                            });
                             true
                         }
                         Err(vslam_ekf::Error::NoOdometry { .. }) => false,
                         Err(e) => return Err(e.into()),
                     }
                 }
-                None => match Increment::from_odometry(&self.odometry, t0, t_us, &self.rig.noise) {
-                    Ok(inc) => {
-                        phase1_motion = Some((inc.motion, inc.covariance));
-                        let (pose, f, q) = inc.apply(&self.pose);
-                        self.pose = pose;
-                        let p = f * self.pose_covariance * f.transpose() + q;
-                        self.pose_covariance = 0.5 * (p + p.transpose());
-                        true
+                None => {
+                    let vehicle = self.smoother.camera().vehicle;
+                    match Increment::from_odometry_vehicle(
+                        &self.odometry,
+                        t0,
+                        t_us,
+                        &self.rig.noise,
+                        &vehicle,
+                        estimates_vehicle,
+                    ) {
+                        Ok((inc, reported, jv)) => {
+                            phase1_motion = Some(OdometryFactor {
+                                motion: inc.motion,
+                                covariance: reported,
+                                vehicle,
+                                vehicle_jacobian: jv,
+                            });
+                            let (pose, f, q) = inc.apply(&self.pose);
+                            self.pose = pose;
+                            let p = f * self.pose_covariance * f.transpose() + q;
+                            self.pose_covariance = 0.5 * (p + p.transpose());
+                            true
+                        }
+                        Err(vslam_ekf::Error::NoOdometry { .. }) => false,
+                        Err(e) => return Err(e.into()),
                     }
-                    Err(vslam_ekf::Error::NoOdometry { .. }) => false,
-                    Err(e) => return Err(e.into()),
-                },
+                }
             };
             if !moved {
                 outcome.no_odometry = true;
                 self.stats.frames_without_odometry += 1;
             }
         }
-        if let Some((m, cov)) = &phase1_motion {
-            self.excite(m, cov);
+        if let Some(o) = &phase1_motion {
+            self.excite(&o.motion, &o.covariance);
         }
         self.last_frame_t = Some(t_us);
-        // Keep the last sample at or before this frame: it is held into the next interval.
+        // Keep the last sample at or before this frame's odometry-clock time (less a margin
+        // for the clock offset's estimate to move): it is held into the next interval.
+        let vehicle = self
+            .ekf
+            .as_ref()
+            .map_or_else(|| self.smoother.camera().vehicle, |e| e.camera().vehicle);
+        let keep_until = vehicle
+            .odometry_time_us(t_us)
+            .min(t_us)
+            .saturating_sub(ODOMETRY_MARGIN_US);
         let keep_from = self
             .odometry
-            .partition_point(|s| s.t_us <= t_us)
+            .partition_point(|s| s.t_us <= keep_until)
             .saturating_sub(1);
         self.odometry.drain(..keep_from);
         self.stats.frames += 1;
@@ -643,7 +718,7 @@ impl Navigator {
     fn phase1(
         &mut self,
         tracked: &TrackedFrame,
-        motion: Option<(calib::odometry::Motion, Matrix3<f64>)>,
+        motion: Option<OdometryFactor>,
         outcome: &mut FrameOutcome,
     ) -> Result<(), Error> {
         let observations: Vec<(u64, calib::Measurement)> = tracked
@@ -708,7 +783,7 @@ impl Navigator {
     fn smooth(
         &mut self,
         tracked: &TrackedFrame,
-        motion: Option<(calib::odometry::Motion, Matrix3<f64>)>,
+        motion: Option<OdometryFactor>,
         outcome: &FrameOutcome,
     ) {
         if outcome.switched || !self.smooths_phase2() {

@@ -115,10 +115,23 @@ fn run() -> Result<(), String> {
         let odometry_samples = sim_run.odometry_samples();
         let mut previous: Option<u64> = None;
         for f in sim_run.frames.iter().filter(|f| decoded.contains(&f.t_us)) {
+            let vehicle = sc.rig.nominal.vehicle;
             let odometry = previous.and_then(|t0| {
-                Increment::from_odometry(&odometry_samples, t0, f.t_us, &sc.rig.noise)
-                    .ok()
-                    .map(|inc| (inc.motion, inc.covariance))
+                Increment::from_odometry_vehicle(
+                    &odometry_samples,
+                    t0,
+                    f.t_us,
+                    &sc.rig.noise,
+                    &vehicle,
+                    true,
+                )
+                .ok()
+                .map(|(inc, reported, jv)| calib::odometry::OdometryFactor {
+                    motion: inc.motion,
+                    covariance: reported,
+                    vehicle,
+                    vehicle_jacobian: jv,
+                })
             });
             previous = Some(f.t_us);
             let mut observations = Vec::new();

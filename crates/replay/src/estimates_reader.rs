@@ -253,18 +253,40 @@ impl At<'_> {
         Ok(m)
     }
 
-    /// `{name: {value, sigma}}` for every parameter of C, in [`Param::ALL`] order.
+    /// `{name: {value, sigma}}` for every parameter of C and V, in [`Param::ALL`] order: V
+    /// from `field` or from a `vehicle` object beside it (a summary's), and nominal with
+    /// sigma 0 in files written before V existed.
     fn params(&self, v: &Value, field: &str) -> Result<Vec<ParamEstimate>, EstimatesError> {
         let object = v
             .get(field)
             .filter(|o| o.is_object())
             .ok_or_else(|| self.bad(field, "an object of parameters", v.get(field)))?;
+        let vehicle = v.get("vehicle").filter(|o| o.is_object());
+        let nominal = calib::CameraParams {
+            vehicle: calib::Vehicle::NOMINAL,
+            f: 0.0,
+            cx: 0.0,
+            cy: 0.0,
+            baseline: 0.0,
+            mount: calib::Mount::default(),
+        };
         Param::ALL
             .iter()
             .map(|&param| {
-                let p = object
+                let found = object
                     .get(param.name())
-                    .ok_or_else(|| self.bad(param.name(), "{value, sigma}", None))?;
+                    .or_else(|| vehicle.and_then(|o| o.get(param.name())));
+                let p = match found {
+                    Some(p) => p,
+                    None if param.is_vehicle() => {
+                        return Ok(ParamEstimate {
+                            param,
+                            value: nominal.get(param),
+                            sigma: 0.0,
+                        });
+                    }
+                    None => return Err(self.bad(param.name(), "{value, sigma}", None)),
+                };
                 Ok(ParamEstimate {
                     param,
                     value: self.float(p, "value")?,
@@ -413,14 +435,17 @@ impl At<'_> {
     }
 
     fn truth(&self, t: &Value) -> Result<TruthErrors, EstimatesError> {
-        let camera = match t.get("camera").filter(|c| c.is_object()) {
-            Some(errors) => Param::ALL
-                .iter()
-                .filter(|p| errors.get(p.name()).is_some())
-                .map(|&p| Ok((p, self.float(errors, p.name())?)))
-                .collect::<Result<Vec<_>, EstimatesError>>()?,
-            None => Vec::new(),
-        };
+        let objects: Vec<&Value> = ["camera", "vehicle"]
+            .iter()
+            .filter_map(|k| t.get(*k).filter(|c| c.is_object()))
+            .collect();
+        let camera = Param::ALL
+            .iter()
+            .filter_map(|&p| {
+                let errors = objects.iter().find(|o| o.get(p.name()).is_some())?;
+                Some(self.float(errors, p.name()).map(|e| (p, e)))
+            })
+            .collect::<Result<Vec<_>, EstimatesError>>()?;
         let count = |field: &str| -> Result<usize, EstimatesError> {
             Ok(usize::try_from(self.uint(t, field)?).unwrap_or(usize::MAX))
         };

@@ -185,6 +185,7 @@ pub fn replay_log(
         }
     }
     let stats = navigator.stats();
+    if std::env::var_os("STEREONAV_DEBUG_STATS").is_some() { eprintln!("{stats:?}"); }
     let tracker = navigator.front_end().tracker().stats();
     counts.stereo_matches = navigator.front_end().stereo_stats().matches;
     counts.tracks = tracker.started;
@@ -207,11 +208,7 @@ pub fn replay_log(
         ));
     }
     for (p, sigma, prior) in navigator.spurious_information() {
-        let (scale, unit) = match p {
-            Param::F | Param::Cx | Param::Cy => (1.0, "px"),
-            Param::Baseline | Param::MountX | Param::MountY | Param::MountZ => (1e3, "mm"),
-            Param::MountRoll | Param::MountPitch | Param::MountYaw => (180.0 / PI, "deg"),
-        };
+        let (scale, unit) = p.display_unit();
         warnings.push(format!(
             "the filter holds information on {} (sigma {:.2} {unit}, prior {:.2} {unit}) that the motion cannot give (the odometry travelled {:.3} m significantly): a model error elsewhere, such as the camera moving while the odometry says the vehicle stands",
             p.name(),
@@ -310,6 +307,12 @@ impl Truth {
 /// The camera parameters of the simulator's truth (`/truth/camera`).
 pub fn truth_camera(t: &TruthCamera) -> CameraParams {
     CameraParams {
+        vehicle: calib::Vehicle {
+            odom_scale: t.odom_scale,
+            odom_yaw_scale: t.odom_yaw_scale,
+            odom_yaw_bias: t.odom_yaw_bias,
+            time_offset: t.time_offset,
+        },
         f: t.f,
         cx: t.cx,
         cy: t.cy,

@@ -150,6 +150,7 @@ pub fn write_trajectory(path: &Path, replay: &Replay) -> Result<(), Error> {
 /// - `phase_switch_t_us`: when phase 2 started, or `null`;
 /// - `pose`: `{t_us, x, y, theta}` at the last frame, or `null` when no frame was processed;
 /// - `camera`: `{name: {value, sigma}}` for every parameter of `C` (the final estimate);
+/// - `vehicle`: the same for every parameter of `V` (1.2);
 /// - `landmarks`: `[{id, x, y, z, sigma: [sx, sy, sz], observations}]`, the final map;
 ///
 /// and also:
@@ -160,7 +161,7 @@ pub fn write_trajectory(path: &Path, replay: &Replay) -> Result<(), Error> {
 ///   frames in the trajectory);
 /// - `truth`: `null`, or the errors against the simulator's truth: `landmark_rms_m`,
 ///   `landmark_rms_aligned_m`, `landmarks_matched`, `landmarks_unmatched`, `lamps_missed`,
-///   `match_radius_m`, `ate_rms_m`, `ate_max_m`, `heading_rms_rad` and `camera`
+///   `match_radius_m`, `ate_rms_m`, `ate_max_m`, `heading_rms_rad`, `camera` and `vehicle`
 ///   (`{name: estimate - truth}`).
 ///
 /// Non-finite numbers are `null` (see the module docs).
@@ -176,7 +177,8 @@ pub fn summary_json(replay: &Replay) -> Value {
         "lost": c.lost,
         "phase_switch_t_us": replay.phase_switch_t_us,
         "pose": pose,
-        "camera": params_json(&replay.final_camera),
+        "camera": params_json(camera_part(&replay.final_camera)),
+        "vehicle": params_json(vehicle_part(&replay.final_camera)),
         "landmarks": replay.landmarks.iter().map(landmark_json).collect::<Vec<_>>(),
         "phase1_skipped": replay.phase1_skipped,
         "warnings": replay.warnings,
@@ -193,10 +195,19 @@ fn output_error(file: &'static str, path: &Path, source: std::io::Error) -> Erro
     }
 }
 
-fn params_json(params: &[ParamEstimate]) -> Value {
+/// The estimates of `C` only.
+fn camera_part(params: &[ParamEstimate]) -> impl Iterator<Item = &ParamEstimate> {
+    params.iter().filter(|p| !p.param.is_vehicle())
+}
+
+/// The estimates of `V` only.
+fn vehicle_part(params: &[ParamEstimate]) -> impl Iterator<Item = &ParamEstimate> {
+    params.iter().filter(|p| p.param.is_vehicle())
+}
+
+fn params_json<'a>(params: impl Iterator<Item = &'a ParamEstimate>) -> Value {
     Value::Object(
         params
-            .iter()
             .map(|p| {
                 (
                     p.param.name().to_owned(),
@@ -239,11 +250,13 @@ fn counts_json(c: &Counts, frames_processed: usize) -> Value {
 }
 
 fn truth_json(t: &TruthErrors) -> Value {
-    let camera: serde_json::Map<String, Value> = t
-        .camera
-        .iter()
-        .map(|(param, error)| (param.name().to_owned(), json!(error)))
-        .collect();
+    let errors = |vehicle: bool| -> serde_json::Map<String, Value> {
+        t.camera
+            .iter()
+            .filter(|(param, _)| param.is_vehicle() == vehicle)
+            .map(|(param, error)| (param.name().to_owned(), json!(error)))
+            .collect()
+    };
     json!({
         "landmark_rms_m": t.landmark_rms,
         "landmark_rms_aligned_m": t.landmark_rms_aligned,
@@ -254,7 +267,8 @@ fn truth_json(t: &TruthErrors) -> Value {
         "ate_rms_m": t.ate_rms,
         "ate_max_m": t.ate_max,
         "heading_rms_rad": t.heading_rms,
-        "camera": camera,
+        "camera": errors(false),
+        "vehicle": errors(true),
         "consistency": t.consistency.map(|c| json!({
             "pose_nees": c.pose_nees,
             "pose_frames": c.pose_frames,
@@ -709,7 +723,7 @@ fn camera_json(sample: &CameraSample) -> Value {
     json!({
         "t_us": sample.t_us,
         "phase": sample.phase.name(),
-        "params": params_json(&sample.params),
+        "params": params_json(sample.params.iter()),
     })
 }
 
@@ -1148,8 +1162,8 @@ mod schema {
         )
     }
 
-    /// `{name: {value, sigma}}` for every parameter of C.
-    fn params(description: &str) -> Value {
+    /// `{name: {value, sigma}}` for every parameter of `parameters`.
+    fn params(description: &str, parameters: &[Param]) -> Value {
         let estimate = strict_object(
             "stereonav.ParamEstimate",
             "One camera parameter's estimate",
@@ -1161,11 +1175,16 @@ mod schema {
                 ("sigma", float("Its 1-sigma (0 when held fixed)")),
             ],
         );
-        let properties: Vec<(&str, Value)> = Param::ALL
+        let properties: Vec<(&str, Value)> = parameters
             .iter()
             .map(|p| (p.name(), estimate.clone()))
             .collect();
-        strict_object("stereonav.CameraParams", description, &properties)
+        let title = if parameters.iter().all(|p| p.is_vehicle()) {
+            "stereonav.VehicleParams"
+        } else {
+            "stereonav.CameraParams"
+        };
+        strict_object(title, description, &properties)
     }
 
     fn phase() -> Value {
@@ -1198,7 +1217,7 @@ mod schema {
             &[
                 ("t_us", t_us("Timestamp, microseconds")),
                 ("phase", phase()),
-                ("params", params("Every parameter of C")),
+                ("params", params("Every parameter of C and V", &Param::ALL)),
             ],
         ))
     }
@@ -1316,7 +1335,11 @@ mod schema {
                 ),
             ],
         );
-        let camera_errors: Vec<(&str, Value)> = Param::ALL
+        let camera_errors: Vec<(&str, Value)> = Param::CAMERA
+            .iter()
+            .map(|p| (p.name(), float("estimate minus truth")))
+            .collect();
+        let vehicle_errors: Vec<(&str, Value)> = Param::VEHICLE
             .iter()
             .map(|p| (p.name(), float("estimate minus truth")))
             .collect();
@@ -1357,6 +1380,14 @@ mod schema {
                     ),
                 ),
                 (
+                    "vehicle",
+                    object(
+                        "stereonav.VehicleErrors",
+                        "Final vehicle parameter errors, by name",
+                        &vehicle_errors,
+                    ),
+                ),
+                (
                     "consistency",
                     json!({"oneOf": [{"type": "null"}, strict_object(
                         "stereonav.Consistency",
@@ -1385,7 +1416,14 @@ mod schema {
                     json!({"type": ["integer", "null"], "minimum": 0, "description": "When phase 2 started"}),
                 ),
                 ("pose", nullable(pose)),
-                ("camera", params("The final camera parameters")),
+                (
+                    "camera",
+                    params("The final camera parameters C", &Param::CAMERA),
+                ),
+                (
+                    "vehicle",
+                    params("The final vehicle parameters V", &Param::VEHICLE),
+                ),
                 ("landmarks", array(landmark, "The final map")),
                 (
                     "phase1_skipped",

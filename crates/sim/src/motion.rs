@@ -154,7 +154,8 @@ impl Motion {
         self.samples.last().map_or(0, |s| s.t_us)
     }
 
-    /// The measured odometry: `(1 + scale) v + white noise`, `w + bias + white noise`.
+    /// The measured odometry: `(1 + scale) v + white noise`, `(1 + yaw scale) w + bias + white
+    /// noise`.
     pub(crate) fn measured(
         &self,
         noise: &crate::scenario::NoiseSpec,
@@ -173,7 +174,9 @@ impl Motion {
                     t_us: s.t_us,
                     vx: scale * s.vx + noise.velocity_mps * nx,
                     vy: scale * s.vy + noise.velocity_mps * ny,
-                    vtheta: s.vtheta + noise.yaw_rate_bias_radps + noise.yaw_rate_radps * nw,
+                    vtheta: (1.0 + noise.yaw_rate_scale_error) * s.vtheta
+                        + noise.yaw_rate_bias_radps
+                        + noise.yaw_rate_radps * nw,
                 }
             })
             .collect()

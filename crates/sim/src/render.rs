@@ -510,6 +510,7 @@ mod tests {
 
     fn renderer() -> Renderer {
         let camera = CameraParams {
+            vehicle: Default::default(),
             f: 700.0,
             cx: 376.0,
             cy: 240.0,

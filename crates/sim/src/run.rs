@@ -128,8 +128,16 @@ pub fn simulate_with_progress(
         Mode::Rendered => Some(Renderer::new(camera, &regs, spec.render, landmarks.clone())),
         Mode::Fast => None,
     };
-    let one_frame = |index: usize, t_us: u64| -> Result<FrameTruth> {
-        let pose = motion.pose_at(t_us);
+    // The board stamps a frame exposed at odometry-clock time T with T + its clock offset.
+    let offset_us = (rates.board_clock_offset_s * 1e6).round();
+    let stamp = |t: u64| -> u64 {
+        #[allow(clippy::cast_precision_loss, clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let s = (t as f64 + offset_us).max(0.0) as u64;
+        s
+    };
+    let one_frame = |index: usize, exposed_us: u64| -> Result<FrameTruth> {
+        let pose = motion.pose_at(exposed_us);
+        let t_us = stamp(exposed_us);
         let views = lamp_views(&camera, &pose, &landmarks, &regs);
         let (left, right) = match &renderer {
             None => fast_frame(
@@ -324,6 +332,10 @@ pub fn truth_camera(c: &CameraParams) -> TruthCamera {
         mount_roll: c.mount.roll,
         mount_pitch: c.mount.pitch,
         mount_yaw: c.mount.yaw,
+        odom_scale: c.vehicle.odom_scale,
+        odom_yaw_scale: c.vehicle.odom_yaw_scale,
+        odom_yaw_bias: c.vehicle.odom_yaw_bias,
+        time_offset: c.vehicle.time_offset,
     }
 }
 

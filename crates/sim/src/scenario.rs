@@ -141,6 +141,10 @@ pub struct Rates {
     pub camera_phase_us: u64,
     /// Frame counter of the first packet.
     pub first_frame: u32,
+    /// The board's clock against the odometry's, seconds: a frame exposed at odometry-clock
+    /// time `T` is stamped `T + board_clock_offset_s` (the vehicle's `time_offset`,
+    /// vehicle-interfaces.md 1.2).
+    pub board_clock_offset_s: f64,
 }
 
 impl Default for Rates {
@@ -151,6 +155,7 @@ impl Default for Rates {
             start_t_us: 1_000_000,
             camera_phase_us: 0,
             first_frame: 0,
+            board_clock_offset_s: 0.0,
         }
     }
 }
@@ -171,6 +176,9 @@ pub struct NoiseSpec {
     /// Constant bias of the measured yaw rate, rad/s.
     #[serde(default)]
     pub yaw_rate_bias_radps: f64,
+    /// Yaw rate scale error: measured `vtheta` is `(1 + e)` times the truth (plus the bias).
+    #[serde(default)]
+    pub yaw_rate_scale_error: f64,
     /// Spread of the lamps' Harris responses in fast mode (sigma of the natural logarithm).
     #[serde(default = "default_response_spread")]
     pub response_log_sigma: f64,
@@ -660,7 +668,16 @@ impl Scenario {
 
     /// The true camera parameters `C`.
     pub fn true_camera(&self) -> CameraParams {
-        self.spec.camera.params()
+        let n = &self.spec.noise;
+        CameraParams {
+            vehicle: calib::Vehicle {
+                odom_scale: 1.0 + n.velocity_scale_error,
+                odom_yaw_scale: 1.0 + n.yaw_rate_scale_error,
+                odom_yaw_bias: n.yaw_rate_bias_radps,
+                time_offset: self.spec.rates.board_clock_offset_s,
+            },
+            ..self.spec.camera.params()
+        }
     }
 
     /// The board's registers.
@@ -679,6 +696,7 @@ impl TrueCamera {
     pub fn params(&self) -> CameraParams {
         let m = &self.mount;
         CameraParams {
+            vehicle: Default::default(),
             f: self.f_px,
             cx: self.cx_px,
             cy: self.cy_px,
@@ -809,6 +827,18 @@ impl ScenarioSpec {
         v.within(
             "noise.yaw_rate_bias_radps",
             n.yaw_rate_bias_radps,
+            -1.0,
+            1.0,
+        );
+        v.within(
+            "noise.yaw_rate_scale_error",
+            n.yaw_rate_scale_error,
+            -0.5,
+            0.5,
+        );
+        v.within(
+            "rates.board_clock_offset_s",
+            r.board_clock_offset_s,
             -1.0,
             1.0,
         );

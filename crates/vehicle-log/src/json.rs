@@ -202,7 +202,19 @@ pub(crate) fn encode_truth_landmarks(landmarks: &[TruthLandmark]) -> Result<Vec<
 pub(crate) fn decode_truth_camera(bytes: &[u8]) -> Result<TruthCamera, Problem> {
     let obj = object(bytes)?;
     let f = |key| f64_field(&obj, "", key);
+    // V is optional: nominal when a simulator does not model it.
+    let v = |key, nominal: f64| {
+        if obj.contains_key(key) {
+            f(key)
+        } else {
+            Ok(nominal)
+        }
+    };
     Ok(TruthCamera {
+        odom_scale: v("odom_scale", 1.0)?,
+        odom_yaw_scale: v("odom_yaw_scale", 1.0)?,
+        odom_yaw_bias: v("odom_yaw_bias", 0.0)?,
+        time_offset: v("time_offset", 0.0)?,
         f: f("f")?,
         cx: f("cx")?,
         cy: f("cy")?,
@@ -228,6 +240,10 @@ pub(crate) fn encode_truth_camera(camera: &TruthCamera) -> Result<Vec<u8>, Probl
         ("mount_roll", camera.mount_roll),
         ("mount_pitch", camera.mount_pitch),
         ("mount_yaw", camera.mount_yaw),
+        ("odom_scale", camera.odom_scale),
+        ("odom_yaw_scale", camera.odom_yaw_scale),
+        ("odom_yaw_bias", camera.odom_yaw_bias),
+        ("time_offset", camera.time_offset),
     ] {
         finite(key, value)?;
     }

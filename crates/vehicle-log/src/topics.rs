@@ -154,7 +154,7 @@ pub const TRUTH_LANDMARKS_SCHEMA: &str = r#"{
 pub const TRUTH_CAMERA_SCHEMA: &str = r#"{
   "$schema": "https://json-schema.org/draft/2020-12/schema",
   "title": "stereonav.TruthCamera",
-  "description": "Simulator truth: the camera parameters C (vehicle-interfaces.md section 1)",
+  "description": "Simulator truth: the camera parameters C (vehicle-interfaces.md section 1) and the vehicle parameters V (1.2, optional: nominal when absent)",
   "type": "object",
   "properties": {
     "f": { "type": "number", "description": "Focal length, px" },
@@ -166,7 +166,11 @@ pub const TRUTH_CAMERA_SCHEMA: &str = r#"{
     "mount_z": { "type": "number", "description": "m" },
     "mount_roll": { "type": "number", "description": "rad" },
     "mount_pitch": { "type": "number", "description": "rad" },
-    "mount_yaw": { "type": "number", "description": "rad" }
+    "mount_yaw": { "type": "number", "description": "rad" },
+    "odom_scale": { "type": "number", "description": "reported vx, vy = odom_scale x true (default 1)" },
+    "odom_yaw_scale": { "type": "number", "description": "reported vtheta = odom_yaw_scale x true + odom_yaw_bias (default 1)" },
+    "odom_yaw_bias": { "type": "number", "description": "rad/s (default 0)" },
+    "time_offset": { "type": "number", "description": "s: a board timestamp t was exposed at odometry-clock time t - time_offset (default 0)" }
   },
   "required": ["f", "cx", "cy", "baseline", "mount_x", "mount_y", "mount_z", "mount_roll", "mount_pitch", "mount_yaw"]
 }"#;

@@ -44,7 +44,8 @@ pub struct TruthLandmark {
 }
 
 /// Simulator truth on `/truth/camera`: the true camera parameters `C`
-/// (vehicle-interfaces.md section 1).
+/// (vehicle-interfaces.md section 1) and the true vehicle parameters `V` (1.2; absent in logs
+/// of simulators that do not model them: nominal).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TruthCamera {
     /// Focal length, px.
@@ -67,6 +68,22 @@ pub struct TruthCamera {
     pub mount_pitch: f64,
     /// Mount yaw, rad.
     pub mount_yaw: f64,
+    /// Reported `vx, vy` = `odom_scale` x true.
+    #[serde(default = "one")]
+    pub odom_scale: f64,
+    /// Reported `vtheta` = `odom_yaw_scale` x true + `odom_yaw_bias`.
+    #[serde(default = "one")]
+    pub odom_yaw_scale: f64,
+    /// Rad/s added to every reported `vtheta`.
+    #[serde(default)]
+    pub odom_yaw_bias: f64,
+    /// S: a board timestamp `t` was exposed at odometry-clock time `t - time_offset`.
+    #[serde(default)]
+    pub time_offset: f64,
+}
+
+const fn one() -> f64 {
+    1.0
 }
 
 /// One message of a vehicle log, in log order.

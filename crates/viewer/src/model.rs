@@ -214,13 +214,8 @@ pub struct Model {
 
 /// The display unit and scale of a parameter.
 pub fn display_unit(param: Param) -> (&'static str, f64) {
-    match param {
-        Param::F | Param::Cx | Param::Cy => ("px", 1.0),
-        Param::Baseline | Param::MountX | Param::MountY | Param::MountZ => ("mm", 1e3),
-        Param::MountRoll | Param::MountPitch | Param::MountYaw => {
-            ("deg", 180.0 / core::f64::consts::PI)
-        }
-    }
+    let (scale, unit) = param.display_unit();
+    (unit, scale)
 }
 
 /// Indices of the samples kept when a series at times `t` (sorted) is thinned to about `max`
@@ -561,6 +556,7 @@ impl Model {
         match sample {
             Some(s) => {
                 let mut c = self.nominal.unwrap_or(CameraParams {
+                    vehicle: Default::default(),
                     f: 1.0,
                     cx: 0.0,
                     cy: 0.0,
@@ -731,6 +727,7 @@ mod tests {
 
     fn camera(pitch: f64) -> CameraParams {
         CameraParams {
+            vehicle: Default::default(),
             f: 700.0,
             cx: 376.0,
             cy: 240.0,

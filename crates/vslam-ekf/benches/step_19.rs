@@ -22,6 +22,7 @@ fn rig() -> Rig {
         width: 752,
         height: 480,
         nominal: CameraParams {
+            vehicle: Default::default(),
             f: 700.0,
             cx: 376.0,
             cy: 240.0,

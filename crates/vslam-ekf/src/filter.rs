@@ -802,6 +802,19 @@ impl Ekf {
     /// Predicts with a motion and its covariance: `pose' = pose (+) motion`,
     /// `P_rr = F P_rr F^T + Q`, `P_rx = F P_rx`. Only the pose rows and columns change: O(n).
     pub fn predict_increment(&mut self, inc: &Increment) -> Result<(), Error> {
+        self.predict_increment_vehicle(inc, &nalgebra::Matrix3x4::zeros())
+    }
+
+    /// [`Self::predict_increment`] for a motion that depends on the vehicle's parameters `V`
+    /// (vehicle-interfaces.md 1.2): `vehicle_jacobian` is `d motion / dV` at the filter's `V`
+    /// ([`Param::VEHICLE`] order; the motion was integrated with it). With `G = d pose' / dV`
+    /// for the estimated ones, `P_rr = F P_rr F^T + F P_rV G^T + G P_Vr F^T + G P_VV G^T + Q`
+    /// and `P_rx = F P_rx + G P_Vx`: still only the pose rows and columns change, O(n).
+    pub fn predict_increment_vehicle(
+        &mut self,
+        inc: &Increment,
+        vehicle_jacobian: &nalgebra::Matrix3x4<f64>,
+    ) -> Result<(), Error> {
         let m = &inc.motion;
         for (what, value) in [
             ("motion dx", m.dx),
@@ -810,33 +823,68 @@ impl Ekf {
         ] {
             check_finite(what, value)?;
         }
-        if inc.covariance.iter().any(|v| !v.is_finite()) {
-            return Err(Error::NonFinite {
-                what: "motion covariance",
-                value: inc
-                    .covariance
-                    .iter()
-                    .copied()
-                    .find(|v| !v.is_finite())
-                    .unwrap_or(f64::NAN),
-            });
+        for (what, matrix) in [
+            ("motion covariance", inc.covariance.as_slice()),
+            ("motion vehicle Jacobian", vehicle_jacobian.as_slice()),
+        ] {
+            if let Some(v) = matrix.iter().copied().find(|v| !v.is_finite()) {
+                return Err(Error::NonFinite { what, value: v });
+            }
         }
+        let theta = self.x[2];
         let (pose, f, q) = inc.apply(&self.pose());
         let n = self.x.len();
+        // G's columns for the estimated vehicle parameters: (state index, d pose' / dV_k).
+        let rot = crate::motion::compose_jacobian_second(theta);
+        let c0 = self.camera_offset();
+        let g: Vec<(usize, Vector3<f64>)> = self
+            .estimated
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.is_vehicle())
+            .map(|(k, p)| {
+                (
+                    c0 + k,
+                    rot * vehicle_jacobian.column(p.index() - calib::N_CAMERA),
+                )
+            })
+            .filter(|(_, col)| col.iter().any(|v| *v != 0.0))
+            .collect();
         self.x[0] = pose.x;
         self.x[1] = pose.y;
         self.x[2] = wrap_angle(pose.theta);
         // F = [[1, 0, a], [0, 1, b], [0, 0, 1]].
         let (fa, fb) = (f[(0, 2)], f[(1, 2)]);
         let prr = self.pose_covariance();
-        let new_rr = f * prr * f.transpose() + q;
-        let new_rr = 0.5 * (new_rr + new_rr.transpose());
         let buf = self.p.as_mut_slice();
+        // P_Vr before the pose columns change (row c >= 3 of columns 0..3).
+        let pvr: Vec<nalgebra::RowVector3<f64>> = g
+            .iter()
+            .map(|(c, _)| {
+                nalgebra::RowVector3::new(buf[at(n, *c, 0)], buf[at(n, *c, 1)], buf[at(n, *c, 2)])
+            })
+            .collect();
+        let mut new_rr = f * prr * f.transpose() + q;
+        for (a, (ca, ga)) in g.iter().enumerate() {
+            let cross = f * pvr[a].transpose() * ga.transpose();
+            new_rr += cross + cross.transpose();
+            for (cb, gb) in &g {
+                let pab = buf[at(n, (*ca).max(*cb), (*ca).min(*cb))];
+                new_rr += ga * gb.transpose() * pab;
+            }
+        }
+        let new_rr = 0.5 * (new_rr + new_rr.transpose());
         // P_xr = P_rx^T lies in columns 0..3 below the pose block (the lower triangle).
         for j in POSE_DIM..n {
             let (p0, p1, p2) = (buf[at(n, j, 0)], buf[at(n, j, 1)], buf[at(n, j, 2)]);
-            buf[at(n, j, 0)] = p0 + fa * p2;
-            buf[at(n, j, 1)] = p1 + fb * p2;
+            let mut row = nalgebra::RowVector3::new(p0 + fa * p2, p1 + fb * p2, p2);
+            for (c, gc) in &g {
+                let pjc = buf[at(n, j.max(*c), j.min(*c))];
+                row += gc.transpose() * pjc;
+            }
+            buf[at(n, j, 0)] = row[0];
+            buf[at(n, j, 1)] = row[1];
+            buf[at(n, j, 2)] = row[2];
         }
         for i in 0..POSE_DIM {
             for j in 0..POSE_DIM {
@@ -885,7 +933,10 @@ impl Ekf {
         }
         let c0 = self.camera_offset();
         for (k, p) in self.estimated.iter().enumerate() {
-            push(c0 + k, jac.camera.column(p.index()).into_owned());
+            // The projection does not depend on the vehicle's parameters: no column.
+            if !p.is_vehicle() {
+                push(c0 + k, jac.camera.column(p.index()).into_owned());
+            }
         }
         Ok((predicted, obs))
     }
@@ -1502,6 +1553,7 @@ mod tests {
             width: 752,
             height: 480,
             nominal: CameraParams {
+                vehicle: Default::default(),
                 f: 700.0,
                 cx: 376.0,
                 cy: 240.0,

@@ -236,6 +236,61 @@ impl Increment {
         Ok(total)
     }
 
+    /// [`Self::from_odometry`] between two stereo frames stamped `t0_us` and `t1_us` by the
+    /// board, for the vehicle `v` (vehicle-interfaces.md 1.2): over the odometry-clock
+    /// interval `t - time_offset`, with the true velocities of `V`. Returns the increment (its
+    /// covariance that of the true motion: the reported velocities' noise through `V`), the
+    /// covariance in the reported odometry's units (what the batch weighs its residual with,
+    /// [`calib::odometry::OdometryFactor`]), and, with `jacobian`, `d motion / dV` at `v`
+    /// ([`calib::Param::VEHICLE`] order; zero without).
+    pub fn from_odometry_vehicle(
+        samples: &[OdomSample],
+        t0_us: u64,
+        t1_us: u64,
+        noise: &Noise,
+        v: &calib::Vehicle,
+        jacobian: bool,
+    ) -> Result<(Self, Matrix3<f64>, nalgebra::Matrix3x4<f64>), Error> {
+        if v.is_nominal() && !jacobian {
+            let inc = Self::from_odometry(samples, t0_us, t1_us, noise)?;
+            return Ok((inc, inc.covariance, nalgebra::Matrix3x4::zeros()));
+        }
+        let (a, b) = (v.odometry_time_us(t0_us), v.odometry_time_us(t1_us));
+        let first = samples.partition_point(|s| s.t_us <= a).saturating_sub(1);
+        let last = samples.partition_point(|s| s.t_us < b).max(first + 1);
+        let corrected: alloc::vec::Vec<OdomSample> = samples
+            .get(first..last.min(samples.len()))
+            .unwrap_or_default()
+            .iter()
+            .map(|s| {
+                let (vx, vy, vtheta) = v.true_velocities(s.vx, s.vy, s.vtheta);
+                OdomSample {
+                    t_us: s.t_us,
+                    vx,
+                    vy,
+                    vtheta,
+                }
+            })
+            .collect();
+        let mut inc = Self::from_odometry(&corrected, a, b, noise)?;
+        let reported = inc.covariance;
+        // The true motion's error is the reported one through D^-1, D = diag(odom_scale,
+        // odom_scale, odom_yaw_scale) (to first order in the scales' errors).
+        let d_inv = Matrix3::from_diagonal(&nalgebra::Vector3::new(
+            1.0 / v.odom_scale,
+            1.0 / v.odom_scale,
+            1.0 / v.odom_yaw_scale,
+        ));
+        inc.covariance = d_inv * reported * d_inv;
+        let j = if jacobian {
+            calib::odometry::vehicle_jacobian(samples, t0_us, t1_us, v)
+                .unwrap_or_else(nalgebra::Matrix3x4::zeros)
+        } else {
+            nalgebra::Matrix3x4::zeros()
+        };
+        Ok((inc, reported, j))
+    }
+
     /// The pose reached from `pose`, the Jacobian `F` of that pose with respect to `pose`, and
     /// the process noise `Q` it adds (eq. 3-4): `pose' = pose (+) motion`,
     /// `F = d pose' / d pose`, `Q = Rz(theta) Cov(motion) Rz(theta)^T` (the angle untouched).

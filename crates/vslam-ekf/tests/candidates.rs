@@ -25,6 +25,7 @@ struct World {
 impl World {
     fn new() -> Self {
         let truth = CameraParams {
+            vehicle: Default::default(),
             f: 700.0,
             cx: 376.0,
             cy: 240.0,

@@ -310,7 +310,7 @@ fn bad_construction_is_refused() {
     r.noise.velocity = f64::NAN;
     assert!(Ekf::from_prior(&r, Settings::default()).is_err());
     let mut r = good.clone();
-    r.prior = [None; 10];
+    r.prior = [None; calib::N_PARAMS];
     assert_eq!(
         Ekf::from_prior(&r, Settings::default()).unwrap_err(),
         Error::MissingPrior {

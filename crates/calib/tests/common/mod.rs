@@ -34,6 +34,7 @@ pub fn config(cases: u32) -> ProptestConfig {
 /// The nominal camera of vehicle-interfaces.md section 3, mounted 1 m up, looking straight up.
 pub fn nominal_camera() -> CameraParams {
     CameraParams {
+        vehicle: Default::default(),
         f: 700.0,
         cx: 376.0,
         cy: 240.0,
@@ -72,6 +73,7 @@ pub fn camera_strategy() -> impl Strategy<Value = CameraParams> {
     )
         .prop_map(
             |((f, cx, cy, baseline), (x, y, z), (roll, pitch, yaw))| CameraParams {
+                vehicle: Default::default(),
                 f,
                 cx,
                 cy,

@@ -12,6 +12,7 @@ use super::Rng;
 
 pub fn true_camera(pitch: f64) -> CameraParams {
     CameraParams {
+        vehicle: Default::default(),
         f: 702.0,
         cx: 376.0,
         cy: 240.0,

@@ -101,6 +101,10 @@ pub fn sample(seed: u64, seconds: u64) -> Vec<Record> {
             mount_roll: rng.float(-0.01, 0.01),
             mount_pitch: rng.float(-0.01, 0.01),
             mount_yaw: rng.float(-0.01, 0.01),
+            odom_scale: rng.float(0.98, 1.02),
+            odom_yaw_scale: rng.float(0.99, 1.01),
+            odom_yaw_bias: rng.float(-0.003, 0.003),
+            time_offset: rng.float(-0.02, 0.02),
         }),
         Record::TruthLandmarks(
             (0..40)
