@@ -1,6 +1,9 @@
 //! Odometry integration (vehicle-interfaces.md section 2): robot-frame velocities
 //! `(vx, vy, vtheta)`, each held constant from its timestamp until the next sample.
 
+#[cfg(feature = "alloc")]
+use alloc::vec::Vec;
+
 use nalgebra::{Matrix3, Matrix3x4, Vector3};
 
 use crate::camera::{Pose2, Vehicle};
@@ -101,14 +104,57 @@ pub fn integrate_vehicle(
     )
 }
 
-/// Central-difference steps of the vehicle parameters, [`crate::Param::VEHICLE`] order: small
-/// against their plausible errors, large against rounding (the clock offset moves the
-/// interval by whole microseconds).
-const VEHICLE_STEPS: [f64; 4] = [1e-4, 1e-4, 1e-4, 1e-3];
+/// Central-difference steps of the scales and the yaw bias: small against their plausible
+/// errors, large against rounding.
+const VEHICLE_STEPS: [f64; 3] = [1e-4, 1e-4, 1e-4];
+
+/// Half-width of the window the clock offset's regressor averages the velocities over,
+/// microseconds (three odometry samples either side at 100 Hz).
+pub const SMOOTHING_HALF_WINDOW_US: u64 = 30_000;
+
+/// The true robot-frame velocities `(vx, vy, vtheta)` of vehicle `v` averaged over the
+/// odometry-clock window `[t - half, t + half]` (each sample held from its timestamp until the
+/// next; the window clipped to the samples' span, the last sample held to the window's end).
+/// `None` without a sample at or before the window's end.
+pub fn smoothed_velocity(
+    samples: &[OdomSample],
+    t_us: u64,
+    half_us: u64,
+    v: &Vehicle,
+) -> Option<(f64, f64, f64)> {
+    let (from, to) = (t_us.saturating_sub(half_us), t_us.saturating_add(half_us));
+    let first = samples.partition_point(|s| s.t_us <= from).saturating_sub(1);
+    let (mut sx, mut sy, mut sw, mut total) = (0.0, 0.0, 0.0, 0.0);
+    for (i, s) in samples.iter().enumerate().skip(first) {
+        if s.t_us >= to {
+            break;
+        }
+        let start = s.t_us.max(from);
+        let end = samples.get(i + 1).map_or(to, |n| n.t_us.min(to));
+        if end <= start {
+            continue;
+        }
+        #[allow(clippy::cast_precision_loss)]
+        let dt = (end - start) as f64;
+        let (vx, vy, w) = v.true_velocities(s.vx, s.vy, s.vtheta);
+        sx += vx * dt;
+        sy += vy * dt;
+        sw += w * dt;
+        total += dt;
+    }
+    (total > 0.0).then(|| (sx / total, sy / total, sw / total))
+}
 
 /// `d(dx, dy, dtheta) / dV` of [`integrate_vehicle`] at `v` (3 x 4, [`crate::Param::VEHICLE`]
-/// order), by central differences: the motion is smooth in the scales and the bias, and in
-/// the clock offset piecewise smooth (a sample boundary inside the step gives the mean slope).
+/// order).
+///
+/// The scales and the bias by central differences (the motion is smooth in them). The clock
+/// offset analytically, with velocities averaged over [`SMOOTHING_HALF_WINDOW_US`] at the
+/// interval's ends: moving both ends of the interval earlier by `d` adds the start's twist and
+/// drops the end's, `dm/d offset = (v(a) + w(a) S m_xy - R(m_theta) v(b), w(a) - w(b))`. The
+/// samples' own velocities at the ends would carry the very noise the motion's residual holds
+/// (the end sample is inside the interval): with frames exposed at the odometry's sample
+/// times, the batch then fits that noise with the offset, half a sample off (4 ms at 100 Hz).
 pub fn vehicle_jacobian(
     samples: &[OdomSample],
     t0_us: u64,
@@ -124,14 +170,11 @@ pub fn vehicle_jacobian(
             let slot = match k {
                 0 => &mut w.odom_scale,
                 1 => &mut w.odom_yaw_scale,
-                2 => &mut w.odom_yaw_bias,
-                _ => &mut w.time_offset,
+                _ => &mut w.odom_yaw_bias,
             };
             *slot += sign * h;
             integrate_vehicle(samples, t0_us, t1_us, &w).map(|m| vector(&m))
         };
-        // One-sided where the shifted interval leaves the samples (the clock offset at the
-        // start of the odometry).
         let column = match (shifted(1.0), shifted(-1.0)) {
             (Some(p), Some(m)) => (p - m) / (2.0 * h),
             (Some(p), None) => (p - vector(&base)) / *h,
@@ -140,13 +183,34 @@ pub fn vehicle_jacobian(
         };
         j.set_column(k, &column);
     }
+    let (a, b) = (v.odometry_time_us(t0_us), v.odometry_time_us(t1_us));
+    if let (Some((ax, ay, aw)), Some((bx, by, bw))) = (
+        smoothed_velocity(samples, a, SMOOTHING_HALF_WINDOW_US, v),
+        smoothed_velocity(samples, b, SMOOTHING_HALF_WINDOW_US, v),
+    ) {
+        let (s, c) = (libm::sin(base.dtheta), libm::cos(base.dtheta));
+        j.set_column(
+            3,
+            &Vector3::new(
+                ax - aw * base.dy - (c * bx - s * by),
+                ay + aw * base.dx - (s * bx + c * by),
+                aw - bw,
+            ),
+        );
+    }
     Some(j)
 }
 
 /// The odometry between two frames as the estimators take it: the motion integrated for the
 /// vehicle estimate `vehicle`, its covariance, and how it changes with `V`, so that a solver
-/// that refines `V` moves the motion with it (to first order, `m(V) = m + J (V - vehicle)`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// that refines `V` moves the motion with it. With the reported samples around the interval
+/// ([`Self::samples`]) the motion is integrated again for every `V` a solver tries
+/// ([`Self::at`]): a first-order model of the clock offset made at one offset uses the
+/// velocities of other samples than the ones the frames were exposed between, and their
+/// noise is then an error in the regressor that shrinks the offset's estimate toward the
+/// linearisation point (errors in variables; 8 of 12 ms on the aisle).
+#[cfg(feature = "alloc")]
+#[derive(Debug, Clone, PartialEq)]
 pub struct OdometryFactor {
     /// The motion for `vehicle`.
     pub motion: Motion,
@@ -158,16 +222,23 @@ pub struct OdometryFactor {
     pub vehicle: Vehicle,
     /// `d(dx, dy, dtheta) / dV` at `vehicle`, [`crate::Param::VEHICLE`] order.
     pub vehicle_jacobian: Matrix3x4<f64>,
+    /// The board's stamps of the two frames, microseconds.
+    pub frames_us: (u64, u64),
+    /// The reported odometry samples around the interval (empty: the first-order model only).
+    pub samples: Vec<OdomSample>,
 }
 
+#[cfg(feature = "alloc")]
 impl OdometryFactor {
-    /// A motion that does not depend on `V` (the vehicle nominal, no Jacobian).
+    /// A motion that does not depend on `V` (the vehicle nominal, no Jacobian, no samples).
     pub fn fixed(motion: Motion, covariance: Matrix3<f64>) -> Self {
         Self {
             motion,
             covariance,
             vehicle: Vehicle::NOMINAL,
             vehicle_jacobian: Matrix3x4::zeros(),
+            frames_us: (0, 0),
+            samples: Vec::new(),
         }
     }
 
@@ -183,6 +254,51 @@ impl OdometryFactor {
             dtheta: self.motion.dtheta + dm.z,
             ..self.motion
         }
+    }
+
+    /// The motion for the vehicle `v`: integrated again from the samples for its scales and
+    /// bias, over the interval of the offset it was made with, and moved to `v`'s clock offset
+    /// to first order with the smoothed regressor ([`vehicle_jacobian`]): integrating again
+    /// over a shifted interval would let the offset fit the noise of the samples it moves
+    /// across. Without samples, all to first order.
+    pub fn motion_for(&self, v: &Vehicle) -> Motion {
+        self.at_inner(v, false).0
+    }
+
+    /// The motion and its Jacobian `d motion / dV` for the vehicle `v` (see
+    /// [`Self::motion_for`]).
+    pub fn at(&self, v: &Vehicle) -> (Motion, Matrix3x4<f64>) {
+        self.at_inner(v, true)
+    }
+
+    fn at_inner(&self, v: &Vehicle, jacobian: bool) -> (Motion, Matrix3x4<f64>) {
+        if *v == self.vehicle || self.samples.is_empty() {
+            return (self.motion_at(v), self.vehicle_jacobian);
+        }
+        let (t0, t1) = self.frames_us;
+        let at_made = Vehicle {
+            time_offset: self.vehicle.time_offset,
+            ..*v
+        };
+        let Some(m) = integrate_vehicle(&self.samples, t0, t1, &at_made) else {
+            return (self.motion_at(v), self.vehicle_jacobian);
+        };
+        let j = if jacobian {
+            vehicle_jacobian(&self.samples, t0, t1, &at_made).unwrap_or(self.vehicle_jacobian)
+        } else {
+            self.vehicle_jacobian
+        };
+        let d = v.time_offset - self.vehicle.time_offset;
+        let shift = j.column(3) * d;
+        (
+            Motion {
+                dx: m.dx + shift.x,
+                dy: m.dy + shift.y,
+                dtheta: m.dtheta + shift.z,
+                ..m
+            },
+            j,
+        )
     }
 }
 

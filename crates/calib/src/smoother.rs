@@ -417,6 +417,23 @@ fn odometry_information(
 const NO_ODOMETRY_INFORMATION: f64 = 1e-2;
 
 impl Frame {
+    /// The odometry factor's cost `r^T I r` (see [`Self::odometry_factor`]), without the
+    /// Jacobians.
+    fn odometry_cost(&self, prev: &Pose2, pose: &Pose2, camera: &CameraParams) -> f64 {
+        match &self.odometry {
+            Some((o, info)) => {
+                let v = &camera.vehicle;
+                let (r0, _, _) = odometry_residual(prev, pose, &o.motion_for(v));
+                let r = Vector3::new(v.odom_scale * r0.x, v.odom_scale * r0.y, v.odom_yaw_scale * r0.z);
+                r.dot(&(info * r))
+            }
+            None => {
+                let (r, _, _) = odometry_residual(prev, pose, &Motion::default());
+                r.dot(&r) * NO_ODOMETRY_INFORMATION
+            }
+        }
+    }
+
     /// The odometry factor from the previous frame's pose `prev` to this frame's `pose`, for
     /// the vehicle parameters of `camera`: residual, Jacobians with respect to both poses,
     /// information, and the residual's Jacobian with respect to `V` ([`Param::VEHICLE`]
@@ -442,14 +459,15 @@ impl Frame {
     ) {
         match &self.odometry {
             Some((o, info)) => {
-                let (r0, ja, jb) = odometry_residual(prev, pose, &o.motion_at(&camera.vehicle));
                 let v = &camera.vehicle;
+                let (motion, jacobian) = o.at(v);
+                let (r0, ja, jb) = odometry_residual(prev, pose, &motion);
                 let d = Matrix3::from_diagonal(&Vector3::new(
                     v.odom_scale,
                     v.odom_scale,
                     v.odom_yaw_scale,
                 ));
-                let mut jv = -(d * o.vehicle_jacobian);
+                let mut jv = -(d * jacobian);
                 // d D / d odom_scale and d D / d odom_yaw_scale times the true-units residual.
                 jv[(0, 0)] += r0.x;
                 jv[(1, 0)] += r0.y;
@@ -577,7 +595,7 @@ impl Smoother {
         let odometry = odometry_information(odometry);
         let pose = match (self.frames.last(), &odometry) {
             (None, _) => Pose2::default(),
-            (Some(prev), Some((o, _))) => o.motion_at(&self.camera.vehicle).apply(&prev.pose),
+            (Some(prev), Some((o, _))) => o.motion_for(&self.camera.vehicle).apply(&prev.pose),
             (Some(prev), None) => prev.pose,
         };
         if let Some((o, _)) = &odometry {
@@ -1043,7 +1061,7 @@ impl Smoother {
             pose
         } else {
             match (self.frames.last(), &odometry) {
-                (Some(prev), Some((o, _))) => o.motion_at(&self.camera.vehicle).apply(&prev.pose),
+                (Some(prev), Some((o, _))) => o.motion_for(&self.camera.vehicle).apply(&prev.pose),
                 (Some(prev), None) => prev.pose,
                 (None, _) => Pose2::default(),
             }
@@ -1164,8 +1182,7 @@ impl Smoother {
             if i > 0
                 && let Some(prev) = poses.get(i - 1)
             {
-                let (r, _, _, info, _) = f.odometry_factor(prev, pose, camera);
-                cost += r.dot(&(info * r));
+                cost += f.odometry_cost(prev, pose, camera);
             }
             for (j, z) in &f.observations {
                 let Some(l) = landmarks.get(*j) else { continue };

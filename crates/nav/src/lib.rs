@@ -371,6 +371,36 @@ impl Navigator {
         Ok(true)
     }
 
+    /// The odometry samples a batch needs to integrate the interval `[t0_us, t1_us]` (board
+    /// stamps) again for another clock offset: those within [`ODOMETRY_MARGIN_US`] of the
+    /// interval at the current estimate `vehicle`. None unless V is estimated.
+    fn samples_around(
+        &self,
+        t0_us: u64,
+        t1_us: u64,
+        vehicle: &calib::Vehicle,
+        estimates_vehicle: bool,
+    ) -> Vec<OdomSample> {
+        if !estimates_vehicle {
+            return Vec::new();
+        }
+        let from = vehicle
+            .odometry_time_us(t0_us)
+            .saturating_sub(ODOMETRY_MARGIN_US / 2);
+        let to = vehicle
+            .odometry_time_us(t1_us)
+            .saturating_add(ODOMETRY_MARGIN_US / 2);
+        let first = self
+            .odometry
+            .partition_point(|s| s.t_us <= from)
+            .saturating_sub(1);
+        let last = self.odometry.partition_point(|s| s.t_us <= to);
+        self.odometry
+            .get(first..last)
+            .map(<[OdomSample]>::to_vec)
+            .unwrap_or_default()
+    }
+
     /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
     /// 3 sigma of its noise: a standing vehicle's noise is not motion).
     fn excite(&mut self, m: &calib::odometry::Motion, cov: &Matrix3<f64>) {
@@ -608,6 +638,8 @@ impl Navigator {
                                 covariance: reported,
                                 vehicle,
                                 vehicle_jacobian: jv,
+                                frames_us: (t0, t_us),
+                                samples: self.samples_around(t0, t_us, &vehicle, estimates_vehicle),
                             });
                             true
                         }
@@ -631,6 +663,8 @@ impl Navigator {
                                 covariance: reported,
                                 vehicle,
                                 vehicle_jacobian: jv,
+                                frames_us: (t0, t_us),
+                                samples: self.samples_around(t0, t_us, &vehicle, estimates_vehicle),
                             });
                             let (pose, f, q) = inc.apply(&self.pose);
                             self.pose = pose;
@@ -700,7 +734,9 @@ impl Navigator {
         };
         let tracked = self.front_end.push_frame(t_us, left, right);
         if self.ekf.is_none() {
-            self.phase1(&tracked, phase1_motion, &mut outcome)?;
+            // The frame's motion goes to phase 1's batch; phase 2 takes it only from the next
+            // frame on (the frame of the switch is the batch's last).
+            self.phase1(&tracked, phase1_motion.take(), &mut outcome)?;
         }
         // The frame of the switch is the batch's last: its pixels are in the hand-over already.
         if self.ekf.is_some() && !outcome.switched {

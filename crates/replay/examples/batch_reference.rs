@@ -131,6 +131,15 @@ fn run() -> Result<(), String> {
                     covariance: reported,
                     vehicle,
                     vehicle_jacobian: jv,
+                    frames_us: (t0, f.t_us),
+                    samples: {
+                        let from = t0.saturating_sub(200_000);
+                        let a = odometry_samples
+                            .partition_point(|s| s.t_us <= from)
+                            .saturating_sub(1);
+                        let b = odometry_samples.partition_point(|s| s.t_us <= f.t_us + 200_000);
+                        odometry_samples[a..b].to_vec()
+                    },
                 })
             });
             previous = Some(f.t_us);
@@ -149,6 +158,20 @@ fn run() -> Result<(), String> {
             batch.add_frame(f.t_us, odometry, &observations, &[]);
         }
         let handover = batch.finish().ok_or("the reference batch had no frame")?;
+        for p in calib::Param::VEHICLE {
+            if handover.estimated.contains(&p) {
+                let (scale, unit) = p.display_unit();
+                let sigma = handover.camera_covariance[(p.index(), p.index())]
+                    .max(0.0)
+                    .sqrt();
+                println!(
+                    "seed {seed}: reference {} error {:+.3} {unit} (sigma {:.3})",
+                    p.name(),
+                    scale * (handover.camera.get(p) - sim_run.camera.get(p)),
+                    scale * sigma
+                );
+            }
+        }
         let (mut s_ref, mut n_ref) = (0.0, 0usize);
         for l in &handover.landmarks {
             let lamp = usize::try_from(l.track)

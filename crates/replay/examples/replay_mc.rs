@@ -259,11 +259,10 @@ fn run() -> Result<(), String> {
         );
     }
     for (k, p) in estimated.iter().enumerate() {
-        let scale = if *p == Param::Baseline { 1e3 } else { 1.0 };
-        let unit = if *p == Param::Baseline { "mm" } else { "" };
+        let (scale, unit) = p.display_unit();
         let v = cam_err.get(k).cloned().unwrap_or_default();
         println!(
-            "{p}: error median {:.3}{unit}, worst {:.3}{unit}; inside 3 sigma in {} of {}",
+            "{p}: error median {:.3} {unit}, worst {:.3} {unit}; inside 3 sigma in {} of {}",
             scale * percentile(&mut v.clone(), 0.5),
             scale * percentile(&mut v.clone(), 1.0),
             cam_inside.get(k).copied().unwrap_or(0),

@@ -185,7 +185,6 @@ pub fn replay_log(
         }
     }
     let stats = navigator.stats();
-    if std::env::var_os("STEREONAV_DEBUG_STATS").is_some() { eprintln!("{stats:?}"); }
     let tracker = navigator.front_end().tracker().stats();
     counts.stereo_matches = navigator.front_end().stereo_stats().matches;
     counts.tracks = tracker.started;
