@@ -123,7 +123,9 @@ pub fn smoothed_velocity(
     v: &Vehicle,
 ) -> Option<(f64, f64, f64)> {
     let (from, to) = (t_us.saturating_sub(half_us), t_us.saturating_add(half_us));
-    let first = samples.partition_point(|s| s.t_us <= from).saturating_sub(1);
+    let first = samples
+        .partition_point(|s| s.t_us <= from)
+        .saturating_sub(1);
     let (mut sx, mut sy, mut sw, mut total) = (0.0, 0.0, 0.0, 0.0);
     for (i, s) in samples.iter().enumerate().skip(first) {
         if s.t_us >= to {

@@ -50,7 +50,12 @@ const TABLES: [&str; 7] = [
 ];
 
 /// `[vehicle]`'s keys: the parameters of `V` (vehicle-interfaces.md 1.2).
-const VEHICLE_KEYS: [&str; 4] = ["odom_scale", "odom_yaw_scale", "odom_yaw_bias", "time_offset"];
+const VEHICLE_KEYS: [&str; 4] = [
+    "odom_scale",
+    "odom_yaw_scale",
+    "odom_yaw_bias",
+    "time_offset",
+];
 
 struct Reader<'a> {
     source: &'a str,
@@ -375,8 +380,9 @@ impl Rig {
         let Some(Value::Table(root)) = json_to_toml(&json) else {
             return Err(RigFileError::Syntax {
                 source_name: source_name.to_string(),
-                reason: "expected a JSON object of tables (camera, mount, estimate, prior, noise, ...)"
-                    .to_string(),
+                reason:
+                    "expected a JSON object of tables (camera, mount, estimate, prior, noise, ...)"
+                        .to_string(),
             });
         };
         Self::from_table(&root, source_name)

@@ -413,6 +413,16 @@ fn odometry_information(
     })
 }
 
+/// An odometry factor linearised: residual, its Jacobians with respect to the two poses,
+/// information, and its Jacobian with respect to `V` ([`Param::VEHICLE`] order).
+type OdometryTerms = (
+    Vector3<f64>,
+    Matrix3<f64>,
+    Matrix3<f64>,
+    Matrix3<f64>,
+    nalgebra::Matrix3x4<f64>,
+);
+
 /// Information of a frame interval without odometry: the pose is free to within metres.
 const NO_ODOMETRY_INFORMATION: f64 = 1e-2;
 
@@ -424,7 +434,11 @@ impl Frame {
             Some((o, info)) => {
                 let v = &camera.vehicle;
                 let (r0, _, _) = odometry_residual(prev, pose, &o.motion_for(v));
-                let r = Vector3::new(v.odom_scale * r0.x, v.odom_scale * r0.y, v.odom_yaw_scale * r0.z);
+                let r = Vector3::new(
+                    v.odom_scale * r0.x,
+                    v.odom_scale * r0.y,
+                    v.odom_yaw_scale * r0.z,
+                );
                 r.dot(&(info * r))
             }
             None => {
@@ -445,18 +459,7 @@ impl Frame {
     /// reported noise would shrink with the map (baseline and odometry scale along their
     /// product, vehicle-interfaces.md 1.2: the one direction the data cannot see), and the
     /// batch would drift along it, the odometry cost falling as the square of the scale.
-    fn odometry_factor(
-        &self,
-        prev: &Pose2,
-        pose: &Pose2,
-        camera: &CameraParams,
-    ) -> (
-        Vector3<f64>,
-        Matrix3<f64>,
-        Matrix3<f64>,
-        Matrix3<f64>,
-        nalgebra::Matrix3x4<f64>,
-    ) {
+    fn odometry_factor(&self, prev: &Pose2, pose: &Pose2, camera: &CameraParams) -> OdometryTerms {
         match &self.odometry {
             Some((o, info)) => {
                 let v = &camera.vehicle;

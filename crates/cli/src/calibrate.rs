@@ -119,9 +119,9 @@ fn vector(v: &ParamVector) -> Value {
     Value::Array(v.iter().copied().map(number).collect())
 }
 
-/// `{"<param>": {"value", "sigma"}}` for all ten parameters.
+/// `{"<param>": {"value", "sigma"}}` for the ten parameters of C.
 fn camera_values(camera: &CameraParams, sigma: impl Fn(Param) -> f64) -> Map<String, Value> {
-    Param::ALL
+    Param::CAMERA
         .iter()
         .map(|&p| {
             let entry = json!({"value": number(camera.get(p)), "sigma": number(sigma(p))});
@@ -188,18 +188,22 @@ fn handover_json(h: &Handover) -> Value {
 fn result_json(result: &LogCalibration) -> Value {
     let cal: &Calibration = &result.calibration;
     let report = &cal.observability;
-    let camera: Map<String, Value> = Param::ALL
-        .iter()
-        .map(|&p| {
-            let entry = json!({
-                "value": number(cal.camera.get(p)),
-                "sigma": number(cal.sigma(p)),
-                "nominal": number(result.rig.nominal.get(p)),
-                "estimated": is_estimated(report, p),
-            });
-            (p.name().to_string(), entry)
-        })
-        .collect();
+    let entries = |params: &[Param]| -> Map<String, Value> {
+        params
+            .iter()
+            .map(|&p| {
+                let entry = json!({
+                    "value": number(cal.camera.get(p)),
+                    "sigma": number(cal.sigma(p)),
+                    "nominal": number(result.rig.nominal.get(p)),
+                    "estimated": is_estimated(report, p),
+                });
+                (p.name().to_string(), entry)
+            })
+            .collect()
+    };
+    let camera = entries(&Param::CAMERA);
+    let vehicle = entries(&Param::VEHICLE);
     let incremental: Vec<Value> = result
         .history
         .iter()
@@ -216,6 +220,7 @@ fn result_json(result: &LogCalibration) -> Value {
         "rig_source": rig_source_name(result.rig_source),
         "parameters": Param::ALL.iter().map(|p| p.name()).collect::<Vec<_>>(),
         "camera": camera,
+        "vehicle": vehicle,
         "observability": observability_json(report),
         "max_correlation": correlation_json(report),
         "handover": result.handover.as_ref().map_or(Value::Null, handover_json),

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use calib::Rig;
+use calib::{Param, Rig};
 use replay::{NavSettings, Phase, Replay};
 
 use crate::progress::FrameProgress;
@@ -156,10 +156,23 @@ fn human_summary(log: &std::path::Path, r: &Replay, took: Duration) -> String {
     let _ = writeln!(s, "map: {} landmarks", r.landmarks.len());
     for p in r.final_camera.iter().filter(|p| p.sigma > 0.0) {
         let name = p.param.name();
-        if matches!(name, "baseline" | "mount_x" | "mount_y" | "mount_z") {
-            let _ = writeln!(s, "{name}: {:.2} +- {:.2} mm", p.value * 1e3, p.sigma * 1e3);
-        } else {
-            let _ = writeln!(s, "{name}: {:.3} +- {:.3}", p.value, p.sigma);
+        let (scale, unit) = p.param.display_unit();
+        match p.param {
+            Param::F | Param::Cx | Param::Cy => {
+                let _ = writeln!(s, "{name}: {:.3} +- {:.3}", p.value, p.sigma);
+            }
+            // A scale near 1: the value itself, its sigma in percent.
+            Param::OdomScale | Param::OdomYawScale => {
+                let _ = writeln!(s, "{name}: {:.5} +- {:.3} %", p.value, p.sigma * scale);
+            }
+            _ => {
+                let _ = writeln!(
+                    s,
+                    "{name}: {:.2} +- {:.2} {unit}",
+                    p.value * scale,
+                    p.sigma * scale
+                );
+            }
         }
     }
     if let Some(f) = r.frames.last() {

@@ -109,13 +109,15 @@ fn paper_calibration_log_gives_the_truth_with_the_logs_rig() {
         assert!(r["reason"].is_null());
     }
     assert!(doc["max_correlation"]["value"].as_f64().unwrap().abs() <= 1.0);
-    // History: the start (nominal) first, ten values a row; the last row is the estimate.
+    // History: the start (nominal) first, a value of C and V a row in "parameters" order;
+    // the last row is the estimate.
     let history = doc["history"].as_array().unwrap();
     assert!(history.len() >= 2);
+    assert_eq!(doc["parameters"].as_array().unwrap().len(), 14);
     assert!(
         history
             .iter()
-            .all(|row| row.as_array().unwrap().len() == 10)
+            .all(|row| row.as_array().unwrap().len() == 14)
     );
     assert_eq!(history[0][0].as_f64(), Some(700.0));
     assert_eq!(
@@ -130,7 +132,7 @@ fn paper_calibration_log_gives_the_truth_with_the_logs_rig() {
     let b = f64_at(handover, "/camera/baseline/value");
     assert!((b - 0.1164).abs() < 0.001, "{handover}");
     for solve in doc["incremental"].as_array().unwrap() {
-        assert_eq!(solve["values"].as_array().unwrap().len(), 10);
+        assert_eq!(solve["values"].as_array().unwrap().len(), 14);
         assert!(solve["t_us"].is_u64());
     }
     let counts = &doc["counts"];

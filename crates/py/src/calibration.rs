@@ -25,7 +25,7 @@ use calib::selfcal::{
     Calibration, FramePair, Handover, LandmarkPair, ObservabilityReport, SolveStatus,
     SolverSettings, StableRule,
 };
-use calib::{CameraParams, Measurement, N_PARAMS, Param, ParamVector, Rig, RigFileError};
+use calib::{CameraParams, Measurement, N_CAMERA, Param, ParamVector, Rig, RigFileError};
 use numpy::ndarray::{Array2, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -314,7 +314,7 @@ impl fmt::Display for CalibInputError {
             }
             Self::CameraLength { len } => write!(
                 f,
-                "start camera has {len} values, expected {N_PARAMS} in CAMERA_PARAMETERS order"
+                "start camera has {len} values, expected {N_CAMERA} in CAMERA_PARAMETERS order"
             ),
             Self::Rig(err) => err.fmt(f),
             Self::Pairing { name } => write!(
@@ -619,20 +619,19 @@ fn positive(name: &'static str, value: f64) -> Result<(), CalibInputError> {
     }
 }
 
-/// The start camera from ten values in [`Param::ALL`] order.
+/// The start camera from ten values in [`Param::CAMERA`] order (the vehicle nominal: the
+/// frame-pair solver does not model V).
 fn start_camera(values: &[f64]) -> Result<CameraParams, CalibInputError> {
-    if values.len() != N_PARAMS {
+    if values.len() != N_CAMERA {
         return Err(CalibInputError::CameraLength { len: values.len() });
     }
-    for (&param, &value) in Param::ALL.iter().zip(values) {
+    for (&param, &value) in Param::CAMERA.iter().zip(values) {
         let positive_needed = matches!(param, Param::F | Param::Baseline);
         if !value.is_finite() || (positive_needed && value <= 0.0) {
             return Err(CalibInputError::Camera { param, value });
         }
     }
-    Ok(CameraParams::from_vector(&ParamVector::from_column_slice(
-        values,
-    )))
+    Ok(crate::camera_from_values(values, &calib::Vehicle::NOMINAL))
 }
 
 /// The rig from the JSON form of its file; `source` names it in errors.
@@ -654,15 +653,21 @@ fn solve(
     CalibrationResult { calibration }
 }
 
+/// The camera's part `C` of a parameter vector (the Python arrays hold C only).
 fn vector_array<'py>(py: Python<'py>, v: &ParamVector) -> Bound<'py, PyArray1<f64>> {
-    v.iter().copied().collect::<Vec<_>>().into_pyarray(py)
+    v.iter()
+        .take(N_CAMERA)
+        .copied()
+        .collect::<Vec<_>>()
+        .into_pyarray(py)
 }
 
+/// The camera's block of a covariance over C and V.
 fn covariance_array<'py>(
     py: Python<'py>,
-    cov: &nalgebra::SMatrix<f64, N_PARAMS, N_PARAMS>,
+    cov: &nalgebra::SMatrix<f64, { calib::N_PARAMS }, { calib::N_PARAMS }>,
 ) -> Bound<'py, PyArray2<f64>> {
-    Array2::from_shape_fn((N_PARAMS, N_PARAMS), |(i, j)| cov[(i, j)]).into_pyarray(py)
+    Array2::from_shape_fn((N_CAMERA, N_CAMERA), |(i, j)| cov[(i, j)]).into_pyarray(py)
 }
 
 /// Rows of parameter vectors as a `(K, 10)` array.
@@ -671,9 +676,11 @@ fn vectors_array<'py, 'a>(
     rows: impl ExactSizeIterator<Item = &'a ParamVector>,
 ) -> Bound<'py, PyArray2<f64>> {
     let k = rows.len();
-    let flat: Vec<f64> = rows.flat_map(|v| v.iter().copied()).collect();
-    Array2::from_shape_vec((k, N_PARAMS), flat)
-        .unwrap_or_else(|_| Array2::zeros((0, N_PARAMS)))
+    let flat: Vec<f64> = rows
+        .flat_map(|v| v.iter().take(N_CAMERA).copied())
+        .collect();
+    Array2::from_shape_vec((k, N_CAMERA), flat)
+        .unwrap_or_else(|_| Array2::zeros((0, N_CAMERA)))
         .into_pyarray(py)
 }
 

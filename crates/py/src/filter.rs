@@ -17,7 +17,7 @@
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use calib::odometry::OdomSample;
-use calib::{CameraParams, Measurement, N_PARAMS, Param, ParamVector, Rig};
+use calib::{Measurement, N_CAMERA, Param, Rig};
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array2, Array3, ArrayView1, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
@@ -232,21 +232,30 @@ fn camera_start(
     camera: &ArrayView1<'_, f64>,
     cov: &ArrayView2<'_, f64>,
 ) -> Result<CameraStart, String> {
-    if camera.len() != N_PARAMS {
+    if camera.len() != N_CAMERA {
         return Err(format!(
-            "start camera has {} values, expected {N_PARAMS} in CAMERA_PARAMETERS order",
+            "start camera has {} values, expected {N_CAMERA} in CAMERA_PARAMETERS order",
             camera.len()
         ));
     }
-    if cov.shape() != [N_PARAMS, N_PARAMS] {
+    if cov.shape() != [N_CAMERA, N_CAMERA] {
         return Err(format!(
-            "start camera covariance has shape {:?}, expected ({N_PARAMS}, {N_PARAMS})",
+            "start camera covariance has shape {:?}, expected ({N_CAMERA}, {N_CAMERA})",
             cov.shape()
         ));
     }
     Ok(CameraStart {
-        camera: CameraParams::from_vector(&ParamVector::from_iterator(camera.iter().copied())),
-        covariance: CameraCovariance::from_fn(|i, j| cov[[i, j]]),
+        camera: crate::camera_from_values(
+            &camera.iter().copied().collect::<Vec<_>>(),
+            &calib::Vehicle::NOMINAL,
+        ),
+        covariance: CameraCovariance::from_fn(|i, j| {
+            if i < N_CAMERA && j < N_CAMERA {
+                cov[[i, j]]
+            } else {
+                0.0
+            }
+        }),
     })
 }
 
@@ -589,21 +598,15 @@ impl Filter {
     /// Every camera parameter, (10,) in `CAMERA_PARAMETERS` order.
     #[getter]
     fn camera<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.locked()
-            .ekf
-            .camera()
-            .to_vector()
-            .iter()
-            .copied()
-            .collect::<Vec<_>>()
-            .into_pyarray(py)
+        crate::camera_values(&self.locked().ekf.camera()).into_pyarray(py)
     }
 
     /// The camera covariance, (10, 10) in `CAMERA_PARAMETERS` order, zero for the parameters
     /// not estimated.
     #[getter]
     fn camera_covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        fixed_array(py, &self.locked().ekf.camera_covariance())
+        let cov = self.locked().ekf.camera_covariance();
+        fixed_array(py, &cov.fixed_view::<N_CAMERA, N_CAMERA>(0, 0).into_owned())
     }
 
     /// Names of the estimated camera parameters, in state order.

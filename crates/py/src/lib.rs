@@ -249,6 +249,22 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     Ok(())
 }
 
+/// A camera from the ten values of `C` in [`calib::Param::CAMERA`] order (the Python
+/// arrays hold C only) and the vehicle's parameters `vehicle`.
+pub(crate) fn camera_from_values(values: &[f64], vehicle: &calib::Vehicle) -> calib::CameraParams {
+    let mut c = calib::CameraParams::from_vector(&calib::ParamVector::zeros());
+    c.vehicle = *vehicle;
+    for (&p, &v) in calib::Param::CAMERA.iter().zip(values) {
+        c.set(p, v);
+    }
+    c
+}
+
+/// The ten values of `C`, [`calib::Param::CAMERA`] order.
+pub(crate) fn camera_values(c: &calib::CameraParams) -> Vec<f64> {
+    calib::Param::CAMERA.iter().map(|&p| c.get(p)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

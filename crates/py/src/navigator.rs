@@ -28,7 +28,7 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use calib::odometry::OdomSample;
 use calib::smoother::SmootherSettings;
-use calib::{N_PARAMS, Rig};
+use calib::{N_CAMERA, Rig};
 use numpy::ndarray::{Array2, Array3, ArrayView1, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -158,8 +158,8 @@ fn step_error(py: Python<'_>, err: nav::Error) -> PyErr {
 /// Values and sigmas as two `(10,)` arrays in `Param::ALL` order (NaN for a parameter
 /// missing from `params`, which the replay never leaves out).
 fn camera_tuple<'py>(py: Python<'py>, params: &[ParamEstimate]) -> CameraTuple<'py> {
-    let mut values = vec![f64::NAN; N_PARAMS];
-    let mut sigmas = vec![f64::NAN; N_PARAMS];
+    let mut values = vec![f64::NAN; N_CAMERA];
+    let mut sigmas = vec![f64::NAN; N_CAMERA];
     for p in params {
         if let (Some(v), Some(s)) = (
             values.get_mut(p.param.index()),
@@ -225,8 +225,8 @@ fn nis_tuple<'py>(py: Python<'py>, frames: &[FrameEstimate]) -> NisTuple<'py> {
 
 fn camera_history_tuple<'py>(py: Python<'py>, samples: &[CameraSample]) -> CameraHistoryTuple<'py> {
     let k = samples.len();
-    let mut values = Array2::from_elem((k, N_PARAMS), f64::NAN);
-    let mut sigmas = Array2::from_elem((k, N_PARAMS), f64::NAN);
+    let mut values = Array2::from_elem((k, N_CAMERA), f64::NAN);
+    let mut sigmas = Array2::from_elem((k, N_CAMERA), f64::NAN);
     for (row, sample) in samples.iter().enumerate() {
         for p in &sample.params {
             if let (Some(v), Some(s)) = (
@@ -683,7 +683,7 @@ impl Navigator {
     #[getter]
     fn camera_covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         let (_, cov) = self.locked().navigator.camera();
-        Array2::from_shape_fn((N_PARAMS, N_PARAMS), |(i, j)| cov[(i, j)]).into_pyarray(py)
+        Array2::from_shape_fn((N_CAMERA, N_CAMERA), |(i, j)| cov[(i, j)]).into_pyarray(py)
     }
 
     /// The map, by id: `(ids (N,), positions (N, 3), covariances (N, 3, 3), observations
@@ -836,7 +836,7 @@ mod tests {
         let mut cov = vslam_ekf::CameraCovariance::zeros();
         cov[(3, 3)] = 4e-6;
         let params = ParamEstimate::all(&rig_camera, &cov);
-        assert_eq!(params.len(), N_PARAMS);
+        assert_eq!(params.len(), calib::N_PARAMS);
         assert_eq!(params[3].param, calib::Param::Baseline);
         assert!((params[3].sigma - 2e-3).abs() < 1e-15);
         assert_eq!(params[0].sigma, 0.0);

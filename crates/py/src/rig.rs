@@ -1,7 +1,7 @@
 //! The stereo rig model (`vehicle-interfaces.md` sections 1 and 3) for Python: projection with
 //! Jacobians and triangulation over NumPy arrays, and rig files.
 
-use calib::{CameraParams, N_PARAMS, Param, ParamVector, Pose2, Rig};
+use calib::{CameraParams, N_CAMERA, Param, Pose2, Rig};
 use nalgebra::Vector3;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
@@ -9,24 +9,25 @@ use pyo3::prelude::*;
 
 use crate::input_error;
 
-/// The camera parameters from a 1-D array of the 10 values in `Param::ALL` order.
+/// The camera parameters from a 1-D array of the 10 values of C in `Param::CAMERA` order.
 fn camera(py: Python<'_>, c: &PyReadonlyArray1<'_, f64>) -> PyResult<CameraParams> {
     let c = c.as_array();
-    if c.len() != N_PARAMS {
+    if c.len() != N_CAMERA {
         return Err(input_error(
             py,
-            format!("camera has {} values, expected {N_PARAMS}", c.len()),
+            format!("camera has {} values, expected {N_CAMERA}", c.len()),
         ));
     }
     if let Some((i, v)) = c.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(input_error(
             py,
-            format!("camera {} is {v}, not a finite number", Param::ALL[i]),
+            format!("camera {} is {v}, not a finite number", Param::CAMERA[i]),
         ));
     }
-    Ok(CameraParams::from_vector(&ParamVector::from_iterator(
-        c.iter().copied(),
-    )))
+    Ok(crate::camera_from_values(
+        &c.iter().copied().collect::<Vec<_>>(),
+        &calib::Vehicle::NOMINAL,
+    ))
 }
 
 fn pose(py: Python<'_>, p: &PyReadonlyArray1<'_, f64>) -> PyResult<Pose2> {
@@ -95,7 +96,7 @@ pub(crate) fn project<'py>(
     let mut z = Array2::from_elem((n, 4), f64::NAN);
     let mut jp = Array3::from_elem((n, 4, 3), f64::NAN);
     let mut jl = Array3::from_elem((n, 4, 3), f64::NAN);
-    let mut jc = Array3::from_elem((n, 4, N_PARAMS), f64::NAN);
+    let mut jc = Array3::from_elem((n, 4, N_CAMERA), f64::NAN);
     for (i, p) in points.iter().enumerate() {
         let Ok((m, j)) = calib::project_with_jacobians(&c, &pose, &Vector3::from(*p)) else {
             continue;
@@ -106,7 +107,7 @@ pub(crate) fn project<'py>(
                 jp[[i, r, k]] = j.pose[(r, k)];
                 jl[[i, r, k]] = j.landmark[(r, k)];
             }
-            for k in 0..N_PARAMS {
+            for k in 0..N_CAMERA {
                 jc[[i, r, k]] = j.camera[(r, k)];
             }
         }
@@ -262,7 +263,7 @@ pub(crate) fn rig_tuple(
     (
         rig.width,
         rig.height,
-        rig.nominal.to_vector().iter().copied().collect(),
+        crate::camera_values(&rig.nominal),
         rig.estimate.iter().map(|p| p.name()).collect(),
         prior,
         (rig.noise.pixel, rig.noise.velocity, rig.noise.yaw_rate),
@@ -272,5 +273,5 @@ pub(crate) fn rig_tuple(
 /// The names of the 10 camera parameters, in the order of the camera arrays.
 #[pyfunction]
 pub(crate) fn camera_parameter_names() -> Vec<&'static str> {
-    Param::ALL.iter().map(|p| p.name()).collect()
+    Param::CAMERA.iter().map(|p| p.name()).collect()
 }

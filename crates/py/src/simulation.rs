@@ -38,13 +38,7 @@ impl SimRun {
     /// True camera parameters, 10 values in `CAMERA_PARAMETERS` order.
     #[getter]
     fn camera<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.run
-            .camera
-            .to_vector()
-            .iter()
-            .copied()
-            .collect::<Vec<_>>()
-            .into_pyarray(py)
+        crate::camera_values(&self.run.camera).into_pyarray(py)
     }
 
     /// The nominal rig file (TOML text) a user of this vehicle would have.

@@ -158,7 +158,7 @@ fn run() -> Result<(), String> {
             batch.add_frame(f.t_us, odometry, &observations, &[]);
         }
         let handover = batch.finish().ok_or("the reference batch had no frame")?;
-        for p in calib::Param::VEHICLE {
+        for p in Param::VEHICLE {
             if handover.estimated.contains(&p) {
                 let (scale, unit) = p.display_unit();
                 let sigma = handover.camera_covariance[(p.index(), p.index())]

@@ -635,6 +635,7 @@ fn summary_has_the_contract_keys_and_types() {
             "phase_switch_t_us",
             "pose",
             "camera",
+            "vehicle",
             "landmarks",
             "phase1_skipped",
             "warnings",
@@ -656,10 +657,18 @@ fn summary_has_the_contract_keys_and_types() {
     assert_eq!(s["pose"]["y"].as_f64(), Some(last.pose[1]));
     assert_eq!(s["pose"]["theta"].as_f64(), Some(last.pose[2]));
 
-    let names: Vec<&str> = Param::ALL.iter().map(|p| p.name()).collect();
+    // C under "camera", V under "vehicle" (vehicle-interfaces.md section 5).
+    let names: Vec<&str> = Param::CAMERA.iter().map(|p| p.name()).collect();
     assert_eq!(keys(&s["camera"]), set(&names));
+    let vehicle_names: Vec<&str> = Param::VEHICLE.iter().map(|p| p.name()).collect();
+    assert_eq!(keys(&s["vehicle"]), set(&vehicle_names));
     for p in &replay.final_camera {
-        let c = &s["camera"][p.param.name()];
+        let table = if p.param.is_vehicle() {
+            "vehicle"
+        } else {
+            "camera"
+        };
+        let c = &s[table][p.param.name()];
         assert_eq!(keys(c), set(&["value", "sigma"]));
         assert_eq!(c["value"].as_f64(), Some(p.value));
         assert_eq!(c["sigma"].as_f64(), Some(p.sigma));
@@ -720,6 +729,7 @@ fn summary_has_the_contract_keys_and_types() {
             "ate_max_m",
             "heading_rms_rad",
             "camera",
+            "vehicle",
             "consistency",
         ])
     );
@@ -739,6 +749,7 @@ fn summary_has_the_contract_keys_and_types() {
     }
     assert_eq!(truth["ate_rms_m"].as_f64(), Some(0.015));
     assert_eq!(keys(&truth["camera"]), set(&names));
+    assert_eq!(keys(&truth["vehicle"]), set(&vehicle_names));
     assert_eq!(truth["camera"]["f"].as_f64(), Some(1e-3));
 
     // Without truth, phase switch or frames: nulls.

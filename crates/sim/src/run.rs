@@ -131,7 +131,11 @@ pub fn simulate_with_progress(
     // The board stamps a frame exposed at odometry-clock time T with T + its clock offset.
     let offset_us = (rates.board_clock_offset_s * 1e6).round();
     let stamp = |t: u64| -> u64 {
-        #[allow(clippy::cast_precision_loss, clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        #[allow(
+            clippy::cast_precision_loss,
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss
+        )]
         let s = (t as f64 + offset_us).max(0.0) as u64;
         s
     };
