@@ -891,3 +891,94 @@ fn bad_lens_tables_are_named() {
         "must be positive",
     );
 }
+
+/// The `[vehicle]` table of section 3 (v2): the nominal vehicle parameters, each key optional
+/// (nominal when absent), V's names in `[estimate]` and `[prior]` like C's; the TOML and JSON
+/// forms write it back.
+#[test]
+fn vehicle_table_and_vehicle_parameters_load() {
+    let text = format!(
+        "{}[vehicle]\nodom_scale = 1.015\ntime_offset = -0.012\n",
+        with(
+            "estimate",
+            "parameters",
+            r#"["baseline", "f", "odom_scale", "odom_yaw_bias", "time_offset"]"#
+        )
+        .replace(
+            "[prior]\n",
+            "[prior]\nodom_scale = 0.02\nodom_yaw_bias = 0.005\ntime_offset = 0.03\n"
+        )
+    );
+    let rig = Rig::from_toml_str(&text, NAME).unwrap();
+    let v = rig.nominal.vehicle;
+    assert_eq!(
+        (
+            v.odom_scale,
+            v.odom_yaw_scale,
+            v.odom_yaw_bias,
+            v.time_offset
+        ),
+        (1.015, 1.0, 0.0, -0.012)
+    );
+    assert_eq!(
+        rig.estimate,
+        [
+            Param::F,
+            Param::Baseline,
+            Param::OdomScale,
+            Param::OdomYawBias,
+            Param::TimeOffset
+        ]
+    );
+    assert_eq!(rig.prior[Param::TimeOffset.index()], Some(0.03));
+    assert_eq!(Rig::from_toml_str(&rig.to_toml(), NAME).unwrap(), rig);
+    assert_eq!(Rig::from_json_str(&rig.to_json(), NAME).unwrap(), rig);
+    // Without the table: nominal.
+    let plain = Rig::from_toml_str(EXAMPLE, NAME).unwrap();
+    assert!(plain.nominal.vehicle.is_nominal());
+}
+
+#[test]
+fn bad_vehicle_tables_are_named() {
+    let base = render(&example_tables());
+    expect_key_error(
+        &format!("{base}[vehicle]\nodom_scale = -1.0\n"),
+        "[vehicle] odom_scale",
+        "must be positive",
+    );
+    expect_key_error(
+        &format!("{base}[vehicle]\nodom_yaw_scale = 0\n"),
+        "[vehicle] odom_yaw_scale",
+        "must be positive",
+    );
+    expect_key_error(
+        &format!("{base}[vehicle]\nwheel_radius = 0.2\n"),
+        "[vehicle] wheel_radius",
+        "unknown key",
+    );
+    expect_key_error(
+        &format!("{base}[vehicle]\ntime_offset = \"12 ms\"\n"),
+        "[vehicle] time_offset",
+        "expected a number",
+    );
+    expect_key_error(
+        &format!("{base}[vehicle]\ntime_offset = nan\n"),
+        "[vehicle] time_offset",
+        "not a finite number",
+    );
+    expect_key_error(
+        &format!("{base}[vehicle.left]\nx = 1\n"),
+        "[vehicle] left",
+        "unknown key",
+    );
+    // A vehicle parameter estimated needs its prior, as a camera parameter does.
+    expect_key_error(
+        &with(
+            "estimate",
+            "parameters",
+            r#"["baseline", "f", "time_offset"]"#,
+        ),
+        "[prior] time_offset",
+        "missing key",
+    );
+}
