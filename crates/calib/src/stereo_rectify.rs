@@ -142,9 +142,7 @@ pub enum RectifyError {
         expected: &'static str,
     },
     /// The two lenses have different models (OpenCV rectifies a pair of one kind).
-    #[error(
-        "the left lens is {left} and the right one {right}: both must have the same model"
-    )]
+    #[error("the left lens is {left} and the right one {right}: both must have the same model")]
     MixedModels {
         /// The left lens model.
         left: &'static str,
@@ -267,7 +265,10 @@ pub fn rotation_deviation(m: &Matrix3<f64>) -> (f64, f64) {
     if !m.iter().all(|v| v.is_finite()) {
         return (f64::NAN, f64::NAN);
     }
-    ((m * m.transpose() - Matrix3::identity()).amax(), m.determinant())
+    (
+        (m * m.transpose() - Matrix3::identity()).amax(),
+        m.determinant(),
+    )
 }
 
 fn validate(cal: &StereoCalibration) -> Result<(), RectifyError> {
@@ -297,7 +298,10 @@ fn validate(cal: &StereoCalibration) -> Result<(), RectifyError> {
                 [("k1", k1), ("k2", k2), ("k3", k3), ("k4", k4), ("k4", k4)]
             }
         };
-        for (what, value) in [("cx", cam.cx), ("cy", cam.cy)].into_iter().chain(coefficients) {
+        for (what, value) in [("cx", cam.cx), ("cy", cam.cy)]
+            .into_iter()
+            .chain(coefficients)
+        {
             if !value.is_finite() {
                 return Err(bad(what, value, "finite"));
             }
@@ -419,7 +423,12 @@ fn plumb_bob_projection(
     let mut c = Vector2::zeros();
     for (cam, rect, _) in cameras {
         let mut mean = Vector2::zeros();
-        for (x, y) in [(0.0, 0.0), (w - 1.0, 0.0), (0.0, h - 1.0), (w - 1.0, h - 1.0)] {
+        for (x, y) in [
+            (0.0, 0.0),
+            (w - 1.0, 0.0),
+            (0.0, h - 1.0),
+            (w - 1.0, h - 1.0),
+        ] {
             mean += border(cam, rect, Vector2::new(x, y), Vector2::zeros()) * 0.25;
         }
         c += (centre - mean) * 0.5;
@@ -496,7 +505,10 @@ fn fisheye_new_camera(
         ("left edge focal length", w * 0.5 / (mean.x - min.x)),
         ("right edge focal length", w * 0.5 / (max.x - mean.x)),
         ("top edge focal length", h * 0.5 * aspect / (mean.y - min.y)),
-        ("bottom edge focal length", h * 0.5 * aspect / (max.y - mean.y)),
+        (
+            "bottom edge focal length",
+            h * 0.5 * aspect / (max.y - mean.y),
+        ),
     ] {
         if !(candidate.is_finite() && candidate > 0.0) {
             return Err(RectifyError::Border {
@@ -699,8 +711,8 @@ mod tests {
                 (-0.2, -0.3, 0.8),
             ] {
                 let in_left = Vector3::new(x, y, z);
-                let in_right = cal.right_from_left_rotation * in_left
-                    + cal.right_from_left_translation;
+                let in_right =
+                    cal.right_from_left_rotation * in_left + cal.right_from_left_translation;
                 let left = r
                     .lens
                     .left
