@@ -225,7 +225,11 @@ pub fn model_name(model: &LensModel) -> &'static str {
 /// `fisheye.stereoRectify` with `CALIB_ZERO_DISPARITY` and `balance = 0` for `equidistant`.
 pub fn stereo_rectify(cal: &StereoCalibration) -> Result<Rectification, RectifyError> {
     validate(cal)?;
-    let (left_rect_from_left, right_rect_from_right, t_rect) = rotations(
+    let Rotations {
+        left_rect_from_left,
+        right_rect_from_right,
+        t_rect,
+    } = rotations(
         &cal.right_from_left_rotation,
         &cal.right_from_left_translation,
     )?;
@@ -332,15 +336,21 @@ fn validate(cal: &StereoCalibration) -> Result<(), RectifyError> {
     Ok(())
 }
 
-/// `R1` (left rectified from left), `R2` (right rectified from right) and the rectified
-/// translation `R2 T` = `(-B, 0, 0)`.
+/// The rectifying rotations of both cameras.
+struct Rotations {
+    /// `R1`: raw left camera -> rectified orientation.
+    left_rect_from_left: Matrix3<f64>,
+    /// `R2`: raw right camera -> rectified orientation.
+    right_rect_from_right: Matrix3<f64>,
+    /// The rectified translation `R2 T` = `(-B, 0, 0)`.
+    t_rect: Vector3<f64>,
+}
+
+/// `R1`, `R2` and the rectified translation.
 ///
 /// Each camera turns by half of `R` towards the other (OpenCV's `Rodrigues(-0.5 om)`), then
 /// both by the rotation that takes the half-rotated translation onto the x axis.
-fn rotations(
-    right_from_left: &Matrix3<f64>,
-    t: &Vector3<f64>,
-) -> Result<(Matrix3<f64>, Matrix3<f64>, Vector3<f64>), RectifyError> {
+fn rotations(right_from_left: &Matrix3<f64>, t: &Vector3<f64>) -> Result<Rotations, RectifyError> {
     // The nearest rotation (a file's matrix is orthonormal only to its printed digits), as a
     // unit quaternion: its rotation vector keeps full precision at small angles, where one
     // taken from the matrix trace (acos) would not.
@@ -370,7 +380,11 @@ fn rotations(
     if t_rect.x >= 0.0 {
         return Err(RectifyError::CamerasSwapped { x: t_rect.x });
     }
-    Ok((left_rect_from_left, right_rect_from_right, t_rect))
+    Ok(Rotations {
+        left_rect_from_left,
+        right_rect_from_right,
+        t_rect,
+    })
 }
 
 /// OpenCV's approximate inverse of the `plumb_bob` model (`cv::undistortPoints` with its

@@ -616,8 +616,19 @@ fn import_kalibr(path: &Path) -> Result<Imported> {
 // ---------------------------------------------------------------------------------------------
 // ROS
 
-/// One ROS `camera_info` file: its lens, projection matrix and image size.
-fn ros_camera(path: &Path) -> Result<(String, Lens, Matrix3x4<f64>, (u32, u32))> {
+/// One ROS `camera_info` file.
+#[derive(Debug)]
+struct RosCamera {
+    file: String,
+    lens: Lens,
+    /// `P`, the rectified camera's projection matrix.
+    projection: Matrix3x4<f64>,
+    /// Width, height.
+    size: (u32, u32),
+}
+
+/// Reads one ROS `camera_info` file.
+fn ros_camera(path: &Path) -> Result<RosCamera> {
     let (file, yaml) = load_yaml(path)?;
     let root = Node::root(&file, &yaml);
     let size = image_size(
@@ -651,12 +662,27 @@ fn ros_camera(path: &Path) -> Result<(String, Lens, Matrix3x4<f64>, (u32, u32))>
         cy,
         rectification,
     };
-    Ok((file, lens, p, size))
+    Ok(RosCamera {
+        file,
+        lens,
+        projection: p,
+        size,
+    })
 }
 
 fn import_ros(left_path: &Path, right_path: &Path) -> Result<Imported> {
-    let (left_file, left, p_left, left_size) = ros_camera(left_path)?;
-    let (right_file, right, p_right, right_size) = ros_camera(right_path)?;
+    let RosCamera {
+        file: left_file,
+        lens: left,
+        projection: p_left,
+        size: left_size,
+    } = ros_camera(left_path)?;
+    let RosCamera {
+        file: right_file,
+        lens: right,
+        projection: p_right,
+        size: right_size,
+    } = ros_camera(right_path)?;
     if left_size != right_size {
         bail!(
             "{left_file} is {} x {} and {right_file} {} x {}: the rig has one image size",
@@ -674,7 +700,8 @@ fn import_ros(left_path: &Path, right_path: &Path) -> Result<Imported> {
         );
     }
     let (f, cx, cy) = (p_left[(0, 0)], p_left[(0, 2)], p_left[(1, 2)]);
-    if !(f > 0.0) {
+    // Finite: every number read is.
+    if f <= 0.0 {
         bail!("{left_file}: projection_matrix: focal length {f} must be positive");
     }
     // The rig model: both rectified cameras [f 0 cx -f B_i; 0 f cy 0; 0 0 1 0], B_left = 0.
@@ -684,7 +711,7 @@ fn import_ros(left_path: &Path, right_path: &Path) -> Result<Imported> {
         (&right_file, &p_right, p_right[(0, 3)]),
     ] {
         let off = (p - expected(tx)).amax();
-        if !(off <= PROJECTION_TOLERANCE_PX) {
+        if off > PROJECTION_TOLERANCE_PX {
             bail!(
                 "{file}: projection_matrix [{}] is not [f 0 cx {}; 0 f cy 0; 0 0 1 0] with the \
                  left camera's f {f}, cx {cx}, cy {cy} (off by {off:.3e}): stereonav needs a \
@@ -695,7 +722,7 @@ fn import_ros(left_path: &Path, right_path: &Path) -> Result<Imported> {
         }
     }
     let baseline = -p_right[(0, 3)] / p_right[(0, 0)];
-    if !(baseline > 0.0) {
+    if baseline <= 0.0 {
         bail!(
             "{right_file}: projection_matrix: baseline -P[0,3] / P[0,0] = {baseline}; expected \
              positive (are LEFT.yaml and RIGHT.yaml swapped?)"
