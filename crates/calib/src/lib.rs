@@ -7,6 +7,8 @@
 //!   stereo triangulation with covariance propagation.
 //! * [`config`] (feature `alloc`): the rig configuration: nominal `C`, what to estimate, priors,
 //!   noise; [`rig_file`] (feature `std`) reads and writes it as TOML (section 3) and JSON.
+//! * [`lens`]: real lenses (section 1.1); [`stereo_rectify`]: a raw stereo calibration
+//!   rectified as OpenCV's `stereoRectify` does (section 5, `stereonav rig import`).
 //!
 //! Builds without `std` (with `alloc`; nalgebra with `libm`) so that firmware can link it.
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -28,6 +30,7 @@ pub mod rig_file;
 pub mod selfcal;
 #[cfg(feature = "alloc")]
 pub mod smoother;
+pub mod stereo_rectify;
 
 pub use camera::{CameraParams, Mount, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, Vehicle};
 #[cfg(feature = "alloc")]

@@ -12,6 +12,7 @@ mod fpga;
 mod harris;
 mod progress;
 mod replay;
+mod rig_import;
 mod simulate;
 mod view;
 
@@ -41,6 +42,8 @@ enum Command {
     /// SLAM; prints a short summary and writes the estimates (MCAP), the summary (JSON) and the
     /// trajectory (CSV) on request.
     Replay(replay::Args),
+    /// Rig files: `rig import` writes one from a stereo calibration by Kalibr, ROS or OpenCV.
+    Rig(rig_import::Args),
     /// The viewer: a vehicle log (replayed on the fly) or an estimates file, with the image
     /// planes, the map, the camera parameters and the NIS over time and a timeline;
     /// `--screenshot OUT.png` renders it headless to PNG and exits.
@@ -84,6 +87,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::run(&args),
         Command::Calibrate(args) => calibrate::run(&args),
         Command::Replay(args) => replay::run(&args),
+        Command::Rig(args) => rig_import::run(&args),
         Command::View(args) => view::run(&args),
     };
     match result {
