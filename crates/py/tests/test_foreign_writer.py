@@ -94,3 +94,27 @@ def test_the_whole_method_on_a_log_written_by_another_tool(
     assert replayed.summary["camera"] == original.summary["camera"]
     assert (replayed.trajectory == original.trajectory).all()
     assert len(replayed.landmarks) == 5
+
+
+def test_a_real_vehicle_log_written_by_another_tool(tmp_path: pathlib.Path) -> None:
+    # The paper's drive with a 1 % odometry scale, a yaw-rate bias and a 12 ms board clock
+    # offset (fixtures/scenarios/paper-experiment-vehicle.toml), simulated, then rewritten by
+    # the reference writer with other chunks: V is estimated from it as from the original,
+    # and to within the bounds.
+    scenario = ROOT / "fixtures" / "scenarios" / "paper-experiment-vehicle.toml"
+    rig = ROOT / "fixtures" / "scenarios" / "paper-experiment-vehicle.rig.toml"
+    sim = stereonav.simulate(scenario, seed=3)
+    original_log = tmp_path / "vehicle.mcap"
+    sim.write_log(original_log)
+    foreign = tmp_path / "foreign-vehicle.mcap"
+    rewrite(original_log, foreign, 7)
+    original = stereonav.replay(original_log, rig)
+    replayed = stereonav.replay(foreign, rig)
+    assert replayed.summary["vehicle"] == original.summary["vehicle"]
+    assert (replayed.trajectory == original.trajectory).all()
+    vehicle = replayed.summary["vehicle"]
+    assert abs(vehicle["odom_scale"]["value"] - 1.01) <= 0.006
+    assert abs(vehicle["odom_yaw_bias"]["value"] - 0.002) <= 0.0005
+    assert vehicle["odom_yaw_scale"]["sigma"] == 0.0  # not estimated: nominal
+    assert vehicle["odom_yaw_scale"]["value"] == 1.0
+    assert abs(replayed.summary["camera"]["baseline"]["value"] - 0.1202) <= 0.0005
