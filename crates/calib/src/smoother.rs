@@ -331,6 +331,8 @@ struct Frame {
     /// information (inverse covariance).
     odometry: Option<(OdometryFactor, Matrix3<f64>)>,
     observations: Vec<(usize, Measurement)>,
+    /// Each observation's whitening through real lenses ([`lens_whitening`]), computed once.
+    whitening: Vec<Option<nalgebra::Matrix4<f64>>>,
     /// Measurements of tracks not yet confirmed, by track: they join their landmark when
     /// the track is confirmed (kept for [`TENTATIVE_FRAMES`] frames).
     tentative: Vec<(u64, Measurement)>,
@@ -411,6 +413,38 @@ fn odometry_information(
         (info.iter().all(|v| v.is_finite()) && o.vehicle_jacobian.iter().all(|v| v.is_finite()))
             .then_some((o, 0.5 * (info + info.transpose())))
     })
+}
+
+/// The whitening of one stereo measurement through real lenses (vehicle-interfaces.md 1.1):
+/// the rig's pixel sigma is that of the raw board features, so a rectified measurement's
+/// noise is `sigma^2 J^-1 J^-T` per camera, `J = d raw / d rectified` (the lens's forward map,
+/// `Lens::unrectify`, at the measurement). `A = blockdiag(J_left, J_right) / sigma` has
+/// `A^T A = R^-1`: the whitened residual is the residual in raw pixels over sigma (a fisheye
+/// stretches the noise toward the rectified image's edges, and the batch weighs those
+/// measurements less). `None` without lenses, or where the forward map fails (the rig's one
+/// sigma then).
+fn lens_whitening(rig: &Rig, z: &Measurement) -> Option<nalgebra::Matrix4<f64>> {
+    let lens = rig.lens.as_ref()?;
+    let c = &rig.nominal;
+    // Central differences of the closed-form forward map (0.001 px: its curvature is far
+    // below the pixel noise at that scale).
+    let jacobian = |l: &crate::lens::Lens, u: f64, v: f64| -> Option<nalgebra::Matrix2<f64>> {
+        let h = 1e-3;
+        let at =
+            |du: f64, dv: f64| l.unrectify(nalgebra::Vector2::new(u + du, v + dv), c.f, c.cx, c.cy);
+        let (px, mx, py, my) = (at(h, 0.0)?, at(-h, 0.0)?, at(0.0, h)?, at(0.0, -h)?);
+        Some(nalgebra::Matrix2::from_columns(&[
+            (px - mx) / (2.0 * h),
+            (py - my) / (2.0 * h),
+        ]))
+    };
+    let jl = jacobian(&lens.left, z[0], z[1])?;
+    let jr = jacobian(&lens.right, z[2], z[3])?;
+    let s = rig.noise.pixel;
+    let mut a = nalgebra::Matrix4::zeros();
+    a.fixed_view_mut::<2, 2>(0, 0).copy_from(&(jl / s));
+    a.fixed_view_mut::<2, 2>(2, 2).copy_from(&(jr / s));
+    a.iter().all(|v| v.is_finite()).then_some(a)
 }
 
 /// An odometry factor linearised: residual, its Jacobians with respect to the two poses,
@@ -698,6 +732,7 @@ impl Smoother {
             t_us,
             pose,
             odometry,
+            whitening: used.iter().map(|(_, z)| lens_whitening(&self.rig, z)).collect(),
             observations: used,
             tentative,
         });
@@ -743,6 +778,7 @@ impl Smoother {
                 break;
             }
             f.observations.push((j, z));
+            f.whitening.push(lens_whitening(&self.rig, &z));
             earliest = Some(i);
         }
         if let (Some(i), Some(l)) = (earliest, self.landmarks.get_mut(j)) {
@@ -995,6 +1031,7 @@ impl Smoother {
             pose: joint.pose,
             odometry: None,
             observations: Vec::new(),
+            whitening: Vec::new(),
             tentative: Vec::new(),
         }];
         self.mapping = true;
@@ -1073,6 +1110,7 @@ impl Smoother {
             t_us,
             pose,
             odometry,
+            whitening: used.iter().map(|(_, z)| lens_whitening(&self.rig, z)).collect(),
             observations: used,
             tentative: Vec::new(),
         });
@@ -1187,10 +1225,13 @@ impl Smoother {
             {
                 cost += f.odometry_cost(prev, pose, camera);
             }
-            for (j, z) in &f.observations {
+            for (k, (j, z)) in f.observations.iter().enumerate() {
                 let Some(l) = landmarks.get(*j) else { continue };
                 let e = match project(camera, pose, l) {
-                    Ok(p) => (z - p).norm() / sigma,
+                    Ok(p) => match f.whitening.get(k).copied().flatten() {
+                        Some(a) => (a * (z - p)).norm(),
+                        None => (z - p).norm() / sigma,
+                    },
                     Err(_) => self.settings.huber * 10.0,
                 };
                 cost += huber_cost(e, self.settings.huber);
@@ -1397,13 +1438,24 @@ impl Smoother {
             if i + 1 == n && !last_pixels {
                 continue;
             }
-            for (j, zm) in &f.observations {
+            for (k, (j, zm)) in f.observations.iter().enumerate() {
                 let Some(l) = landmarks.get(*j) else { continue };
                 let Ok((zh, jac)) = project_with_jacobians(camera, pose, l) else {
                     continue;
                 };
-                let r = zm - zh;
-                let e = r.norm() * libm::sqrt(inv_var);
+                // Through real lenses the residual and its Jacobians are whitened per
+                // observation (lens_whitening); else the rig's one pixel sigma.
+                let (r, jl, jp, jc, unit) = match f.whitening.get(k).copied().flatten() {
+                    Some(a) => (
+                        a * (zm - zh),
+                        a * jac.landmark,
+                        a * jac.pose,
+                        a * jac.camera,
+                        1.0,
+                    ),
+                    None => (zm - zh, jac.landmark, jac.pose, jac.camera, inv_var),
+                };
+                let e = r.norm() * libm::sqrt(unit);
                 let wgt = if e > self.settings.huber {
                     sys.outliers += 1;
                     self.settings.huber / e
@@ -1411,11 +1463,10 @@ impl Smoother {
                     1.0
                 };
                 sys.observations += 1;
-                let wi = wgt * inv_var;
-                let jc: SMatrix<f64, 4, N_PARAMS> = jac.camera;
+                let wi = wgt * unit;
+                let jc: SMatrix<f64, 4, N_PARAMS> = jc;
                 let col = m + 3 * j;
                 // Landmark and camera blocks of the arrow.
-                let jl = jac.landmark;
                 let ll = jl.transpose() * jl * wi;
                 let bl = jl.transpose() * r * wi;
                 for a in 0..3 {
@@ -1438,7 +1489,6 @@ impl Smoother {
                 }
                 if i >= first {
                     let k = i - first;
-                    let jp = jac.pose;
                     sys.d[k] += jp.transpose() * jp * wi;
                     sys.b[k] += jp.transpose() * r * wi;
                     let pl = jp.transpose() * jl * wi;

@@ -725,7 +725,7 @@ impl Viewer {
         let columns = if count > PLOTS_PER_COLUMN { 2 } else { 1 };
         let rows = count.div_ceil(columns);
         ui.label(format!(
-            "camera parameters: estimate with its {SIGMAS:.0}-sigma band; NIS against its bound"
+            "camera and vehicle parameters: estimate with its {SIGMAS:.0}-sigma band; NIS against its bound"
         ));
         let spacing = ui.spacing().item_spacing;
         let title_height = ui.text_style_height(&egui::TextStyle::Body) + spacing.y;
