@@ -1722,6 +1722,81 @@ impl System {
 mod tests {
     use super::*;
 
+    fn rig_with(model: crate::lens::LensModel, fx: f64) -> Rig {
+        let lens = crate::lens::Lens {
+            model,
+            fx,
+            fy: fx,
+            cx: 376.0,
+            cy: 240.0,
+            rectification: Matrix3::identity(),
+        };
+        let mut prior = [None; N_PARAMS];
+        prior[Param::Baseline.index()] = Some(0.01);
+        Rig {
+            width: 752,
+            height: 480,
+            nominal: CameraParams {
+                f: 700.0,
+                cx: 376.0,
+                cy: 240.0,
+                baseline: 0.12,
+                mount: crate::camera::Mount::default(),
+                vehicle: crate::camera::Vehicle::NOMINAL,
+            },
+            estimate: alloc::vec![Param::Baseline],
+            prior,
+            noise: crate::config::Noise {
+                pixel: 0.3,
+                velocity: 0.02,
+                yaw_rate: 0.01,
+            },
+            lens: Some(crate::lens::StereoLens {
+                left: lens,
+                right: lens,
+            }),
+        }
+    }
+
+    /// Through a lens without distortion at the rectified focal length, the whitening is the
+    /// rig's sigma; through a fisheye at a lower raw focal length, a measurement near the
+    /// rectified image's corner weighs less than one at the centre (its noise is stretched).
+    #[test]
+    fn lens_whitening_carries_the_raw_noise() {
+        let flat = rig_with(
+            crate::lens::LensModel::PlumbBob {
+                k1: 0.0,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+                k3: 0.0,
+            },
+            700.0,
+        );
+        let z = Measurement::new(400.0, 250.0, 380.0, 250.0);
+        let a = lens_whitening(&flat, &z).unwrap();
+        assert!((a - nalgebra::Matrix4::identity() / 0.3).amax() < 1e-6, "{a}");
+        let fisheye = rig_with(
+            crate::lens::LensModel::Equidistant {
+                k1: 0.0,
+                k2: 0.0,
+                k3: 0.0,
+                k4: 0.0,
+            },
+            350.0,
+        );
+        let centre = lens_whitening(&fisheye, &Measurement::new(380.0, 242.0, 372.0, 242.0))
+            .unwrap()
+            .norm();
+        let corner = lens_whitening(&fisheye, &Measurement::new(740.0, 470.0, 730.0, 470.0))
+            .unwrap()
+            .norm();
+        assert!(corner < 0.9 * centre, "corner {corner}, centre {centre}");
+        let mut plain = flat.clone();
+        plain.lens = None;
+        assert!(lens_whitening(&plain, &z).is_none());
+    }
+
     #[test]
     fn odometry_jacobians_match_finite_differences() {
         let a = Pose2::new(0.3, -0.2, 0.7);
