@@ -304,6 +304,26 @@ impl OdometryFactor {
     }
 }
 
+/// How long before the first sample the odometry may be taken as that sample held back,
+/// microseconds. A frame can be exposed before the odometry's first sample (a log that starts
+/// with a frame, or a frame stamped before its exposure by a negative clock offset still
+/// unknown): without it the first interval had no odometry, phase 1's chain hung from the
+/// first frame by a weak factor, and a -24 ms offset left the pose known to 10 m at the
+/// hand-over.
+pub const BACKWARD_HOLD_US: u64 = 100_000;
+
+/// The index of the sample held at `t0_us` (the last at or before it, or the first one when
+/// `t0_us` is at most [`BACKWARD_HOLD_US`] before it) and the time to integrate from.
+pub fn start_of(samples: &[OdomSample], t0_us: u64) -> Option<(usize, u64)> {
+    match samples.partition_point(|s| s.t_us <= t0_us).checked_sub(1) {
+        Some(i) => Some((i, t0_us)),
+        None => {
+            let first = samples.first()?;
+            (first.t_us - t0_us <= BACKWARD_HOLD_US).then_some((0, t0_us))
+        }
+    }
+}
+
 /// [`integrate`] with the velocities of each sample given by `velocities` (the reported ones
 /// corrected by a vehicle model).
 pub fn integrate_with(
@@ -315,10 +335,7 @@ pub fn integrate_with(
     if t1_us < t0_us {
         return None;
     }
-    // The last sample at or before t0.
-    let start = samples
-        .partition_point(|s| s.t_us <= t0_us)
-        .checked_sub(1)?;
+    let (start, t0_us) = start_of(samples, t0_us)?;
     let mut motion = Motion::default();
     let mut t = t0_us;
     for (i, s) in samples.iter().enumerate().skip(start) {

@@ -338,6 +338,10 @@ struct Frame {
     tentative: Vec<(u64, Measurement)>,
 }
 
+/// A parameter further than this many prior sigmas from its nominal value is not a step the
+/// batch takes ([`Smoother::plausible`]): the prior says it cannot be there.
+const PLAUSIBLE_PRIOR_SIGMAS: f64 = 10.0;
+
 /// A change of speed that counts as excitation for the clock offset, m/s: well above the
 /// odometry noise of a frame interval.
 const SPEED_STEP_MPS: f64 = 0.05;
@@ -732,7 +736,10 @@ impl Smoother {
             t_us,
             pose,
             odometry,
-            whitening: used.iter().map(|(_, z)| lens_whitening(&self.rig, z)).collect(),
+            whitening: used
+                .iter()
+                .map(|(_, z)| lens_whitening(&self.rig, z))
+                .collect(),
             observations: used,
             tentative,
         });
@@ -838,6 +845,24 @@ impl Smoother {
         .then_some(
             "only the product baseline x odom_scale is observable: each is known only as well as the other's prior",
         )
+    }
+
+    /// Whether a trial step's parameters are physically possible: an odometry scale or yaw
+    /// scale between 0.5 and 2, and every estimated parameter within
+    /// [`PLAUSIBLE_PRIOR_SIGMAS`] prior sigmas of its nominal value. Near a scale of zero the
+    /// reported-units odometry residual degenerates (a yaw scale of 0.0004 makes every
+    /// interval a tight spiral whose predicted motion, and residual, vanish), and a solve from
+    /// a poor start once stepped there; the damping then grows instead.
+    fn plausible(&self, c: &CameraParams) -> bool {
+        let v = &c.vehicle;
+        if !((0.5..=2.0).contains(&v.odom_scale) && (0.5..=2.0).contains(&v.odom_yaw_scale)) {
+            return false;
+        }
+        self.estimated.iter().all(|&p| {
+            let s = self.prior_sigma(p);
+            !s.is_finite()
+                || libm::fabs(c.get(p) - self.rig.nominal.get(p)) <= PLAUSIBLE_PRIOR_SIGMAS * s
+        })
     }
 
     fn prior_sigma(&self, p: Param) -> f64 {
@@ -1110,7 +1135,10 @@ impl Smoother {
             t_us,
             pose,
             odometry,
-            whitening: used.iter().map(|(_, z)| lens_whitening(&self.rig, z)).collect(),
+            whitening: used
+                .iter()
+                .map(|(_, z)| lens_whitening(&self.rig, z))
+                .collect(),
             observations: used,
             tentative: Vec::new(),
         });
@@ -1280,6 +1308,10 @@ impl Smoother {
                     continue;
                 };
                 let (c2, p2, l2) = self.apply(&camera, &poses, &landmarks, &step);
+                if !self.plausible(&c2) {
+                    self.lambda *= 10.0;
+                    continue;
+                }
                 let cost2 = self.cost(&c2, &p2, &l2);
                 if cost2.is_finite() && cost2 <= cost {
                     let decrease = cost - cost2;
@@ -1775,7 +1807,10 @@ mod tests {
         );
         let z = Measurement::new(400.0, 250.0, 380.0, 250.0);
         let a = lens_whitening(&flat, &z).unwrap();
-        assert!((a - nalgebra::Matrix4::identity() / 0.3).amax() < 1e-6, "{a}");
+        assert!(
+            (a - nalgebra::Matrix4::identity() / 0.3).amax() < 1e-6,
+            "{a}"
+        );
         let fisheye = rig_with(
             crate::lens::LensModel::Equidistant {
                 k1: 0.0,

@@ -72,6 +72,14 @@ pub use error::Error;
 /// stream with odometry and no frames does not grow it without bound.
 pub const MAX_ODOMETRY_BUFFER: usize = 10_000;
 
+/// How far past a frame's timestamp the odometry should be fed before the frame, microseconds.
+/// A frame stamped `t` by the board was exposed at odometry-clock time `t - time_offset`
+/// (vehicle-interfaces.md 1.2): with a negative offset that is after `t`, and the motion up to
+/// the exposure needs odometry from after the stamp (without it the last sample is held, and a
+/// clock offset of -12 ms wrecked the aisle's map). A log's reader (`replay`) feeds this much
+/// ahead; a live caller can only feed what has arrived.
+pub const ODOMETRY_LOOKAHEAD_US: u64 = 250_000;
+
 /// Odometry kept before a frame's odometry-clock time beyond the one sample held into the
 /// next interval, microseconds: the clock offset's estimate may move the next interval's
 /// start back by this much (vehicle-interfaces.md 1.2).

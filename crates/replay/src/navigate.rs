@@ -88,7 +88,10 @@ pub fn replay_log(
     let mut smoothed_poses: Vec<(u64, Pose2)> = Vec::new();
     let (mut nees_sum, mut nees_frames, mut nees_last) = (0.0, 0usize, f64::NAN);
     for (k, frame) in input.frames.iter().enumerate() {
-        while let Some(s) = next_odom.next_if(|s| s.t_us <= frame.t_us) {
+        // The odometry past the frame's stamp too: a frame exposed after its stamp (a negative
+        // clock offset) needs it (nav::ODOMETRY_LOOKAHEAD_US).
+        let until = frame.t_us.saturating_add(nav::ODOMETRY_LOOKAHEAD_US);
+        while let Some(s) = next_odom.next_if(|s| s.t_us <= until) {
             if let Err(e) = navigator.push_odometry(*s) {
                 *refused.entry(e.to_string()).or_default() += 1;
             }

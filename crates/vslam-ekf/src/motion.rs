@@ -180,13 +180,12 @@ impl Increment {
             return Err(Error::BackwardInterval { t0_us, t1_us });
         }
         check_noise(noise)?;
-        let start = samples
-            .partition_point(|s| s.t_us <= t0_us)
-            .checked_sub(1)
-            .ok_or(Error::NoOdometry {
-                t0_us,
-                first_us: samples.first().map(|s| s.t_us),
-            })?;
+        // The last sample at or before t0 (or the first, held back a little:
+        // calib::odometry::BACKWARD_HOLD_US).
+        let (start, _) = calib::odometry::start_of(samples, t0_us).ok_or(Error::NoOdometry {
+            t0_us,
+            first_us: samples.first().map(|s| s.t_us),
+        })?;
         let mut total = Self::default();
         let mut t = t0_us;
         for (i, s) in samples.iter().enumerate().skip(start) {
