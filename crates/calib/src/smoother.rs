@@ -451,6 +451,12 @@ fn lens_whitening(rig: &Rig, z: &Measurement) -> Option<nalgebra::Matrix4<f64>> 
     a.iter().all(|v| v.is_finite()).then_some(a)
 }
 
+/// `D = diag(odom_scale, odom_scale, odom_yaw_scale)`: a true-motion error in the reported
+/// odometry's units (`Frame::odometry_factor`).
+fn to_reported_units(v: &crate::camera::Vehicle) -> Matrix3<f64> {
+    Matrix3::from_diagonal(&Vector3::new(v.odom_scale, v.odom_scale, v.odom_yaw_scale))
+}
+
 /// An odometry factor linearised: residual, its Jacobians with respect to the two poses,
 /// information, and its Jacobian with respect to `V` ([`Param::VEHICLE`] order).
 type OdometryTerms = (
@@ -472,11 +478,7 @@ impl Frame {
             Some((o, info)) => {
                 let v = &camera.vehicle;
                 let (r0, _, _) = odometry_residual(prev, pose, &o.motion_for(v));
-                let r = Vector3::new(
-                    v.odom_scale * r0.x,
-                    v.odom_scale * r0.y,
-                    v.odom_yaw_scale * r0.z,
-                );
+                let r = to_reported_units(v) * r0;
                 r.dot(&(info * r))
             }
             None => {
@@ -503,11 +505,7 @@ impl Frame {
                 let v = &camera.vehicle;
                 let (motion, jacobian) = o.at(v);
                 let (r0, ja, jb) = odometry_residual(prev, pose, &motion);
-                let d = Matrix3::from_diagonal(&Vector3::new(
-                    v.odom_scale,
-                    v.odom_scale,
-                    v.odom_yaw_scale,
-                ));
+                let d = to_reported_units(v);
                 let mut jv = -(d * jacobian);
                 // d D / d odom_scale and d D / d odom_yaw_scale times the true-units residual.
                 jv[(0, 0)] += r0.x;

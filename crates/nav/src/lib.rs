@@ -379,6 +379,14 @@ impl Navigator {
         Ok(true)
     }
 
+    /// The current estimate of the vehicle's parameters V: the filter's in phase 2, the
+    /// batch's in phase 1 (a prediction does not change it).
+    fn vehicle(&self) -> calib::Vehicle {
+        self.ekf
+            .as_ref()
+            .map_or_else(|| self.smoother.camera().vehicle, |e| e.camera().vehicle)
+    }
+
     /// The odometry samples a batch needs to integrate the interval `[t0_us, t1_us]` (board
     /// stamps) again for another clock offset: those within [`ODOMETRY_MARGIN_US`] of the
     /// interval at the current estimate `vehicle`. None unless V is estimated.
@@ -627,63 +635,39 @@ impl Navigator {
         // odometry-clock interval the frames were exposed in, with the true velocities.
         let mut phase1_motion = None;
         let estimates_vehicle = self.rig.estimate.iter().any(|p| p.is_vehicle());
+        let vehicle = self.vehicle();
         if let Some(t0) = self.last_frame_t {
-            let moved = match &mut self.ekf {
-                Some(ekf) => {
-                    let vehicle = ekf.camera().vehicle;
-                    match Increment::from_odometry_vehicle(
-                        &self.odometry,
-                        t0,
-                        t_us,
-                        ekf.noise(),
-                        &vehicle,
-                        estimates_vehicle,
-                    ) {
-                        Ok((inc, reported, jv)) => {
-                            ekf.predict_increment_vehicle(&inc, &jv)?;
-                            phase1_motion = Some(OdometryFactor {
-                                motion: inc.motion,
-                                covariance: reported,
-                                vehicle,
-                                vehicle_jacobian: jv,
-                                frames_us: (t0, t_us),
-                                samples: self.samples_around(t0, t_us, &vehicle, estimates_vehicle),
-                            });
-                            true
-                        }
-                        Err(vslam_ekf::Error::NoOdometry { .. }) => false,
-                        Err(e) => return Err(e.into()),
-                    }
-                }
-                None => {
-                    let vehicle = self.smoother.camera().vehicle;
-                    match Increment::from_odometry_vehicle(
-                        &self.odometry,
-                        t0,
-                        t_us,
-                        &self.rig.noise,
-                        &vehicle,
-                        estimates_vehicle,
-                    ) {
-                        Ok((inc, reported, jv)) => {
-                            phase1_motion = Some(OdometryFactor {
-                                motion: inc.motion,
-                                covariance: reported,
-                                vehicle,
-                                vehicle_jacobian: jv,
-                                frames_us: (t0, t_us),
-                                samples: self.samples_around(t0, t_us, &vehicle, estimates_vehicle),
-                            });
+            let noise = self.ekf.as_ref().map_or(self.rig.noise, |e| *e.noise());
+            let moved = match Increment::from_odometry_vehicle(
+                &self.odometry,
+                t0,
+                t_us,
+                &noise,
+                &vehicle,
+                estimates_vehicle,
+            ) {
+                Ok((inc, reported, jv)) => {
+                    match &mut self.ekf {
+                        Some(ekf) => ekf.predict_increment_vehicle(&inc, &jv)?,
+                        None => {
                             let (pose, f, q) = inc.apply(&self.pose);
                             self.pose = pose;
                             let p = f * self.pose_covariance * f.transpose() + q;
                             self.pose_covariance = 0.5 * (p + p.transpose());
-                            true
                         }
-                        Err(vslam_ekf::Error::NoOdometry { .. }) => false,
-                        Err(e) => return Err(e.into()),
                     }
+                    phase1_motion = Some(OdometryFactor {
+                        motion: inc.motion,
+                        covariance: reported,
+                        vehicle,
+                        vehicle_jacobian: jv,
+                        frames_us: (t0, t_us),
+                        samples: self.samples_around(t0, t_us, &vehicle, estimates_vehicle),
+                    });
+                    true
                 }
+                Err(vslam_ekf::Error::NoOdometry { .. }) => false,
+                Err(e) => return Err(e.into()),
             };
             if !moved {
                 outcome.no_odometry = true;
@@ -696,10 +680,6 @@ impl Navigator {
         self.last_frame_t = Some(t_us);
         // Keep the last sample at or before this frame's odometry-clock time (less a margin
         // for the clock offset's estimate to move): it is held into the next interval.
-        let vehicle = self
-            .ekf
-            .as_ref()
-            .map_or_else(|| self.smoother.camera().vehicle, |e| e.camera().vehicle);
         let keep_until = vehicle
             .odometry_time_us(t_us)
             .min(t_us)
