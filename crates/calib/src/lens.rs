@@ -87,6 +87,24 @@ pub struct StereoLens {
 }
 
 impl LensModel {
+    /// The model's name in rig files and calibration files (`plumb_bob`, `equidistant`).
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Self::PlumbBob { .. } => "plumb_bob",
+            Self::Equidistant { .. } => "equidistant",
+        }
+    }
+
+    /// The coefficients in the rig file's order: `k1 k2 p1 p2 k3` (plumb_bob), `k1 k2 k3 k4`
+    /// (equidistant).
+    pub fn coefficients(&self) -> impl Iterator<Item = f64> {
+        let (c, n) = match *self {
+            Self::PlumbBob { k1, k2, p1, p2, k3 } => ([k1, k2, p1, p2, k3], 5),
+            Self::Equidistant { k1, k2, k3, k4 } => ([k1, k2, k3, k4, 0.0], 4),
+        };
+        c.into_iter().take(n)
+    }
+
     /// The distorted normalised point of the ideal one `p`, and its Jacobian `d distorted /
     /// d p`.
     pub fn distort(&self, p: Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {

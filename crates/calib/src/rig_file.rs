@@ -534,14 +534,8 @@ impl Rig {
         }
         if let (Some(l), Some(obj)) = (&self.lens, json.as_object_mut()) {
             let side = |lens: &Lens| {
-                let (model, coefficients) = match lens.model {
-                    LensModel::PlumbBob { k1, k2, p1, p2, k3 } => {
-                        ("plumb_bob", vec![k1, k2, p1, p2, k3])
-                    }
-                    LensModel::Equidistant { k1, k2, k3, k4 } => {
-                        ("equidistant", vec![k1, k2, k3, k4])
-                    }
-                };
+                let (model, coefficients): (_, Vec<f64>) =
+                    (lens.model.name(), lens.model.coefficients().collect());
                 let r = &lens.rectification;
                 let rect: Vec<f64> = (0..3)
                     .flat_map(|i| (0..3).map(move |j| r[(i, j)]))
@@ -601,14 +595,8 @@ impl Rig {
         }
         if let Some(l) = &self.lens {
             for (name, lens) in [("left", &l.left), ("right", &l.right)] {
-                let coefficients: Vec<f64> = match lens.model {
-                    LensModel::PlumbBob { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
-                    LensModel::Equidistant { k1, k2, k3, k4 } => vec![k1, k2, k3, k4],
-                };
-                let model = match lens.model {
-                    LensModel::PlumbBob { .. } => "plumb_bob",
-                    LensModel::Equidistant { .. } => "equidistant",
-                };
+                let coefficients: Vec<f64> = lens.model.coefficients().collect();
+                let model = lens.model.name();
                 let list = |v: &[f64]| {
                     v.iter()
                         .map(|x| format!("{x:?}"))

@@ -212,14 +212,6 @@ pub enum RectifyError {
     },
 }
 
-/// The name of a lens model, as in the rig file.
-pub fn model_name(model: &LensModel) -> &'static str {
-    match model {
-        LensModel::PlumbBob { .. } => "plumb_bob",
-        LensModel::Equidistant { .. } => "equidistant",
-    }
-}
-
 /// Rectifies a stereo calibration as OpenCV does (module documentation): `stereoRectify`
 /// with `CALIB_ZERO_DISPARITY` and `alpha = 0` for `plumb_bob` lenses,
 /// `fisheye.stereoRectify` with `CALIB_ZERO_DISPARITY` and `balance = 0` for `equidistant`.
@@ -311,7 +303,7 @@ fn validate(cal: &StereoCalibration) -> Result<(), RectifyError> {
             }
         }
     }
-    let (left, right) = (model_name(&cal.left.model), model_name(&cal.right.model));
+    let (left, right) = (cal.left.model.name(), cal.right.model.name());
     if left != right {
         return Err(RectifyError::MixedModels { left, right });
     }

@@ -26,8 +26,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use calib::Rig;
 use calib::lens::{Lens, LensModel, StereoLens};
 use calib::stereo_rectify::{
-    ROTATION_TOLERANCE, RawCamera, StereoCalibration, model_name, rotation_deviation,
-    stereo_rectify,
+    ROTATION_TOLERANCE, RawCamera, StereoCalibration, rotation_deviation, stereo_rectify,
 };
 use nalgebra::{Matrix3, Matrix3x4, Vector3};
 use saphyr::{LoadableYamlNode, ScalarOwned, YamlOwned};
@@ -135,7 +134,7 @@ fn run_import(args: &ImportArgs) -> Result<()> {
         imported.cx,
         imported.cy,
         imported.baseline,
-        model_name(&imported.lens.left.model),
+        imported.lens.left.model.name(),
         imported.provenance
     )?;
     Ok(())
@@ -692,11 +691,11 @@ fn import_ros(left_path: &Path, right_path: &Path) -> Result<Imported> {
             right_size.1
         );
     }
-    if model_name(&left.model) != model_name(&right.model) {
+    if left.model.name() != right.model.name() {
         bail!(
             "{left_file} is {} and {right_file} {}: both lenses must have the same model",
-            model_name(&left.model),
-            model_name(&right.model)
+            left.model.name(),
+            right.model.name()
         );
     }
     let (f, cx, cy) = (p_left[(0, 0)], p_left[(0, 2)], p_left[(1, 2)]);
@@ -852,10 +851,8 @@ fn rig_toml(imported: &Imported) -> String {
          yaw_rate = 0.01   # rad/s, 1 sigma per odometry sample"
     );
     for (side, which, l) in [("left", "R1", &lens.left), ("right", "R2", &lens.right)] {
-        let (model, coefficients) = match l.model {
-            LensModel::PlumbBob { k1, k2, p1, p2, k3 } => ("plumb_bob", vec![k1, k2, p1, p2, k3]),
-            LensModel::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
-        };
+        let (model, coefficients): (_, Vec<f64>) =
+            (l.model.name(), l.model.coefficients().collect());
         // The comments line up with the other tables' (column 19).
         let pad = " ".repeat(18usize.saturating_sub("[lens.]".len() + side.len()));
         let r = &l.rectification;
