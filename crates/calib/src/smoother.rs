@@ -1186,6 +1186,11 @@ impl Smoother {
         core::mem::take(&mut self.smoothed)
     }
 
+    /// The timestamp of the oldest frame kept (whose pose a later solve may still change).
+    pub fn window_start_t_us(&self) -> Option<u64> {
+        self.frames.first().map(|f| f.t_us)
+    }
+
     /// The kept frames' `(t_us, pose)` (the last solve's, the filter's since).
     pub fn window_poses(&self) -> Vec<(u64, Pose2)> {
         self.frames.iter().map(|f| (f.t_us, f.pose)).collect()

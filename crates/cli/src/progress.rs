@@ -9,34 +9,54 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 /// Frames below which no progress bar is drawn (a short job is done before it would show).
 const PROGRESS_MIN_FRAMES: u64 = 2_000;
 
-/// A frame counter shown as a bar, `VERB [====>   ] done/total frames, eta`.
+/// Bytes below which no progress bar is drawn (a log of 16 MiB replays in seconds).
+const PROGRESS_MIN_BYTES: u64 = 16 << 20;
+
+/// A counter shown as a bar, `VERB [====>   ] done/total frames, eta` (or bytes).
 pub(crate) struct FrameProgress {
     bar: ProgressBar,
     verb: &'static str,
+    bytes: bool,
     terminal: bool,
     shown: bool,
 }
 
 impl FrameProgress {
-    /// A hidden bar, shown at the first update of a long job on a terminal.
+    /// A hidden bar counting frames, shown at the first update of a long job on a terminal.
     pub(crate) fn new(verb: &'static str) -> Self {
         Self {
             bar: ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden()),
             verb,
+            bytes: false,
             terminal: std::io::stderr().is_terminal(),
             shown: false,
         }
     }
 
-    /// `done` of `total` frames.
+    /// The same counting bytes of a file (a job that streams it).
+    pub(crate) fn bytes(verb: &'static str) -> Self {
+        Self {
+            bytes: true,
+            ..Self::new(verb)
+        }
+    }
+
+    /// `done` of `total` frames (or bytes).
     pub(crate) fn update(&mut self, done: u64, total: u64) {
-        if !self.shown && self.terminal && total >= PROGRESS_MIN_FRAMES {
+        let min = if self.bytes {
+            PROGRESS_MIN_BYTES
+        } else {
+            PROGRESS_MIN_FRAMES
+        };
+        if !self.shown && self.terminal && total >= min {
             self.shown = true;
             self.bar.set_length(total);
-            let template = format!(
-                "{} [{{bar:30}}] {{pos}}/{{len}} frames, {{eta}} left",
-                self.verb
-            );
+            let counts = if self.bytes {
+                "{bytes}/{total_bytes}"
+            } else {
+                "{pos}/{len} frames"
+            };
+            let template = format!("{} [{{bar:30}}] {counts}, {{eta}} left", self.verb);
             self.bar.set_style(
                 ProgressStyle::with_template(&template)
                     .unwrap_or_else(|_| ProgressStyle::default_bar())

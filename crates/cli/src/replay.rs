@@ -1,6 +1,9 @@
 //! `stereonav replay LOG.mcap [--rig RIG.toml] [--out EST.mcap] [--summary SUMMARY.json]
 //! [--trajectory TRAJ.csv] [--skip-phase1] [--phase1-frames N] [--consider-camera]`: the whole stack on a vehicle log
-//! (vehicle-interfaces.md section 5; `replay::replay_log`).
+//! (vehicle-interfaces.md section 5; `replay::Replayer`).
+//!
+//! The replay streams: `EST.mcap` and `TRAJ.csv` are written as the frames come and
+//! `SUMMARY.json` at the end, in memory bounded by the map whatever the log's length.
 //!
 //! Prints a short human summary on stdout (frames, the phase switch, the map, the camera
 //! parameters, the final pose and, when the log has simulator truth, the errors); warnings
@@ -14,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use calib::{Param, Rig};
-use replay::{NavSettings, Phase, Replay};
+use replay::{NavSettings, OutputFiles, ReplayEnd, Replayer};
 
 use crate::progress::FrameProgress;
 use calib::smoother::SmootherSettings;
@@ -87,38 +90,33 @@ pub(crate) fn nav_settings(
 pub(crate) fn run(args: &Args) -> Result<()> {
     let settings = nav_settings(args.skip_phase1, args.phase1_frames, args.consider_camera)?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
-    let mut bar = FrameProgress::new("replaying");
+    let mut bar = FrameProgress::bytes("replaying");
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let started = Instant::now();
-    let result = replay::replay_log(&args.log, rig, &settings, &mut progress);
+    // The log's start first: a foreign file or one without a rig makes no output.
+    let replayer = Replayer::open(&args.log, rig, &settings)?;
+    let mut outputs = OutputFiles::create(args.out.as_deref(), args.trajectory.as_deref())?;
+    let result = replayer.run(&mut outputs, &mut progress);
     bar.finish();
-    let replay = result?;
+    let end = result?;
+    outputs.finish(&end, args.summary.as_deref())?;
     let took = started.elapsed();
     {
         let mut stderr = io::stderr().lock();
-        for w in &replay.warnings {
+        for w in &end.warnings {
             writeln!(stderr, "stereonav: warning: {w}")?;
         }
     }
-    if let Some(path) = &args.out {
-        replay::write_estimates(path, &replay)?;
-    }
-    if let Some(path) = &args.summary {
-        replay::write_summary(path, &replay)?;
-    }
-    if let Some(path) = &args.trajectory {
-        replay::write_trajectory(path, &replay)?;
-    }
-    let text = human_summary(&args.log, &replay, took);
+    let text = human_summary(&args.log, &end, took);
     io::stdout().lock().write_all(text.as_bytes())?;
     Ok(())
 }
 
 /// The few lines a person reads after a replay.
-fn human_summary(log: &std::path::Path, r: &Replay, took: Duration) -> String {
+fn human_summary(log: &std::path::Path, r: &ReplayEnd, took: Duration) -> String {
     let mut s = String::new();
-    let span_s = match (r.frames.first(), r.frames.last()) {
-        (Some(a), Some(b)) => (b.t_us.saturating_sub(a.t_us)) as f64 * 1e-6,
+    let span_s = match (r.first_t_us, &r.last_frame) {
+        (Some(a), Some(b)) => (b.t_us.saturating_sub(a)) as f64 * 1e-6,
         _ => 0.0,
     };
     let speed = if took.as_secs_f64() > 0.0 {
@@ -130,16 +128,12 @@ fn human_summary(log: &std::path::Path, r: &Replay, took: Duration) -> String {
         s,
         "{}: {} stereo frames ({span_s:.1} s of data) replayed in {:.2} s ({speed:.0}x real time); {} corrupt packets, {} frames lost",
         log.display(),
-        r.frames.len(),
+        r.frames_processed,
         took.as_secs_f64(),
         r.counts.corrupt,
         r.counts.lost
     );
-    let phase2 = r
-        .frames
-        .iter()
-        .filter(|f| f.phase == Phase::Navigating)
-        .count();
+    let phase2 = r.phase2_frames;
     let phases = match (r.phase1_skipped, r.phase_switch_t_us) {
         (true, _) => "phase 1 skipped: phase 2 from the rig's priors".to_string(),
         (false, Some(t)) if phase2 == 0 => format!(
@@ -175,7 +169,7 @@ fn human_summary(log: &std::path::Path, r: &Replay, took: Duration) -> String {
             }
         }
     }
-    if let Some(f) = r.frames.last() {
+    if let Some(f) = &r.last_frame {
         let _ = writeln!(
             s,
             "final pose: x {:.3} m, y {:.3} m, theta {:.2} deg",

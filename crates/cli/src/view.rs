@@ -70,7 +70,7 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     }
     let options = viewer::LoadOptions { rig, settings };
 
-    let mut bar = FrameProgress::new("replaying");
+    let mut bar = FrameProgress::bytes("replaying");
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let loaded = viewer::load(&args.log, &options, &mut progress);
     bar.finish();

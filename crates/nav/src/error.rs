@@ -51,3 +51,19 @@ pub enum Error {
         last_us: u64,
     },
 }
+
+impl Error {
+    /// The kind of refusal, without its values: `"settings"`, `"association settings"`,
+    /// `"filter"`, `"non-finite input"`, `"odometry out of order"`, `"frame out of order"`
+    /// (to count refusals by kind).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::Settings { .. } => "settings",
+            Self::Association(_) => "association settings",
+            Self::Filter(_) => "filter",
+            Self::NonFinite { .. } => "non-finite input",
+            Self::OdometryOutOfOrder { .. } => "odometry out of order",
+            Self::FrameOutOfOrder { .. } => "frame out of order",
+        }
+    }
+}

@@ -515,6 +515,16 @@ impl Navigator {
         self.smoother.take_smoothed()
     }
 
+    /// The timestamp of the oldest frame phase 2's smoother still holds, while it runs: the
+    /// poses of that frame and later ones may still change ([`Self::take_smoothed`]).
+    pub fn smoothing_since_t_us(&self) -> Option<u64> {
+        if self.smoother.is_mapping() {
+            self.smoother.window_start_t_us()
+        } else {
+            None
+        }
+    }
+
     /// The poses of the frames the smoother still holds (final only at the end of a log).
     pub fn smoother_window(&self) -> Vec<(u64, Pose2)> {
         if self.smoother.is_mapping() {

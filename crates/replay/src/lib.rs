@@ -1,6 +1,5 @@
-//! Runs the navigation stack on a vehicle log (vehicle-interfaces.md section 4). For now one
-//! job: phase 1, self-calibration of the camera parameters, in batch over a whole log
-//! ([`calibrate_log`]).
+//! Runs the navigation stack on a vehicle log (vehicle-interfaces.md sections 4 and 5): the
+//! whole stack ([`Replayer`], [`replay_log`]) and phase 1 alone in batch ([`calibrate_log`]).
 //!
 //! The steps, each a crate of its own:
 //!
@@ -10,16 +9,26 @@
 //!    order and decoded; corrupt packets and lost frames are counted, never fatal.
 //! 3. **Order by data time.** A frame reaches the log tens of milliseconds after the odometry of
 //!    the same instant (exposure, read-out, the detector, the link), so log order is not
-//!    time order. Frames and odometry are each sorted by their own timestamp (`t_us`, one
+//!    time order. Frames and odometry are each ordered by their own timestamp (`t_us`, one
 //!    clock) and merged, odometry first on a tie, so that every frame sees the odometry up to
 //!    its instant.
-//! 4. **Associate** (`track`): left-right matching, tracking with odometry prediction, and
-//!    phase 1's frame pairs from the confirmed tracks. The association uses the rig's nominal
-//!    parameters with their priors as uncertainty.
-//! 5. **Calibrate** (`calib::selfcal`): once in batch over every pair (the result), and fed pair
-//!    by pair to a [`SelfCalibrator`] to find when the estimate became stable: the hand-over
-//!    time at which the vehicle would have switched to phase 2. The incremental solver stops at
-//!    the hand-over.
+//! 4. **Navigate** (`nav`): association, phase 1's self-calibration, the switch, phase 2's
+//!    EKF SLAM.
+//! 5. **Output**: `EST.mcap`, `SUMMARY.json`, `TRAJ.csv` ([`OutputFiles`]).
+//!
+//! **The replay streams.** [`Replayer`] reads the log record by record, orders frames and
+//! odometry through a window of [`REORDER_US`] of data time, and hands each frame's estimate to
+//! a [`ReplaySink`] once its pose is final (after phase 1's hand-over, or when phase 2's
+//! fixed-lag smoother lets the frame go); the errors against the truth and the filter's
+//! consistency are accumulated as the frames go by. Its memory is bounded by the map and the
+//! windows, not by the log's length: a shift of eight hours replays in the memory of one
+//! minute (docs/benchmarks.md, "A whole shift"). [`replay_log`] is the same into a
+//! [`ReplayCollector`], for callers that want every estimate in memory (Python, the viewer).
+//!
+//! [`calibrate_log`] reads the whole log ([`read_vehicle_log`]), associates with the rig's
+//! nominal parameters and priors, and calibrates once in batch over every frame pair (the
+//! result), and fed pair by pair to a [`SelfCalibrator`] to find when the estimate became
+//! stable: the hand-over time at which the vehicle would have switched to phase 2.
 //!
 //! Errors are one line naming the file and the problem ([`Error`]); nothing here panics on any
 //! input.
@@ -30,6 +39,7 @@ mod error;
 mod estimates_reader;
 mod navigate;
 mod output;
+mod stream;
 mod types;
 
 use std::path::{Path, PathBuf};
@@ -49,12 +59,17 @@ pub use error::Error;
 pub use estimates_reader::{ESTIMATES_FRAME_TOPIC, EstimatesError, read_estimates};
 pub use nav::{NavSettings, Navigator};
 pub use navigate::{
-    LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, replay_log, truth_camera,
+    LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, ReplayCollector, ReplaySink, Replayer,
+    replay_log, truth_camera,
 };
-pub use output::{summary_json, write_estimates, write_summary, write_trajectory};
+pub use output::{
+    EstimatesWriter, OutputFiles, TrajectoryWriter, end_summary_json, summary_json,
+    write_estimates, write_summary, write_summary_value, write_trajectory,
+};
+pub use stream::REORDER_US;
 pub use types::{
     CameraSample, Consistency, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
-    Replay, TruthErrors,
+    Replay, ReplayEnd, TruthErrors,
 };
 
 /// How the replay associates and calibrates.
@@ -193,7 +208,6 @@ pub struct LogInput {
     pub counts: Counts,
     /// What limits the input, one line each.
     pub warnings: Vec<String>,
-    pub(crate) truth: Option<navigate::Truth>,
 }
 
 /// Steps 1-3 of the crate docs: read, decode, order by data time (`rig`: instead of the
@@ -260,7 +274,6 @@ pub fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput, Error
         odometry,
         counts,
         warnings,
-        truth: navigate::Truth::from_records(&log.records),
     })
 }
 
@@ -320,7 +333,6 @@ pub fn calibrate_log(
         odometry,
         mut counts,
         mut warnings,
-        truth: _,
     } = input;
 
     let mut front_end = FrontEnd::new(Model::from_rig(&rig), options.front_end)?;

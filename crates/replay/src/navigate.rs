@@ -2,18 +2,19 @@
 //! odometry in data-time order, the estimates collected into a [`Replay`], and the errors
 //! against the simulator's truth when the log carries it.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::f64::consts::PI;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use calib::camera::{CameraParams, Param, Pose2};
 use calib::config::Rig;
 use nav::{NavSettings, Navigator};
-use vehicle_log::{Record, TruthCamera, TruthLandmark, TruthPose};
+use vehicle_log::{TruthCamera, TruthPose};
 
+use crate::stream::{Input, LogStream, TruthStream};
 use crate::{
-    CameraSample, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
-    Replay, TruthErrors, read_vehicle_log,
+    CameraSample, DecodedFrame, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
+    Phase, Replay, ReplayEnd, RigSource, TruthErrors,
 };
 
 /// Data time between two map snapshots in the replay, microseconds.
@@ -57,9 +58,49 @@ fn map_of(navigator: &Navigator) -> Vec<LandmarkEstimate> {
     out
 }
 
-/// Runs the navigator over the vehicle log at `path` (see [`crate::calibrate_log`] for the
-/// reading, the rig choice and the ordering by data time). `progress` is called with
-/// `(frames done, frames in the log)` after each frame.
+/// Where a streaming replay's series go as they are final: the estimate of each frame, the
+/// camera samples and the map snapshots, in data-time order (a frame, then the camera
+/// sample and the map taken after it). [`ReplayCollector`] keeps them (a [`Replay`]);
+/// [`crate::OutputFiles`] writes `EST.mcap` and `TRAJ.csv` as they come.
+pub trait ReplaySink {
+    /// A frame's final estimate.
+    fn frame(&mut self, frame: &FrameEstimate) -> Result<(), Error>;
+    /// The camera parameters after a frame (a phase-1 solve or a phase-2 frame).
+    fn camera(&mut self, sample: &CameraSample) -> Result<(), Error>;
+    /// The map at a frame, about once a second of data time, and at the end.
+    fn map(&mut self, map: &MapSnapshot) -> Result<(), Error>;
+}
+
+/// A [`ReplaySink`] that keeps everything: the series of a [`Replay`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReplayCollector {
+    /// The frames, in order.
+    pub frames: Vec<FrameEstimate>,
+    /// The camera samples.
+    pub camera: Vec<CameraSample>,
+    /// The map snapshots.
+    pub maps: Vec<MapSnapshot>,
+}
+
+impl ReplaySink for ReplayCollector {
+    fn frame(&mut self, frame: &FrameEstimate) -> Result<(), Error> {
+        self.frames.push(frame.clone());
+        Ok(())
+    }
+    fn camera(&mut self, sample: &CameraSample) -> Result<(), Error> {
+        self.camera.push(sample.clone());
+        Ok(())
+    }
+    fn map(&mut self, map: &MapSnapshot) -> Result<(), Error> {
+        self.maps.push(map.clone());
+        Ok(())
+    }
+}
+
+/// Runs the navigator over the vehicle log at `path` and keeps every estimate (a
+/// [`Replayer`] into a [`ReplayCollector`]; its memory grows with the log, the replayer's
+/// own does not). `progress` is called with `(bytes read, bytes in the file)` as the reading
+/// goes.
 ///
 /// Errors: the file cannot be read, is not MCAP, has no vehicle topics, there is no rig, or the
 /// settings are out of range. A log cut short is replayed as far as it goes, with a warning;
@@ -70,51 +111,182 @@ pub fn replay_log(
     settings: &NavSettings,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Replay, Error> {
-    let path = path.as_ref();
-    let input = read_vehicle_log(path, rig)?;
-    let mut warnings = input.warnings;
-    let mut counts = input.counts;
-    let rig = input.rig;
-    let mut navigator = Navigator::new(rig.clone(), *settings)?;
+    let replayer = Replayer::open(path.as_ref(), rig, settings)?;
+    let mut collected = ReplayCollector::default();
+    let end = replayer.run(&mut collected, progress)?;
+    Ok(Replay::from_parts(
+        end,
+        collected.frames,
+        collected.camera,
+        collected.maps,
+    ))
+}
 
-    let total = input.frames.len() as u64;
-    let mut frames: Vec<FrameEstimate> = Vec::with_capacity(input.frames.len());
-    let mut camera: Vec<CameraSample> = Vec::new();
-    let mut maps: Vec<MapSnapshot> = Vec::new();
-    let mut next_snapshot: Option<u64> = None;
-    let mut refused: BTreeMap<String, u64> = BTreeMap::new();
-    let mut next_odom = input.odometry.iter().peekable();
-    // Final poses from phase 2's fixed-lag smoother, as it marginalises its frames.
-    let mut smoothed_poses: Vec<(u64, Pose2)> = Vec::new();
-    let (mut nees_sum, mut nees_frames, mut nees_last) = (0.0, 0usize, f64::NAN);
-    for (k, frame) in input.frames.iter().enumerate() {
-        // The odometry past the frame's stamp too: a frame exposed after its stamp (a negative
-        // clock offset) needs it (nav::ODOMETRY_LOOKAHEAD_US).
-        let until = frame.t_us.saturating_add(nav::ODOMETRY_LOOKAHEAD_US);
-        while let Some(s) = next_odom.next_if(|s| s.t_us <= until) {
-            if let Err(e) = navigator.push_odometry(*s) {
-                *refused.entry(e.to_string()).or_default() += 1;
+/// A frame's estimate with the camera sample and map taken after it, held until the frame's
+/// pose is final.
+#[derive(Debug, Clone)]
+struct Bundle {
+    frame: FrameEstimate,
+    camera: Option<CameraSample>,
+    map: Option<MapSnapshot>,
+}
+
+/// The replay of one log as a stream (vehicle-interfaces.md section 5): log -> decoder ->
+/// data-time order (a window of seconds) -> navigator -> a [`ReplaySink`], in memory bounded
+/// by the map, not by the log's length.
+///
+/// A frame's estimate goes to the sink once its pose is final: the frames of phase 1 take the
+/// batch's smoothed poses at the hand-over, and those phase 2's fixed-lag smoother holds take
+/// its poses as it marginalises them, so frames wait that long (at most phase 1's buffer, then
+/// the smoother's window). The summary's quantities (counts, the errors against the truth,
+/// the filter's consistency) are accumulated frame by frame.
+///
+/// [`Replayer::open`] reads the start of the log (so that a foreign file, or one without a
+/// rig, is refused before any output is made); [`Replayer::run`] does the rest.
+pub struct Replayer {
+    path: PathBuf,
+    stream: LogStream,
+    navigator: Navigator,
+    rig: Rig,
+    given_rig: bool,
+    settings: NavSettings,
+    warnings: Vec<String>,
+    refused: Refusals,
+    pending: VecDeque<Bundle>,
+    next_snapshot: Option<u64>,
+    nees_sum: f64,
+    nees_frames: usize,
+    nees_last: f64,
+    truth: TruthAccumulator,
+    frames_processed: u64,
+    phase2_frames: u64,
+    first_t_us: Option<u64>,
+    phase1_poses_applied: bool,
+}
+
+impl std::fmt::Debug for Replayer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Replayer")
+            .field("path", &self.path)
+            .field("frames_processed", &self.frames_processed)
+            .field("pending", &self.pending.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Replayer {
+    /// Opens the log at `path` and reads its start: the rig (`rig`, or else the log's
+    /// `/rig`), and far enough to know it is a vehicle log.
+    ///
+    /// Errors: the file cannot be read, is not MCAP, has no vehicle topics, there is no rig, or
+    /// the settings are out of range.
+    pub fn open(path: &Path, rig: Option<Rig>, settings: &NavSettings) -> Result<Self, Error> {
+        let mut stream = LogStream::open(path)?;
+        stream.preamble(rig.is_none())?;
+        let given_rig = rig.is_some();
+        let rig = match rig {
+            Some(rig) => rig,
+            None => {
+                let text = stream.rig_text.as_deref().unwrap_or_default();
+                Rig::from_json_str(text, &format!("{} /rig", path.display()))?
+            }
+        };
+        let navigator = Navigator::new(rig.clone(), *settings)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            stream,
+            navigator,
+            rig,
+            given_rig,
+            settings: *settings,
+            warnings: Vec::new(),
+            refused: BTreeMap::new(),
+            pending: VecDeque::new(),
+            next_snapshot: None,
+            nees_sum: 0.0,
+            nees_frames: 0,
+            nees_last: f64::NAN,
+            truth: TruthAccumulator::default(),
+            frames_processed: 0,
+            phase2_frames: 0,
+            first_t_us: None,
+            phase1_poses_applied: false,
+        })
+    }
+
+    /// The rig used.
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    /// Where the rig came from.
+    pub fn rig_source(&self) -> RigSource {
+        if self.given_rig {
+            RigSource::Given
+        } else {
+            RigSource::Log
+        }
+    }
+
+    /// Replays the rest of the log into `sink`; `progress` is called with `(bytes read,
+    /// bytes in the file)` after each frame.
+    ///
+    /// Errors: a malformed message on a vehicle topic (what came before it has gone to the
+    /// sink), or the sink's.
+    pub fn run(
+        mut self,
+        sink: &mut dyn ReplaySink,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<ReplayEnd, Error> {
+        while let Some(input) = self.stream.next_input()? {
+            match input {
+                Input::Odometry(s) => {
+                    if let Err(e) = self.navigator.push_odometry(s) {
+                        refuse(&mut self.refused, &e);
+                    }
+                }
+                Input::Frame(frame) => {
+                    self.frame(&frame);
+                    self.release(sink, false)?;
+                    let (done, total) = self.stream.progress();
+                    progress(done, total);
+                }
             }
         }
-        let outcome = match navigator.push_frame(frame.t_us, &frame.left, &frame.right) {
+        self.finish(sink)
+    }
+
+    /// One frame through the navigator; its estimate joins the pending frames.
+    fn frame(&mut self, frame: &DecodedFrame) {
+        let outcome = match self
+            .navigator
+            .push_frame(frame.t_us, &frame.left, &frame.right)
+        {
             Ok(o) => o,
             Err(e) => {
-                *refused.entry(e.to_string()).or_default() += 1;
+                refuse(&mut self.refused, &e);
                 nav::FrameOutcome::default()
             }
         };
-        let phase = phase_of(navigator.phase());
-        let (pose, pose_cov) = navigator.pose();
-        if phase == Phase::Navigating
-            && let Some(t) = input.truth.as_ref().and_then(|t| t.pose_at(frame.t_us))
-            && let Some(v) = pose_nees(&pose, &pose_cov, t)
-        {
-            nees_sum += v;
-            nees_frames += 1;
-            nees_last = v;
+        self.frames_processed += 1;
+        self.first_t_us.get_or_insert(frame.t_us);
+        let phase = phase_of(self.navigator.phase());
+        let (pose, pose_cov) = self.navigator.pose();
+        if phase == Phase::Navigating {
+            self.phase2_frames += 1;
+            if let Some(t) = self.stream.truth.pose_at(frame.t_us)
+                && let Some(v) = pose_nees(&pose, &pose_cov, t)
+            {
+                self.nees_sum += v;
+                self.nees_frames += 1;
+                self.nees_last = v;
+            }
         }
-        let landmarks = navigator.ekf().map_or(0, vslam_ekf::Ekf::landmark_count);
-        frames.push(FrameEstimate {
+        let landmarks = self
+            .navigator
+            .ekf()
+            .map_or(0, vslam_ekf::Ekf::landmark_count);
+        let estimate = FrameEstimate {
             t_us: frame.t_us,
             phase,
             pose: [pose.x, pose.y, pose.theta],
@@ -123,79 +295,205 @@ pub fn replay_log(
             nis: outcome.accepted.iter().map(|(id, v)| (id.0, *v)).collect(),
             rejected: u32::try_from(outcome.rejected.len()).unwrap_or(u32::MAX),
             landmarks,
-        });
-        if phase == Phase::Navigating || outcome.solved {
-            let (c, cov) = navigator.camera();
-            camera.push(CameraSample {
+        };
+        let camera = (phase == Phase::Navigating || outcome.solved).then(|| {
+            let (c, cov) = self.navigator.camera();
+            CameraSample {
                 t_us: frame.t_us,
                 phase,
                 params: ParamEstimate::all(&c, &cov),
+            }
+        });
+        let mut map = None;
+        if phase == Phase::Navigating && self.next_snapshot.is_none_or(|t| frame.t_us >= t) {
+            map = Some(MapSnapshot {
+                t_us: frame.t_us,
+                landmarks: map_of(&self.navigator),
             });
+            self.next_snapshot = Some(frame.t_us.saturating_add(MAP_SNAPSHOT_US));
         }
-        if phase == Phase::Navigating {
-            let due = next_snapshot.is_none_or(|t| frame.t_us >= t);
-            if due {
-                maps.push(MapSnapshot {
-                    t_us: frame.t_us,
-                    landmarks: map_of(&navigator),
-                });
-                next_snapshot = Some(frame.t_us.saturating_add(MAP_SNAPSHOT_US));
+        self.pending.push_back(Bundle {
+            frame: estimate,
+            camera,
+            map,
+        });
+        self.take_final_poses();
+    }
+
+    /// The poses that became final (phase 1's at the hand-over, the smoother's as it
+    /// marginalises) go to their pending frames.
+    fn take_final_poses(&mut self) {
+        if !self.phase1_poses_applied && !self.navigator.phase1_trajectory().is_empty() {
+            self.phase1_poses_applied = true;
+            let poses = self.navigator.phase1_trajectory().to_vec();
+            set_poses(&mut self.pending, &poses, Some(Phase::Calibrating));
+        }
+        let smoothed = self.navigator.take_smoothed();
+        set_poses(&mut self.pending, &smoothed, None);
+    }
+
+    /// Hands the pending frames whose poses are final to the sink, oldest first, keeping the
+    /// last one (the end of the log changes it) unless `all`.
+    fn release(&mut self, sink: &mut dyn ReplaySink, all: bool) -> Result<(), Error> {
+        let in_phase1 = self.navigator.phase() == nav::Phase::Calibrating;
+        let smoothing_since = self.navigator.smoothing_since_t_us();
+        while let Some(first) = self.pending.front() {
+            if !all {
+                let last = self.pending.len() == 1;
+                let waits_for_phase1 = first.frame.phase == Phase::Calibrating && in_phase1;
+                let in_window = smoothing_since.is_some_and(|t| first.frame.t_us >= t);
+                if last || waits_for_phase1 || in_window {
+                    break;
+                }
+            }
+            let Some(bundle) = self.pending.pop_front() else {
+                break;
+            };
+            self.truth.add(&bundle.frame, &self.stream.truth, &self.rig);
+            self.stream.truth.forget_before(bundle.frame.t_us);
+            sink.frame(&bundle.frame)?;
+            if let Some(c) = &bundle.camera {
+                sink.camera(c)?;
+            }
+            if let Some(m) = &bundle.map {
+                sink.map(m)?;
             }
         }
-        smoothed_poses.extend(navigator.take_smoothed());
-        progress(k as u64 + 1, total);
+        Ok(())
     }
-    // A log that ends in phase 1 is still mapped: phase 2 starts from the batch of every frame.
-    if let Err(e) = navigator.finish() {
-        *refused.entry(e.to_string()).or_default() += 1;
-    }
-    // The frames of phase 1 take the batch's smoothed poses: the whole trajectory is in the
-    // first frame's world frame.
-    set_poses(
-        &mut frames,
-        navigator.phase1_trajectory(),
-        Some(Phase::Calibrating),
-    );
-    // Every frame phase 2's smoother held takes its smoothed pose.
-    smoothed_poses.extend(navigator.take_smoothed());
-    smoothed_poses.extend(navigator.smoother_window());
-    set_poses(&mut frames, &smoothed_poses, None);
-    let landmarks = map_of(&navigator);
-    if let Some(last) = frames.last()
-        && navigator.ekf().is_some()
-    {
-        // The final map (after the smoother's last solve) is the last snapshot.
-        match maps.last_mut() {
-            Some(m) if m.t_us == last.t_us => m.landmarks.clone_from(&landmarks),
-            _ => maps.push(MapSnapshot {
-                t_us: last.t_us,
-                landmarks: landmarks.clone(),
-            }),
+
+    /// The end of the log: phase 1 ended if it still ran, the last poses, the final map and
+    /// camera, the summary.
+    fn finish(mut self, sink: &mut dyn ReplaySink) -> Result<ReplayEnd, Error> {
+        // A log that ends in phase 1 is still mapped: phase 2 starts from the batch of every
+        // frame.
+        if let Err(e) = self.navigator.finish() {
+            refuse(&mut self.refused, &e);
         }
+        self.take_final_poses();
+        // Every frame phase 2's smoother still holds takes its pose.
+        let window = self.navigator.smoother_window();
+        set_poses(&mut self.pending, &window, None);
+        let landmarks = map_of(&self.navigator);
+        let (final_c, final_cov) = self.navigator.camera();
+        let final_camera = ParamEstimate::all(&final_c, &final_cov);
+        let final_pose_cov = matrix3(&self.navigator.pose().1);
+        let has_filter = self.navigator.ekf().is_some();
+        if let Some(last) = self.pending.back_mut() {
+            // The final map (after the smoother's last solve) is the last snapshot.
+            if has_filter {
+                match &mut last.map {
+                    Some(m) => m.landmarks.clone_from(&landmarks),
+                    None => {
+                        last.map = Some(MapSnapshot {
+                            t_us: last.frame.t_us,
+                            landmarks: landmarks.clone(),
+                        });
+                    }
+                }
+            }
+            // The last frame's camera sample and pose covariance are the final ones.
+            if last.frame.phase == Phase::Navigating {
+                last.frame.pose_covariance = final_pose_cov;
+                if let Some(c) = &mut last.camera {
+                    c.params.clone_from(&final_camera);
+                }
+            }
+        }
+        let last_frame = self.pending.back().map(|b| b.frame.clone());
+        let last_truth = last_frame
+            .as_ref()
+            .and_then(|f| self.stream.truth.pose_at(f.t_us).copied());
+        self.release(sink, true)?;
+
+        let mut counts = self.stream.counts;
+        let mut warnings = self.read_warnings();
+        warnings.append(&mut self.warnings);
+        if counts.frames == 0 {
+            warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
+        }
+        if counts.odometry == 0 {
+            warnings.push("no odometry on /odom: the vehicle's motion is unknown".to_string());
+        }
+        let navigator = &self.navigator;
+        let stats = navigator.stats();
+        let tracker = navigator.front_end().tracker().stats();
+        counts.stereo_matches = navigator.front_end().stereo_stats().matches;
+        counts.tracks = tracker.started;
+        counts.confirmed_tracks = tracker.confirmed;
+        counts.tracker_resets = tracker.resets;
+        counts.phase1_solves = stats.phase1_solves;
+        navigator_warnings(navigator, &self.refused, &mut warnings);
+
+        let truth_stream = &self.stream.truth;
+        let truth = truth_stream.any.then(|| {
+            let mut e = self
+                .truth
+                .errors(truth_stream, &landmarks, &final_c, &self.rig);
+            let state = navigator
+                .ekf()
+                .zip(last_truth.as_ref())
+                .and_then(|(ekf, pose)| state_nees(ekf, pose, truth_stream));
+            if self.nees_frames > 0 || state.is_some() {
+                let (state_nees, state_dof) = state.unwrap_or((f64::NAN, 0));
+                e.consistency = Some(crate::Consistency {
+                    pose_nees: self.nees_sum / self.nees_frames.max(1) as f64,
+                    pose_frames: self.nees_frames,
+                    final_pose_nees: self.nees_last,
+                    state_nees,
+                    state_dof,
+                });
+            }
+            e
+        });
+        Ok(ReplayEnd {
+            last_frame,
+            first_t_us: self.first_t_us,
+            frames_processed: self.frames_processed,
+            phase2_frames: self.phase2_frames,
+            landmarks,
+            final_camera,
+            phase_switch_t_us: navigator.phase_switch_t_us(),
+            phase1_skipped: self.settings.skip_phase1,
+            counts,
+            truth,
+            warnings,
+        })
     }
-    let (final_c, final_cov) = navigator.camera();
-    let final_camera = ParamEstimate::all(&final_c, &final_cov);
-    // The last frame's camera sample and pose covariance are the final ones (after the
-    // smoother's last solve).
-    if let Some(last) = frames.last_mut()
-        && last.phase == Phase::Navigating
-    {
-        last.pose_covariance = matrix3(&navigator.pose().1);
-        if let Some(c) = camera.last_mut()
-            && c.t_us == last.t_us
+
+    /// The reading's warnings: the log ending early, the reader's, the rig given differing
+    /// from the log's.
+    fn read_warnings(&self) -> Vec<String> {
+        let reader = self.stream.reader();
+        let mut warnings = Vec::new();
+        if let Some(why) = reader.truncated() {
+            warnings.push(format!(
+                "the log ends early ({why}): replayed as far as it goes"
+            ));
+        }
+        warnings.extend(reader.warnings().iter().cloned());
+        if self.given_rig
+            && let Some(text) = &self.stream.rig_text
+            && Rig::from_json_str(text, "/rig").is_ok_and(|l| l != self.rig)
         {
-            c.params.clone_from(&final_camera);
+            warnings.push(format!(
+                "{}: the rig given differs from the log's /rig message; using the one given",
+                self.path.display()
+            ));
         }
+        warnings
     }
+}
+
+/// The navigator's warnings at the end of a replay.
+fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut Vec<String>) {
     let stats = navigator.stats();
-    let tracker = navigator.front_end().tracker().stats();
-    counts.stereo_matches = navigator.front_end().stereo_stats().matches;
-    counts.tracks = tracker.started;
-    counts.confirmed_tracks = tracker.confirmed;
-    counts.tracker_resets = tracker.resets;
-    counts.phase1_solves = stats.phase1_solves;
-    for (why, n) in refused {
-        warnings.push(format!("{n} input(s) refused by the navigator: {why}"));
+    for (n, first) in refused.values() {
+        warnings.push(if *n == 1 {
+            format!("1 input refused by the navigator: {first}")
+        } else {
+            format!("{n} inputs refused by the navigator, the first: {first}")
+        });
     }
     if stats.frames_without_odometry > 0 {
         warnings.push(format!(
@@ -241,68 +539,203 @@ pub fn replay_log(
             )
         });
     }
-    let truth = input.truth.as_ref().map(|t| {
-        let mut e = truth_errors(t, &frames, &landmarks, &final_c, &rig);
-        let last = frames.last().and_then(|f| t.pose_at(f.t_us));
-        let state = navigator
-            .ekf()
-            .zip(last)
-            .and_then(|(ekf, pose)| state_nees(ekf, pose, t));
-        if nees_frames > 0 || state.is_some() {
-            let (state_nees, state_dof) = state.unwrap_or((f64::NAN, 0));
-            e.consistency = Some(crate::Consistency {
-                pose_nees: nees_sum / nees_frames.max(1) as f64,
-                pose_frames: nees_frames,
-                final_pose_nees: nees_last,
-                state_nees,
-                state_dof,
-            });
+}
+
+/// The navigator's refusals by kind: how many, and the first one's message (bounded however
+/// many inputs are refused).
+type Refusals = BTreeMap<&'static str, (u64, String)>;
+
+fn refuse(refused: &mut Refusals, e: &nav::Error) {
+    refused
+        .entry(e.kind())
+        .and_modify(|(n, _)| *n += 1)
+        .or_insert_with(|| (1, e.to_string()));
+}
+
+/// Each pending frame (of `phase` only, when given) with a pose in `poses` (sorted by time)
+/// at its timestamp takes it.
+fn set_poses(pending: &mut VecDeque<Bundle>, poses: &[(u64, Pose2)], phase: Option<Phase>) {
+    if poses.is_empty() {
+        return;
+    }
+    let mut i = 0usize;
+    for b in pending.iter_mut() {
+        let f = &mut b.frame;
+        while poses.get(i).is_some_and(|(t, _)| *t < f.t_us) {
+            i += 1;
         }
-        e
-    });
-    Ok(Replay {
-        frames,
-        camera,
-        maps,
-        landmarks,
-        final_camera,
-        phase_switch_t_us: navigator.phase_switch_t_us(),
-        phase1_skipped: settings.skip_phase1,
-        counts,
-        truth,
-        warnings,
-    })
+        if let Some((t, p)) = poses.get(i)
+            && *t == f.t_us
+            && phase.is_none_or(|ph| ph == f.phase)
+        {
+            f.pose = [p.x, p.y, p.theta];
+        }
+    }
 }
 
-/// The simulator's truth in a log.
+/// The errors against the truth, accumulated over the frames as they become final: the
+/// trajectory error, the map's gauge (the planar motion that best takes the phase-2
+/// trajectory onto the true one) and how often each lamp was in view.
 #[derive(Debug, Clone, Default)]
-pub(crate) struct Truth {
-    pub(crate) poses: Vec<TruthPose>,
-    pub(crate) landmarks: Vec<TruthLandmark>,
-    pub(crate) camera: Option<TruthCamera>,
+struct TruthAccumulator {
+    sq: f64,
+    sq_heading: f64,
+    max: f64,
+    n: usize,
+    /// Phase-2 frames with a true pose: sums of sin and cos of the heading error, of the true
+    /// and estimated positions.
+    gauge_sin: f64,
+    gauge_cos: f64,
+    true_x: f64,
+    true_y: f64,
+    est_x: f64,
+    est_y: f64,
+    gauge_frames: usize,
+    /// Frames each true lamp was inside both images at.
+    seen: Vec<usize>,
 }
 
-impl Truth {
-    /// Collects the truth records of a log; `None` when it has none.
-    pub(crate) fn from_records(records: &[Record]) -> Option<Self> {
-        let mut t = Self::default();
-        for r in records {
-            match r {
-                Record::TruthPose(p) => t.poses.push(*p),
-                Record::TruthLandmarks(l) if t.landmarks.is_empty() => t.landmarks.clone_from(l),
-                Record::TruthCamera(c) if t.camera.is_none() => t.camera = Some(*c),
-                _ => {}
+impl TruthAccumulator {
+    /// A final frame estimate against the true pose at its timestamp, if any.
+    fn add(&mut self, f: &FrameEstimate, truth: &TruthStream, rig: &Rig) {
+        let Some(p) = truth.pose_at(f.t_us) else {
+            return;
+        };
+        let [x, y, theta] = f.pose;
+        let e2 = (x - p.x).powi(2) + (y - p.y).powi(2);
+        self.sq += e2;
+        self.max = self.max.max(e2.sqrt());
+        let dh = (theta - p.theta + PI).rem_euclid(2.0 * PI) - PI;
+        self.sq_heading += dh * dh;
+        self.n += 1;
+        if f.phase == Phase::Navigating {
+            let d = p.theta - theta;
+            self.gauge_sin += d.sin();
+            self.gauge_cos += d.cos();
+            self.true_x += p.x;
+            self.true_y += p.y;
+            self.est_x += x;
+            self.est_y += y;
+            self.gauge_frames += 1;
+        }
+        // Lamps in view of both cameras (both phases are mapped).
+        if self.seen.len() != truth.landmarks.len() {
+            self.seen = vec![0; truth.landmarks.len()];
+        }
+        let true_camera = truth.camera.as_ref().map_or(rig.nominal, truth_camera);
+        let (w, h) = (f64::from(rig.width), f64::from(rig.height));
+        let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
+        let pose = Pose2::new(p.x, p.y, p.theta);
+        for (lamp, count) in truth.landmarks.iter().zip(self.seen.iter_mut()) {
+            let l = nalgebra::Vector3::new(lamp.x, lamp.y, lamp.z);
+            if let Ok(z) = calib::project(&true_camera, &pose, &l)
+                && inside(z[0], z[1])
+                && inside(z[2], z[3])
+            {
+                *count += 1;
             }
         }
-        let any = !t.poses.is_empty() || !t.landmarks.is_empty() || t.camera.is_some();
-        t.poses.sort_by_key(|p| p.t_us);
-        any.then_some(t)
     }
 
-    /// The true pose at exactly `t_us`, if the log has one.
-    pub(crate) fn pose_at(&self, t_us: u64) -> Option<&TruthPose> {
-        let i = self.poses.binary_search_by_key(&t_us, |p| p.t_us).ok()?;
-        self.poses.get(i)
+    /// The map's gauge: rotation from the mean heading error (well defined even when the
+    /// robot turns on the spot), then the mean position offset.
+    fn gauge(&self) -> Planar {
+        if self.gauge_frames == 0 {
+            return Planar::IDENTITY;
+        }
+        let angle = f64::atan2(self.gauge_sin, self.gauge_cos);
+        let (sn, cs) = angle.sin_cos();
+        let m = self.gauge_frames as f64;
+        Planar {
+            angle,
+            tx: (self.true_x - (cs * self.est_x - sn * self.est_y)) / m,
+            ty: (self.true_y - (sn * self.est_x + cs * self.est_y)) / m,
+        }
+    }
+
+    /// The errors, with the final map and camera.
+    fn errors(
+        &self,
+        truth: &TruthStream,
+        landmarks: &[LandmarkEstimate],
+        final_camera: &CameraParams,
+        _rig: &Rig,
+    ) -> TruthErrors {
+        let n = self.n;
+        let count = n.max(1) as f64;
+        // Landmarks: the map is anchored where phase 2 started, at the dead-reckoned pose, so
+        // it is first carried onto the truth by the gauge; then each landmark is matched to
+        // the nearest lamp within the radius, one-to-one, closest pairs first. The errors are
+        // taken without that motion.
+        let gauge = self.gauge();
+        let mut candidates: Vec<(f64, f64, usize, usize)> = Vec::new();
+        for (li, l) in landmarks.iter().enumerate() {
+            let moved = gauge.apply(l.position);
+            for (ti, t) in truth.landmarks.iter().enumerate() {
+                let near = distance(moved, [t.x, t.y, t.z]);
+                if near <= LAMP_MATCH_RADIUS_M {
+                    candidates.push((near, distance(l.position, [t.x, t.y, t.z]), li, ti));
+                }
+            }
+        }
+        candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut used_l = vec![false; landmarks.len()];
+        let mut used_t = vec![false; truth.landmarks.len()];
+        let mut lm_sq = 0.0;
+        let mut matched = 0usize;
+        let mut pairs: Vec<([f64; 3], [f64; 3])> = Vec::new();
+        for (_, d, li, ti) in candidates {
+            if used_l.get(li).copied().unwrap_or(true) || used_t.get(ti).copied().unwrap_or(true) {
+                continue;
+            }
+            if let (Some(a), Some(b)) = (used_l.get_mut(li), used_t.get_mut(ti)) {
+                *a = true;
+                *b = true;
+            }
+            lm_sq += d * d;
+            matched += 1;
+            if let (Some(l), Some(t)) = (landmarks.get(li), truth.landmarks.get(ti)) {
+                pairs.push((l.position, [t.x, t.y, t.z]));
+            }
+        }
+        let lamps_missed = self
+            .seen
+            .iter()
+            .zip(&used_t)
+            .filter(|&(&s, &used)| s >= LAMP_SEEN_FRAMES && !used)
+            .count();
+        let camera = truth.camera.as_ref().map_or_else(Vec::new, |c| {
+            let t = truth_camera(c);
+            Param::ALL
+                .iter()
+                .map(|&p| (p, final_camera.get(p) - t.get(p)))
+                .collect()
+        });
+        TruthErrors {
+            landmark_rms: if matched > 0 {
+                (lm_sq / matched as f64).sqrt()
+            } else {
+                f64::NAN
+            },
+            landmark_rms_aligned: aligned_rms(&pairs),
+            landmarks_matched: matched,
+            landmarks_unmatched: landmarks.len() - matched,
+            lamps_missed,
+            match_radius: LAMP_MATCH_RADIUS_M,
+            ate_rms: if n > 0 {
+                (self.sq / count).sqrt()
+            } else {
+                f64::NAN
+            },
+            ate_max: if n > 0 { self.max } else { f64::NAN },
+            heading_rms: if n > 0 {
+                (self.sq_heading / count).sqrt()
+            } else {
+                f64::NAN
+            },
+            camera,
+            consistency: None,
+        }
     }
 }
 
@@ -330,166 +763,6 @@ pub fn truth_camera(t: &TruthCamera) -> CameraParams {
     }
 }
 
-fn truth_errors(
-    truth: &Truth,
-    frames: &[FrameEstimate],
-    landmarks: &[LandmarkEstimate],
-    final_camera: &CameraParams,
-    rig: &Rig,
-) -> TruthErrors {
-    // Trajectory: frames with a true pose at the same timestamp.
-    let mut sq = 0.0;
-    let mut sq_heading = 0.0;
-    let mut max: f64 = 0.0;
-    let mut n = 0usize;
-    for f in frames {
-        let Some(p) = truth.pose_at(f.t_us) else {
-            continue;
-        };
-        let [x, y, theta] = f.pose;
-        let e2 = (x - p.x).powi(2) + (y - p.y).powi(2);
-        sq += e2;
-        max = max.max(e2.sqrt());
-        let dh = (theta - p.theta + PI).rem_euclid(2.0 * PI) - PI;
-        sq_heading += dh * dh;
-        n += 1;
-    }
-    let count = n.max(1) as f64;
-    // Landmarks: the map is anchored where phase 2 started, at the dead-reckoned pose, so it
-    // is first carried onto the truth by the planar motion that best takes the phase-2
-    // trajectory onto the true one (the map's gauge: rotation from the mean heading error,
-    // well defined even when the robot turns on the spot, then the mean position offset); then
-    // each landmark is matched to the nearest lamp within the radius, one-to-one, closest pairs
-    // first. The errors are taken without that motion.
-    let phase2: Vec<(&FrameEstimate, &TruthPose)> = frames
-        .iter()
-        .filter(|f| f.phase == Phase::Navigating)
-        .filter_map(|f| Some((f, truth.pose_at(f.t_us)?)))
-        .collect();
-    let gauge = if phase2.is_empty() {
-        Planar::IDENTITY
-    } else {
-        let (s, c) = phase2.iter().fold((0.0, 0.0), |(s, c), (f, p)| {
-            let d = p.theta - f.pose[2];
-            (s + d.sin(), c + d.cos())
-        });
-        let angle = f64::atan2(s, c);
-        let (sn, cs) = angle.sin_cos();
-        let m = phase2.len() as f64;
-        let (tx, ty) = phase2.iter().fold((0.0, 0.0), |(tx, ty), (f, p)| {
-            (
-                tx + p.x - (cs * f.pose[0] - sn * f.pose[1]),
-                ty + p.y - (sn * f.pose[0] + cs * f.pose[1]),
-            )
-        });
-        Planar {
-            angle,
-            tx: tx / m,
-            ty: ty / m,
-        }
-    };
-    let mut candidates: Vec<(f64, f64, usize, usize)> = Vec::new();
-    for (li, l) in landmarks.iter().enumerate() {
-        let moved = gauge.apply(l.position);
-        for (ti, t) in truth.landmarks.iter().enumerate() {
-            let near = distance(moved, [t.x, t.y, t.z]);
-            if near <= LAMP_MATCH_RADIUS_M {
-                candidates.push((near, distance(l.position, [t.x, t.y, t.z]), li, ti));
-            }
-        }
-    }
-    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut used_l = vec![false; landmarks.len()];
-    let mut used_t = vec![false; truth.landmarks.len()];
-    let mut lm_sq = 0.0;
-    let mut matched = 0usize;
-    let mut pairs: Vec<([f64; 3], [f64; 3])> = Vec::new();
-    for (_, d, li, ti) in candidates {
-        if used_l.get(li).copied().unwrap_or(true) || used_t.get(ti).copied().unwrap_or(true) {
-            continue;
-        }
-        if let (Some(a), Some(b)) = (used_l.get_mut(li), used_t.get_mut(ti)) {
-            *a = true;
-            *b = true;
-        }
-        lm_sq += d * d;
-        matched += 1;
-        if let (Some(l), Some(t)) = (landmarks.get(li), truth.landmarks.get(ti)) {
-            pairs.push((l.position, [t.x, t.y, t.z]));
-        }
-    }
-    // Lamps in view of both cameras at enough frames (both phases are mapped), with no landmark.
-    let true_camera = truth.camera.as_ref().map_or(rig.nominal, truth_camera);
-    let (w, h) = (f64::from(rig.width), f64::from(rig.height));
-    let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
-    let mut seen = vec![0usize; truth.landmarks.len()];
-    for f in frames {
-        let Some(p) = truth.pose_at(f.t_us) else {
-            continue;
-        };
-        let pose = Pose2::new(p.x, p.y, p.theta);
-        for (lamp, count) in truth.landmarks.iter().zip(seen.iter_mut()) {
-            let l = nalgebra::Vector3::new(lamp.x, lamp.y, lamp.z);
-            if let Ok(z) = calib::project(&true_camera, &pose, &l)
-                && inside(z[0], z[1])
-                && inside(z[2], z[3])
-            {
-                *count += 1;
-            }
-        }
-    }
-    let lamps_missed = seen
-        .iter()
-        .zip(&used_t)
-        .filter(|&(&s, &used)| s >= LAMP_SEEN_FRAMES && !used)
-        .count();
-    let camera = truth.camera.as_ref().map_or_else(Vec::new, |c| {
-        let t = truth_camera(c);
-        Param::ALL
-            .iter()
-            .map(|&p| (p, final_camera.get(p) - t.get(p)))
-            .collect()
-    });
-    TruthErrors {
-        landmark_rms: if matched > 0 {
-            (lm_sq / matched as f64).sqrt()
-        } else {
-            f64::NAN
-        },
-        landmark_rms_aligned: aligned_rms(&pairs),
-        landmarks_matched: matched,
-        landmarks_unmatched: landmarks.len() - matched,
-        lamps_missed,
-        match_radius: LAMP_MATCH_RADIUS_M,
-        ate_rms: if n > 0 { (sq / count).sqrt() } else { f64::NAN },
-        ate_max: if n > 0 { max } else { f64::NAN },
-        heading_rms: if n > 0 {
-            (sq_heading / count).sqrt()
-        } else {
-            f64::NAN
-        },
-        camera,
-        consistency: None,
-    }
-}
-
-/// Each frame (of `phase` only, when given) with a pose in `poses` (sorted by time) at its
-/// timestamp takes it.
-fn set_poses(frames: &mut [FrameEstimate], poses: &[(u64, Pose2)], phase: Option<Phase>) {
-    let mut i = 0usize;
-    for f in frames {
-        while poses.get(i).is_some_and(|(t, _)| *t < f.t_us) {
-            i += 1;
-        }
-        if let Some((t, p)) = poses.get(i)
-            && *t == f.t_us
-            && phase.is_none_or(|ph| ph == f.phase)
-        {
-            f.pose = [p.x, p.y, p.theta];
-        }
-    }
-}
-
 /// Pose NEES of a filtered pose against the truth.
 fn pose_nees(pose: &Pose2, cov: &nalgebra::Matrix3<f64>, t: &TruthPose) -> Option<f64> {
     let e = nalgebra::Vector3::new(
@@ -503,7 +776,7 @@ fn pose_nees(pose: &Pose2, cov: &nalgebra::Matrix3<f64>, t: &TruthPose) -> Optio
 
 /// Full-state NEES of the filter at the end against the truth (pose, the landmarks within
 /// 10 cm of a lamp, the estimated camera parameters) and its degrees of freedom.
-fn state_nees(ekf: &vslam_ekf::Ekf, pose: &TruthPose, truth: &Truth) -> Option<(f64, usize)> {
+fn state_nees(ekf: &vslam_ekf::Ekf, pose: &TruthPose, truth: &TruthStream) -> Option<(f64, usize)> {
     let x = ekf.state();
     let p = ekf.covariance();
     let mut index: Vec<usize> = vec![0, 1, 2];

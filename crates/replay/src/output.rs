@@ -32,8 +32,8 @@
 //! `NaN`, `inf` or `-inf` (Rust's `f64` display, which `str::parse::<f64>` reads back).
 
 use std::fs::File;
-use std::io::{BufWriter, Seek, Write};
-use std::path::Path;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
 
 use mcap::records::MessageHeader;
 use mcap::{Compression, WriteOptions};
@@ -42,7 +42,7 @@ use serde_json::{Value, json};
 
 use crate::{
     CameraSample, Counts, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
-    Replay, TruthErrors,
+    Replay, ReplayEnd, TruthErrors,
 };
 
 /// What `EST.mcap` is called in error messages.
@@ -87,7 +87,8 @@ const NS_PER_US: u64 = 1000;
 const MAX_T_US: u64 = (u32::MAX as u64 + 1) * US_PER_S - 1;
 
 /// Writes `EST.mcap` at `path`: the estimates of `replay` for a viewer (see the module docs
-/// for the topics), with zstd chunks, CRCs and a summary section.
+/// for the topics), with zstd chunks, CRCs and a summary section ([`EstimatesWriter`] fed in
+/// data-time order).
 ///
 /// Errors: the file cannot be created or written ([`Error::Output`]), the MCAP writer refuses
 /// a record ([`Error::Mcap`]), or a timestamp is too late for a Foxglove timestamp
@@ -104,20 +105,68 @@ pub fn write_estimates(path: &Path, replay: &Replay) -> Result<(), Error> {
             return Err(time_error(path, topic, t_us));
         }
     }
-    let file = File::create(path).map_err(|source| output_error(EST_FILE, path, source))?;
-    let mut writer = EstWriter::new(path, BufWriter::new(file))?;
-    writer.write_all(replay)?;
-    writer.finish()
+    let mut items: Vec<(u64, Item)> =
+        Vec::with_capacity(replay.frames.len() + replay.camera.len() + replay.maps.len());
+    items.extend(
+        replay
+            .frames
+            .iter()
+            .enumerate()
+            .map(|(i, f)| (f.t_us, Item::Frame(i))),
+    );
+    items.extend(
+        replay
+            .camera
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (c.t_us, Item::Camera(i))),
+    );
+    items.extend(
+        replay
+            .maps
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (m.t_us, Item::Map(i))),
+    );
+    items.sort_unstable();
+    let mut writer = EstimatesWriter::create(path)?;
+    for &(_, item) in &items {
+        match item {
+            Item::Frame(i) => {
+                if let Some(frame) = replay.frames.get(i) {
+                    writer.frame(frame)?;
+                }
+            }
+            Item::Camera(i) => {
+                if let Some(sample) = replay.camera.get(i) {
+                    writer.camera(sample)?;
+                }
+            }
+            Item::Map(i) => {
+                if let Some(map) = replay.maps.get(i) {
+                    writer.map(map)?;
+                }
+            }
+        }
+    }
+    writer.finish(&summary_json(replay))
 }
 
 /// Writes `SUMMARY.json` at `path`: [`summary_json`], pretty-printed, with a final newline.
 ///
 /// Errors: the file cannot be created or written ([`Error::Output`]).
 pub fn write_summary(path: &Path, replay: &Replay) -> Result<(), Error> {
-    let summary = summary_json(replay);
+    write_summary_value(path, &summary_json(replay))
+}
+
+/// Writes a summary (from [`summary_json`] or [`end_summary_json`]) at `path`,
+/// pretty-printed, with a final newline.
+///
+/// Errors: the file cannot be created or written ([`Error::Output`]).
+pub fn write_summary_value(path: &Path, summary: &Value) -> Result<(), Error> {
     let write = || -> std::io::Result<()> {
         let mut w = BufWriter::new(File::create(path)?);
-        serde_json::to_writer_pretty(&mut w, &summary)?;
+        serde_json::to_writer_pretty(&mut w, summary)?;
         w.write_all(b"\n")?;
         w.flush()
     };
@@ -125,20 +174,128 @@ pub fn write_summary(path: &Path, replay: &Replay) -> Result<(), Error> {
 }
 
 /// Writes `TRAJ.csv` at `path`: a header `t_us,x,y,theta` and a row per frame of `replay`, in
-/// its order. Numbers are printed with Rust's `Display`, which reads back to the same `f64`.
+/// its order ([`TrajectoryWriter`]).
 ///
 /// Errors: the file cannot be created or written ([`Error::Output`]).
 pub fn write_trajectory(path: &Path, replay: &Replay) -> Result<(), Error> {
-    let write = || -> std::io::Result<()> {
-        let mut w = BufWriter::new(File::create(path)?);
-        writeln!(w, "t_us,x,y,theta")?;
-        for frame in &replay.frames {
-            let [x, y, theta] = frame.pose;
-            writeln!(w, "{},{x},{y},{theta}", frame.t_us)?;
+    let mut w = TrajectoryWriter::create(path)?;
+    for frame in &replay.frames {
+        w.frame(frame)?;
+    }
+    w.finish()
+}
+
+/// Writes `TRAJ.csv` row by row: a header `t_us,x,y,theta`, then a row per frame. Numbers
+/// are printed with Rust's `Display`, which reads back to the same `f64`.
+#[derive(Debug)]
+pub struct TrajectoryWriter {
+    path: PathBuf,
+    w: BufWriter<File>,
+}
+
+impl TrajectoryWriter {
+    /// Creates (or truncates) the file at `path` and writes the header.
+    ///
+    /// Errors: the file cannot be created or written ([`Error::Output`]).
+    pub fn create(path: &Path) -> Result<Self, Error> {
+        let mut w = BufWriter::new(
+            File::create(path).map_err(|source| output_error(TRAJ_FILE, path, source))?,
+        );
+        writeln!(w, "t_us,x,y,theta").map_err(|source| output_error(TRAJ_FILE, path, source))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            w,
+        })
+    }
+
+    /// A frame's row.
+    pub fn frame(&mut self, frame: &FrameEstimate) -> Result<(), Error> {
+        let [x, y, theta] = frame.pose;
+        writeln!(self.w, "{},{x},{y},{theta}", frame.t_us)
+            .map_err(|source| output_error(TRAJ_FILE, &self.path, source))
+    }
+
+    /// Flushes the file.
+    pub fn finish(mut self) -> Result<(), Error> {
+        self.w
+            .flush()
+            .map_err(|source| output_error(TRAJ_FILE, &self.path, source))
+    }
+}
+
+/// The replay's output files written as the frames come (a [`crate::ReplaySink`]):
+/// `EST.mcap` and `TRAJ.csv` when asked for; [`OutputFiles::finish`] adds the summary.
+#[derive(Debug, Default)]
+pub struct OutputFiles {
+    estimates: Option<EstimatesWriter>,
+    trajectory: Option<TrajectoryWriter>,
+}
+
+impl OutputFiles {
+    /// Creates the files asked for.
+    ///
+    /// Errors: a file cannot be created ([`Error::Output`], [`Error::Mcap`]).
+    pub fn create(estimates: Option<&Path>, trajectory: Option<&Path>) -> Result<Self, Error> {
+        Ok(Self {
+            estimates: estimates.map(EstimatesWriter::create).transpose()?,
+            trajectory: trajectory.map(TrajectoryWriter::create).transpose()?,
+        })
+    }
+
+    /// Ends the files: `EST.mcap` with its `/est/summary` message, and `SUMMARY.json` at
+    /// `summary` when asked for.
+    pub fn finish(self, end: &ReplayEnd, summary: Option<&Path>) -> Result<(), Error> {
+        let value = end_summary_json(end);
+        if let Some(w) = self.estimates {
+            w.finish(&value)?;
         }
-        w.flush()
-    };
-    write().map_err(|source| output_error(TRAJ_FILE, path, source))
+        if let Some(w) = self.trajectory {
+            w.finish()?;
+        }
+        if let Some(path) = summary {
+            write_summary_value(path, &value)?;
+        }
+        Ok(())
+    }
+}
+
+impl crate::ReplaySink for OutputFiles {
+    fn frame(&mut self, frame: &FrameEstimate) -> Result<(), Error> {
+        if let Some(w) = &mut self.estimates {
+            w.frame(frame)?;
+        }
+        if let Some(w) = &mut self.trajectory {
+            w.frame(frame)?;
+        }
+        Ok(())
+    }
+
+    fn camera(&mut self, sample: &CameraSample) -> Result<(), Error> {
+        match &mut self.estimates {
+            Some(w) => w.camera(sample),
+            None => Ok(()),
+        }
+    }
+
+    fn map(&mut self, map: &MapSnapshot) -> Result<(), Error> {
+        match &mut self.estimates {
+            Some(w) => w.map(map),
+            None => Ok(()),
+        }
+    }
+}
+
+/// What the summary is made of, borrowed from a [`Replay`] or a [`ReplayEnd`].
+struct SummaryParts<'a> {
+    counts: &'a Counts,
+    phase_switch_t_us: Option<u64>,
+    last_frame: Option<&'a FrameEstimate>,
+    final_camera: &'a [ParamEstimate],
+    landmarks: &'a [LandmarkEstimate],
+    phase1_skipped: bool,
+    warnings: &'a [String],
+    frames_processed: u64,
+    truth: Option<&'a TruthErrors>,
 }
 
 /// The content of `SUMMARY.json`, and of the `/est/summary` message.
@@ -166,8 +323,38 @@ pub fn write_trajectory(path: &Path, replay: &Replay) -> Result<(), Error> {
 ///
 /// Non-finite numbers are `null` (see the module docs).
 pub fn summary_json(replay: &Replay) -> Value {
-    let c = &replay.counts;
-    let pose = replay.frames.last().map_or(Value::Null, |f| {
+    summary_value(&SummaryParts {
+        counts: &replay.counts,
+        phase_switch_t_us: replay.phase_switch_t_us,
+        last_frame: replay.frames.last(),
+        final_camera: &replay.final_camera,
+        landmarks: &replay.landmarks,
+        phase1_skipped: replay.phase1_skipped,
+        warnings: &replay.warnings,
+        frames_processed: replay.frames.len() as u64,
+        truth: replay.truth.as_ref(),
+    })
+}
+
+/// [`summary_json`] of a streaming replay's end (the same keys and values as of the
+/// [`Replay`] of the same log).
+pub fn end_summary_json(end: &ReplayEnd) -> Value {
+    summary_value(&SummaryParts {
+        counts: &end.counts,
+        phase_switch_t_us: end.phase_switch_t_us,
+        last_frame: end.last_frame.as_ref(),
+        final_camera: &end.final_camera,
+        landmarks: &end.landmarks,
+        phase1_skipped: end.phase1_skipped,
+        warnings: &end.warnings,
+        frames_processed: end.frames_processed,
+        truth: end.truth.as_ref(),
+    })
+}
+
+fn summary_value(s: &SummaryParts<'_>) -> Value {
+    let c = s.counts;
+    let pose = s.last_frame.map_or(Value::Null, |f| {
         let [x, y, theta] = f.pose;
         json!({"t_us": f.t_us, "x": x, "y": y, "theta": theta})
     });
@@ -175,15 +362,15 @@ pub fn summary_json(replay: &Replay) -> Value {
         "frames": c.frames,
         "corrupt": c.corrupt,
         "lost": c.lost,
-        "phase_switch_t_us": replay.phase_switch_t_us,
+        "phase_switch_t_us": s.phase_switch_t_us,
         "pose": pose,
-        "camera": params_json(camera_part(&replay.final_camera)),
-        "vehicle": params_json(vehicle_part(&replay.final_camera)),
-        "landmarks": replay.landmarks.iter().map(landmark_json).collect::<Vec<_>>(),
-        "phase1_skipped": replay.phase1_skipped,
-        "warnings": replay.warnings,
-        "counts": counts_json(c, replay.frames.len()),
-        "truth": replay.truth.as_ref().map_or(Value::Null, truth_json),
+        "camera": params_json(camera_part(s.final_camera)),
+        "vehicle": params_json(vehicle_part(s.final_camera)),
+        "landmarks": s.landmarks.iter().map(landmark_json).collect::<Vec<_>>(),
+        "phase1_skipped": s.phase1_skipped,
+        "warnings": s.warnings,
+        "counts": counts_json(c, s.frames_processed),
+        "truth": s.truth.map_or(Value::Null, truth_json),
     })
 }
 
@@ -238,7 +425,7 @@ fn landmark_sigma(l: &LandmarkEstimate) -> [f64; 3] {
 }
 
 /// The counters the summary does not hold at its top level, and the frames processed.
-fn counts_json(c: &Counts, frames_processed: usize) -> Value {
+fn counts_json(c: &Counts, frames_processed: u64) -> Value {
     let mut map = serde_json::Map::new();
     map.insert("frames_processed".to_string(), json!(frames_processed));
     for (name, value) in c.named() {
@@ -412,26 +599,39 @@ impl Path2d {
     }
 }
 
-/// Writes the messages of `EST.mcap`.
-struct EstWriter<'p, W: Write + Seek> {
-    path: &'p Path,
-    mcap: mcap::Writer<W>,
+/// Writes `EST.mcap` message by message (see the module docs for the topics): call
+/// [`Self::frame`], [`Self::camera`] and [`Self::map`] in data-time order (a frame, then the
+/// camera sample and the map taken after it), then [`Self::finish`] with the summary. Holds
+/// the path drawn on `/est/trajectory` (at most [`TRAJECTORY_MAX_POSES`] poses) and one
+/// chunk, whatever the log's length.
+pub struct EstimatesWriter {
+    path: PathBuf,
+    mcap: mcap::Writer<BufWriter<File>>,
     channels: Channels,
+    trajectory: Path2d,
+    last_trajectory_us: Option<u64>,
+    /// The last frame, when its pose was finite and `/est/trajectory` has not drawn it yet.
+    undrawn: Option<(u64, [f64; 3])>,
+    /// The latest log time written, microseconds.
+    latest_us: u64,
 }
 
-impl<W: Write + Seek> std::fmt::Debug for EstWriter<'_, W> {
+impl std::fmt::Debug for EstimatesWriter {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("EstWriter")
+        f.debug_struct("EstimatesWriter")
             .field("path", &self.path)
             .field("channels", &self.channels)
             .finish_non_exhaustive()
     }
 }
 
-impl<'p, W: Write + Seek> EstWriter<'p, W> {
-    /// Starts the file (magic, header) and adds every channel with its schema, so that a
-    /// reader finds all six even when some have no message.
-    fn new(path: &'p Path, w: W) -> Result<Self, Error> {
+impl EstimatesWriter {
+    /// Creates (or truncates) the file at `path`, writes the magic and header and adds every
+    /// channel with its schema, so that a reader finds all six even when some have no message.
+    ///
+    /// Errors: the file cannot be created or written ([`Error::Output`], [`Error::Mcap`]).
+    pub fn create(path: &Path) -> Result<Self, Error> {
+        let file = File::create(path).map_err(|source| output_error(EST_FILE, path, source))?;
         let options = WriteOptions::new()
             .compression(Some(Compression::Zstd))
             .chunk_size(Some(vehicle_log::CHUNK_TARGET_BYTES))
@@ -443,7 +643,9 @@ impl<'p, W: Write + Seek> EstWriter<'p, W> {
                 env!("CARGO_PKG_VERSION"),
                 mcap::LIBRARY_IDENTIFIER
             ));
-        let mut mcap = options.create(w).map_err(|e| mcap_error(path, e))?;
+        let mut mcap = options
+            .create(BufWriter::new(file))
+            .map_err(|e| mcap_error(path, e))?;
         let mut add = |topic: Topic| -> Result<Channel, Error> {
             let schema = serde_json::to_vec(&topic.schema())
                 .map_err(|e| output_error(EST_FILE, path, e.into()))?;
@@ -465,93 +667,82 @@ impl<'p, W: Write + Seek> EstWriter<'p, W> {
             summary: add(Topic::Summary)?,
         };
         Ok(Self {
-            path,
+            path: path.to_path_buf(),
             mcap,
             channels,
+            trajectory: Path2d::new(),
+            last_trajectory_us: None,
+            undrawn: None,
+            latest_us: 0,
         })
     }
 
-    /// Every message of `replay`, in data-time order, then the summary.
-    fn write_all(&mut self, replay: &Replay) -> Result<(), Error> {
-        let mut items: Vec<(u64, Item)> =
-            Vec::with_capacity(replay.frames.len() + replay.camera.len() + replay.maps.len());
-        items.extend(
-            replay
-                .frames
-                .iter()
-                .enumerate()
-                .map(|(i, f)| (f.t_us, Item::Frame(i))),
-        );
-        items.extend(
-            replay
-                .camera
-                .iter()
-                .enumerate()
-                .map(|(i, c)| (c.t_us, Item::Camera(i))),
-        );
-        items.extend(
-            replay
-                .maps
-                .iter()
-                .enumerate()
-                .map(|(i, m)| (m.t_us, Item::Map(i))),
-        );
-        items.sort_unstable();
-        let last_frame = items
-            .iter()
-            .rev()
-            .find_map(|(_, item)| matches!(item, Item::Frame(_)).then_some(*item));
-
-        let mut path = Path2d::new();
-        let mut last_trajectory_us: Option<u64> = None;
-        for &(_, item) in &items {
-            match item {
-                Item::Frame(i) => {
-                    let Some(frame) = replay.frames.get(i) else {
-                        continue;
-                    };
-                    self.write(Topic::Frame, frame.t_us, |_| frame_info_json(frame))?;
-                    if !frame.pose.iter().all(|v| v.is_finite()) {
-                        continue;
-                    }
-                    self.write(Topic::Pose, frame.t_us, |stamp| {
-                        let [x, y, theta] = frame.pose;
-                        json!({
-                            "timestamp": stamp,
-                            "frame_id": WORLD_FRAME,
-                            "pose": planar_pose_json(x, y, theta),
-                        })
-                    })?;
-                    path.push(frame.pose);
-                    let due = last_trajectory_us
-                        .is_none_or(|last| frame.t_us >= last.saturating_add(TRAJECTORY_PERIOD_US));
-                    if due || Some(item) == last_frame {
-                        self.write(Topic::Trajectory, frame.t_us, |stamp| {
-                            json!({
-                                "timestamp": stamp,
-                                "frame_id": WORLD_FRAME,
-                                "poses": path.poses_json(frame.pose),
-                            })
-                        })?;
-                        last_trajectory_us = Some(frame.t_us);
-                    }
-                }
-                Item::Camera(i) => {
-                    if let Some(sample) = replay.camera.get(i) {
-                        self.write(Topic::Camera, sample.t_us, |_| camera_json(sample))?;
-                    }
-                }
-                Item::Map(i) => {
-                    if let Some(map) = replay.maps.get(i) {
-                        self.write(Topic::Landmarks, map.t_us, |stamp| {
-                            scene_update_json(map, stamp)
-                        })?;
-                    }
-                }
-            }
+    /// A frame: `/est/frame`, and `/est/pose` and (about once a second) `/est/trajectory` when
+    /// its pose is finite.
+    pub fn frame(&mut self, frame: &FrameEstimate) -> Result<(), Error> {
+        self.write(Topic::Frame, frame.t_us, |_| frame_info_json(frame))?;
+        self.undrawn = None;
+        if !frame.pose.iter().all(|v| v.is_finite()) {
+            return Ok(());
         }
-        let end_us = items.last().map_or(0, |(t_us, _)| *t_us);
-        self.write(Topic::Summary, end_us, |_| summary_json(replay))
+        self.write(Topic::Pose, frame.t_us, |stamp| {
+            let [x, y, theta] = frame.pose;
+            json!({
+                "timestamp": stamp,
+                "frame_id": WORLD_FRAME,
+                "pose": planar_pose_json(x, y, theta),
+            })
+        })?;
+        self.trajectory.push(frame.pose);
+        let due = self
+            .last_trajectory_us
+            .is_none_or(|last| frame.t_us >= last.saturating_add(TRAJECTORY_PERIOD_US));
+        if due {
+            self.draw_trajectory(frame.t_us, frame.pose)?;
+        } else {
+            self.undrawn = Some((frame.t_us, frame.pose));
+        }
+        Ok(())
+    }
+
+    /// A camera sample on `/est/camera`.
+    pub fn camera(&mut self, sample: &CameraSample) -> Result<(), Error> {
+        self.write(Topic::Camera, sample.t_us, |_| camera_json(sample))
+    }
+
+    /// A map snapshot on `/est/landmarks`.
+    pub fn map(&mut self, map: &MapSnapshot) -> Result<(), Error> {
+        self.write(Topic::Landmarks, map.t_us, |stamp| {
+            scene_update_json(map, stamp)
+        })
+    }
+
+    /// The path up to the last frame (when not yet drawn), the summary on `/est/summary` at
+    /// the latest time written, the last chunk, the summary section and the footer; flushes.
+    pub fn finish(mut self, summary: &Value) -> Result<(), Error> {
+        if let Some((t_us, pose)) = self.undrawn.take() {
+            self.draw_trajectory(t_us, pose)?;
+        }
+        let end_us = self.latest_us;
+        self.write(Topic::Summary, end_us, |_| summary.clone())?;
+        self.mcap.finish().map_err(|e| mcap_error(&self.path, e))?;
+        self.mcap
+            .into_inner()
+            .flush()
+            .map_err(|source| output_error(EST_FILE, &self.path, source))
+    }
+
+    fn draw_trajectory(&mut self, t_us: u64, pose: [f64; 3]) -> Result<(), Error> {
+        let poses = self.trajectory.poses_json(pose);
+        self.write(Topic::Trajectory, t_us, |stamp| {
+            json!({
+                "timestamp": stamp,
+                "frame_id": WORLD_FRAME,
+                "poses": poses,
+            })
+        })?;
+        self.last_trajectory_us = Some(t_us);
+        Ok(())
     }
 
     /// Writes one message on `topic` at log time `t_us`; `message` is given the Foxglove
@@ -563,14 +754,14 @@ impl<'p, W: Write + Seek> EstWriter<'p, W> {
         message: impl FnOnce(Value) -> Value,
     ) -> Result<(), Error> {
         if t_us > MAX_T_US {
-            return Err(time_error(self.path, topic, t_us));
+            return Err(time_error(&self.path, topic, t_us));
         }
         let stamp = json!({
             "sec": t_us / US_PER_S,
             "nsec": (t_us % US_PER_S) * NS_PER_US,
         });
         let data = serde_json::to_vec(&message(stamp))
-            .map_err(|e| output_error(EST_FILE, self.path, e.into()))?;
+            .map_err(|e| output_error(EST_FILE, &self.path, e.into()))?;
         let log_time = t_us * NS_PER_US; // cannot overflow: t_us <= MAX_T_US
         let channel = self.channels.get_mut(topic);
         let header = MessageHeader {
@@ -580,18 +771,10 @@ impl<'p, W: Write + Seek> EstWriter<'p, W> {
             publish_time: log_time,
         };
         channel.sequence = channel.sequence.wrapping_add(1);
+        self.latest_us = self.latest_us.max(t_us);
         self.mcap
             .write_to_known_channel(&header, &data)
-            .map_err(|e| mcap_error(self.path, e))
-    }
-
-    /// Writes the last chunk, the summary section and the footer, and flushes.
-    fn finish(mut self) -> Result<(), Error> {
-        self.mcap.finish().map_err(|e| mcap_error(self.path, e))?;
-        self.mcap
-            .into_inner()
-            .flush()
-            .map_err(|source| output_error(EST_FILE, self.path, source))
+            .map_err(|e| mcap_error(&self.path, e))
     }
 }
 

@@ -179,6 +179,35 @@ pub struct Consistency {
     pub state_dof: usize,
 }
 
+/// What a streaming replay ([`crate::Replayer`]) ends with: everything of a [`Replay`] but
+/// the series of frames, camera samples and maps, which went to its [`crate::ReplaySink`] as
+/// they came; bounded by the map, whatever the log's length.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplayEnd {
+    /// The last frame's estimate (final), if any frame was processed.
+    pub last_frame: Option<FrameEstimate>,
+    /// The first frame's timestamp, microseconds.
+    pub first_t_us: Option<u64>,
+    /// Frames processed (the rows of the trajectory).
+    pub frames_processed: u64,
+    /// Of them, frames processed in phase 2.
+    pub phase2_frames: u64,
+    /// The final map.
+    pub landmarks: Vec<LandmarkEstimate>,
+    /// The final camera parameters (every one of C).
+    pub final_camera: Vec<ParamEstimate>,
+    /// When phase 2 started (see [`Replay::phase_switch_t_us`]).
+    pub phase_switch_t_us: Option<u64>,
+    /// Phase 1 was skipped (see [`Replay::phase1_skipped`]).
+    pub phase1_skipped: bool,
+    /// What was read, decoded and associated.
+    pub counts: Counts,
+    /// Errors against the truth, when the log has it.
+    pub truth: Option<TruthErrors>,
+    /// Things that did not stop the replay but limit what it says, one line each.
+    pub warnings: Vec<String>,
+}
+
 /// A whole log replayed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Replay {
@@ -203,4 +232,27 @@ pub struct Replay {
     pub truth: Option<TruthErrors>,
     /// Things that did not stop the replay but limit what it says, one line each.
     pub warnings: Vec<String>,
+}
+
+impl Replay {
+    /// The replay made of a streaming replay's end and the series its sink collected.
+    pub fn from_parts(
+        end: ReplayEnd,
+        frames: Vec<FrameEstimate>,
+        camera: Vec<CameraSample>,
+        maps: Vec<MapSnapshot>,
+    ) -> Self {
+        Self {
+            frames,
+            camera,
+            maps,
+            landmarks: end.landmarks,
+            final_camera: end.final_camera,
+            phase_switch_t_us: end.phase_switch_t_us,
+            phase1_skipped: end.phase1_skipped,
+            counts: end.counts,
+            truth: end.truth,
+            warnings: end.warnings,
+        }
+    }
 }

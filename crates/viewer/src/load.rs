@@ -25,7 +25,7 @@ pub struct LoadOptions {
 }
 
 /// Loads `path`: a vehicle log (replayed with `options`; `progress` is called with
-/// `(frames done, frames in the log)`) or an estimates file written by `stereonav replay`.
+/// `(bytes read, bytes in the file)`) or an estimates file written by `stereonav replay`.
 ///
 /// Errors: the file cannot be read or is not MCAP, it is an MCAP file of neither kind, a
 /// vehicle message is malformed, or the replay fails (no rig, bad settings). A log cut short

@@ -11,12 +11,51 @@
 //! [`Increment::from_odometry`] gives a piece of a sample the variance `sigma^2 period dt`
 //! (linear in time within the sample): a whole sample keeps its variance however it is cut,
 //! and only the small correlation between the pieces is dropped.
+//!
+//! **Gaps.** A sample held for longer than [`ODOMETRY_HOLD_LIMIT_US`] (samples lost on the bus,
+//! a chunk of the log lost to damage, odometry that stopped) says nothing about the motion
+//! after that limit: the vehicle may have sped up, braked or turned. Past the limit the piece
+//! takes the error of an unknown acceleration, [`GAP_ACCELERATION_MPS2`] and
+//! [`GAP_YAW_ACCELERATION_RADPS2`] (1 sigma), held since the limit: a position error
+//! `a tau^2 / 2` after `tau` beyond it (0.14 m and 8 degrees after a 1 s gap). Samples at their
+//! usual rate never reach the limit, so a log without gaps is predicted as before.
 
 use calib::odometry::{Motion, OdomSample, constant_velocity_motion};
 use calib::{Noise, Pose2};
 use nalgebra::Matrix3;
 
 use crate::error::Error;
+
+/// An odometry sample held longer than this, microseconds, is a gap past it (see the module
+/// docs): 2.5 periods of a 10 Hz odometry, 25 of the usual 100 Hz.
+pub const ODOMETRY_HOLD_LIMIT_US: u64 = 250_000;
+
+/// The vehicle's acceleration assumed over an odometry gap, 1 sigma, m/s^2 (a forklift's
+/// usual acceleration and braking, the simulator's scenarios' limit).
+pub const GAP_ACCELERATION_MPS2: f64 = 0.5;
+
+/// The vehicle's yaw acceleration assumed over an odometry gap, 1 sigma, rad/s^2 (about
+/// 30 deg/s^2).
+pub const GAP_YAW_ACCELERATION_RADPS2: f64 = 0.5;
+
+/// The extra 1-sigma velocity error, `(linear m/s, yaw rad/s)`, that a piece `[t, end]` of a
+/// sample taken at `sample_t` carries for the part of its hold beyond
+/// [`ODOMETRY_HOLD_LIMIT_US`], as a velocity held over the piece's `dt` seconds: the position
+/// error of an unknown acceleration `a`, `a ((end - L)^2 - (max(t, L) - L)^2) / 2`, over `dt`.
+fn gap_velocity_error(sample_t: u64, t: u64, end: u64, dt: f64) -> (f64, f64) {
+    let limit = sample_t.saturating_add(ODOMETRY_HOLD_LIMIT_US);
+    if end <= limit || dt <= 0.0 {
+        return (0.0, 0.0);
+    }
+    #[allow(clippy::cast_precision_loss)] // microsecond spans far below 2^53
+    let past = |u: u64| u.saturating_sub(limit) as f64 * 1e-6;
+    let (a0, a1) = (past(t), past(end));
+    let growth = 0.5 * (a1 * a1 - a0 * a0) / dt;
+    (
+        GAP_ACCELERATION_MPS2 * growth,
+        GAP_YAW_ACCELERATION_RADPS2 * growth,
+    )
+}
 
 /// A motion in the robot frame at its start with the covariance of its error: what the
 /// prediction adds to the pose.
@@ -219,7 +258,7 @@ impl Increment {
                 .map_or(0, |n| n.t_us.saturating_sub(s.t_us));
             #[allow(clippy::cast_precision_loss)]
             let period = period as f64 * 1e-6;
-            let piece_noise = if period > dt && dt > 0.0 {
+            let mut piece_noise = if period > dt && dt > 0.0 {
                 let k = libm::sqrt(period / dt);
                 Noise {
                     velocity: noise.velocity * k,
@@ -229,6 +268,11 @@ impl Increment {
             } else {
                 *noise
             };
+            let (gap_v, gap_w) = gap_velocity_error(s.t_us, t, end, dt);
+            if gap_v > 0.0 {
+                piece_noise.velocity = libm::hypot(piece_noise.velocity, gap_v);
+                piece_noise.yaw_rate = libm::hypot(piece_noise.yaw_rate, gap_w);
+            }
             total = total.then(&Self::piece(s.vx, s.vy, s.vtheta, dt, &piece_noise));
             t = end;
         }
@@ -311,6 +355,48 @@ mod tests {
     fn motion_vector(vx: f64, vy: f64, w: f64, dt: f64) -> nalgebra::Vector3<f64> {
         let m = constant_velocity_motion(vx, vy, w, dt);
         nalgebra::Vector3::new(m.dx, m.dy, m.dtheta)
+    }
+
+    /// A gap in the odometry (a sample held 1 s) is predicted with the error of an unknown
+    /// acceleration past the hold limit; samples at their usual rate are not.
+    #[test]
+    fn a_gap_in_the_odometry_widens_the_prediction() {
+        let noise = Noise {
+            pixel: 0.3,
+            velocity: 0.005,
+            yaw_rate: 0.01,
+        };
+        let at = |t_us: u64| OdomSample {
+            t_us,
+            vx: 1.0,
+            vy: 0.0,
+            vtheta: 0.0,
+        };
+        let steady: alloc::vec::Vec<OdomSample> = (0..=100).map(|i| at(i * 10_000)).collect();
+        let gap = [at(0), at(1_000_000)];
+        let a = Increment::from_odometry(&steady, 0, 1_000_000, &noise).unwrap();
+        let b = Increment::from_odometry(&gap, 0, 1_000_000, &noise).unwrap();
+        assert!((a.motion.dx - b.motion.dx).abs() < 1e-12);
+        // 100 samples of 5 mm/s noise held 10 ms each: 0.5 mm.
+        assert!(a.covariance[(0, 0)].sqrt() < 1e-3, "{}", a.covariance);
+        // 0.75 s past the limit at 0.5 m/s^2: a tau^2 / 2 = 0.14 m along, more across (the
+        // heading's error too).
+        let expected = 0.5 * GAP_ACCELERATION_MPS2 * 0.75 * 0.75;
+        let along = b.covariance[(0, 0)].sqrt();
+        assert!(
+            (along - expected).abs() < 0.01 * expected + 0.006,
+            "{along}"
+        );
+        assert!(b.covariance[(1, 1)].sqrt() > expected);
+        let yaw = b.covariance[(2, 2)].sqrt();
+        let expected_yaw = 0.5 * GAP_YAW_ACCELERATION_RADPS2 * 0.75 * 0.75;
+        assert!((yaw - expected_yaw).abs() < 0.02 * expected_yaw, "{yaw}");
+        // Cut into two frames, the pieces add up to the same growth (the error's own
+        // correlation between them aside).
+        let first = Increment::from_odometry(&gap, 0, 500_000, &noise).unwrap();
+        let second = Increment::from_odometry(&gap, 500_000, 1_000_000, &noise).unwrap();
+        assert!(first.covariance[(0, 0)].sqrt() < 0.5 * GAP_ACCELERATION_MPS2 * 0.0626 + 0.003);
+        assert!(second.covariance[(0, 0)] > first.covariance[(0, 0)]);
     }
 
     /// A frame time in the middle of an odometry sample: the two predictions that share the

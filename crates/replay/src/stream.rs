@@ -1,0 +1,403 @@
+//! Steps 1-3 of the crate docs as a stream: the log read record by record, the board's byte
+//! stream decoded as it comes, and frames and odometry put in data-time order through a
+//! bounded reorder window, so that a replay holds a few seconds of input whatever the log's
+//! length.
+//!
+//! The order is the one a sort of the whole log gives (frames and odometry each by their own
+//! `t_us`, stable, odometry up to [`nav::ODOMETRY_LOOKAHEAD_US`] past a frame ahead of it), as
+//! long as no frame reaches the log more than [`REORDER_US`] of data time after a later one:
+//! a frame is let out once a frame [`REORDER_US`] later has been read and the odometry has
+//! reached past its look-ahead. A frame later than that (out of the window) is still
+//! replayed, in arrival order; the navigator then refuses it if it is older than the frame
+//! before, and the replay counts it.
+
+use std::cell::Cell;
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap, VecDeque};
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+use calib::odometry::OdomSample;
+use fpga_link::{Decoder, Event};
+use track::Pixel;
+use vehicle_log::{LogReader, Record, TruthCamera, TruthLandmark, TruthPose};
+
+use crate::{Counts, DecodedFrame, Error};
+
+/// The reorder window, microseconds of data time: a frame reaching the log up to this much
+/// after a later frame is still put in its place. The board's latency (exposure, read-out,
+/// the detector, the link) is tens of milliseconds.
+pub const REORDER_US: u64 = 2_000_000;
+
+/// A frame waits at most this long (data time of later frames) for the odometry to pass its
+/// look-ahead: a log whose odometry ends early, or has none, still streams.
+const ODOMETRY_WAIT_US: u64 = 10_000_000;
+
+/// Most frames held in the window (a log of frames far out of order still streams).
+const MAX_HELD_FRAMES: usize = 2_000;
+
+/// Most odometry samples held waiting for a frame (an hour at 100 Hz: a log with no frames
+/// for that long still streams, its odometry then let out ahead of the next frame's).
+const MAX_HELD_ODOMETRY: usize = 360_000;
+
+/// Most untimed bytes of input read before the log's `/rig` when no rig was given.
+const MAX_BYTES_BEFORE_RIG: u64 = 64 << 20;
+
+/// One input of the navigator, in data-time order.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Input {
+    /// An odometry sample.
+    Odometry(OdomSample),
+    /// A decoded stereo frame.
+    Frame(DecodedFrame),
+}
+
+/// Something held in the window, ordered by `(t_us, arrival)`.
+#[derive(Debug, Clone)]
+struct Held<T> {
+    t_us: u64,
+    arrival: u64,
+    item: T,
+}
+
+impl<T> PartialEq for Held<T> {
+    fn eq(&self, other: &Self) -> bool {
+        (self.t_us, self.arrival) == (other.t_us, other.arrival)
+    }
+}
+impl<T> Eq for Held<T> {}
+impl<T> PartialOrd for Held<T> {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl<T> Ord for Held<T> {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        (self.t_us, self.arrival).cmp(&(other.t_us, other.arrival))
+    }
+}
+
+/// The simulator's truth as it streams by: the landmarks and camera (once), and the poses of
+/// the frames not yet done with (bounded: poses older than the frames let out are dropped).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct TruthStream {
+    pub(crate) landmarks: Vec<TruthLandmark>,
+    pub(crate) camera: Option<TruthCamera>,
+    poses: BTreeMap<u64, TruthPose>,
+    /// Whether the log has any truth record.
+    pub(crate) any: bool,
+}
+
+impl TruthStream {
+    /// The true pose at exactly `t_us`, if the log has one (and it is not yet forgotten).
+    pub(crate) fn pose_at(&self, t_us: u64) -> Option<&TruthPose> {
+        self.poses.get(&t_us)
+    }
+
+    /// Forgets the poses before `t_us`.
+    pub(crate) fn forget_before(&mut self, t_us: u64) {
+        self.poses = self.poses.split_off(&t_us);
+    }
+}
+
+/// A reader's position in its source, shared with whoever reports progress.
+#[derive(Debug)]
+pub(crate) struct Counting<R> {
+    inner: R,
+    position: Rc<Cell<u64>>,
+}
+
+impl<R: Read> Read for Counting<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.position
+            .set(self.position.get().saturating_add(n as u64));
+        Ok(n)
+    }
+}
+
+impl<R: Seek> Seek for Counting<R> {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        let at = self.inner.seek(pos)?;
+        self.position.set(at);
+        Ok(at)
+    }
+}
+
+/// A vehicle log as a stream of navigator inputs in data-time order (see the module docs).
+pub(crate) struct LogStream {
+    path: PathBuf,
+    reader: LogReader<Counting<File>>,
+    position: Rc<Cell<u64>>,
+    size: u64,
+    decoder: Decoder,
+    frames: BinaryHeap<Reverse<Held<DecodedFrame>>>,
+    odometry: BinaryHeap<Reverse<Held<OdomSample>>>,
+    arrivals: u64,
+    latest_frame_t: Option<u64>,
+    latest_odometry_t: Option<u64>,
+    /// The stamp of the last frame decoded, in stream order (out-of-order count).
+    last_decoded_t: Option<u64>,
+    ready: VecDeque<Input>,
+    ended: bool,
+    /// The first `/rig` message's text.
+    pub(crate) rig_text: Option<String>,
+    pub(crate) truth: TruthStream,
+    pub(crate) counts: Counts,
+    /// Bytes of `/fpga/features` read so far.
+    feature_bytes: u64,
+}
+
+impl std::fmt::Debug for LogStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LogStream")
+            .field("path", &self.path)
+            .field("held_frames", &self.frames.len())
+            .field("held_odometry", &self.odometry.len())
+            .field("ended", &self.ended)
+            .finish_non_exhaustive()
+    }
+}
+
+impl LogStream {
+    /// Opens the log at `path` (an MCAP file, or an error).
+    pub(crate) fn open(path: &Path) -> Result<Self, Error> {
+        let file = File::open(path).map_err(|source| vehicle_log::Error::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let size = file.metadata().map_or(0, |m| m.len());
+        let position = Rc::new(Cell::new(0));
+        let source = Counting {
+            inner: file,
+            position: Rc::clone(&position),
+        };
+        let reader = LogReader::new(source, path)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            reader,
+            position,
+            size,
+            decoder: Decoder::new(),
+            frames: BinaryHeap::new(),
+            odometry: BinaryHeap::new(),
+            arrivals: 0,
+            latest_frame_t: None,
+            latest_odometry_t: None,
+            last_decoded_t: None,
+            ready: VecDeque::new(),
+            ended: false,
+            rig_text: None,
+            truth: TruthStream::default(),
+            counts: Counts::default(),
+            feature_bytes: 0,
+        })
+    }
+
+    /// `(bytes read, file size)`.
+    pub(crate) fn progress(&self) -> (u64, u64) {
+        (self.position.get().min(self.size), self.size)
+    }
+
+    /// The underlying reader (its warnings, topics, truncation).
+    pub(crate) fn reader(&self) -> &LogReader<Counting<File>> {
+        &self.reader
+    }
+
+    /// Reads until the log's first board bytes or odometry (and, when `need_rig`, its `/rig`)
+    /// have been met, or the log ends. Nothing is let out. Errors: the log has no vehicle
+    /// topics (a foreign MCAP file), no rig is given and the log has none before
+    /// [`MAX_BYTES_BEFORE_RIG`] of data, or the reading fails.
+    pub(crate) fn preamble(&mut self, need_rig: bool) -> Result<(), Error> {
+        loop {
+            let data = self.feature_bytes > 0 || self.counts.odometry > 0;
+            let have_rig = !need_rig || self.rig_text.is_some();
+            if self.ended || (data && have_rig) {
+                break;
+            }
+            if need_rig && self.feature_bytes > MAX_BYTES_BEFORE_RIG {
+                break;
+            }
+            self.pump()?;
+        }
+        if !self.reader.has_vehicle_topics() {
+            return Err(Error::NotVehicleLog {
+                path: self.path.clone(),
+                topics: self.reader.ignored_topics().to_vec(),
+            });
+        }
+        if need_rig && self.rig_text.is_none() {
+            return Err(Error::NoRig {
+                path: self.path.clone(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The next input in data-time order; `None` at the end of the log.
+    pub(crate) fn next_input(&mut self) -> Result<Option<Input>, Error> {
+        loop {
+            if let Some(input) = self.ready.pop_front() {
+                return Ok(Some(input));
+            }
+            if self.release() {
+                continue;
+            }
+            if self.ended {
+                return Ok(None);
+            }
+            self.pump()?;
+        }
+    }
+
+    /// Moves what the window can let out to `ready`; whether it moved anything.
+    fn release(&mut self) -> bool {
+        let Some(Reverse(first)) = self.frames.peek() else {
+            return self.release_odometry_overflow();
+        };
+        let t = first.t_us;
+        let look_ahead = t.saturating_add(nav::ODOMETRY_LOOKAHEAD_US);
+        let later_frame = |wait: u64| {
+            self.latest_frame_t
+                .is_some_and(|latest| latest >= t.saturating_add(wait))
+        };
+        let odometry_past = self.latest_odometry_t.is_some_and(|o| o >= look_ahead);
+        let due = self.ended
+            || self.frames.len() > MAX_HELD_FRAMES
+            || (later_frame(REORDER_US) && odometry_past)
+            || later_frame(ODOMETRY_WAIT_US);
+        if !due {
+            return self.release_odometry_overflow();
+        }
+        while self
+            .odometry
+            .peek()
+            .is_some_and(|Reverse(s)| s.t_us <= look_ahead)
+        {
+            if let Some(Reverse(s)) = self.odometry.pop() {
+                self.ready.push_back(Input::Odometry(s.item));
+            }
+        }
+        if let Some(Reverse(frame)) = self.frames.pop() {
+            self.ready.push_back(Input::Frame(frame.item));
+        }
+        true
+    }
+
+    /// Lets out the oldest odometry when more than [`MAX_HELD_ODOMETRY`] samples wait.
+    fn release_odometry_overflow(&mut self) -> bool {
+        if self.odometry.len() <= MAX_HELD_ODOMETRY {
+            return false;
+        }
+        if let Some(Reverse(s)) = self.odometry.pop() {
+            self.ready.push_back(Input::Odometry(s.item));
+        }
+        true
+    }
+
+    /// Reads one record of the log (or notes its end).
+    fn pump(&mut self) -> Result<(), Error> {
+        match self.reader.next() {
+            None => {
+                self.ended = true;
+                let mut frames = Vec::new();
+                while let Some(event) = self.decoder.decode_end() {
+                    take_event(event, &mut frames);
+                }
+                self.hold_frames(frames);
+                let stats = self.decoder.stats();
+                self.counts.frames = stats.packets;
+                self.counts.corrupt = stats.corrupt;
+                self.counts.lost = stats.lost;
+                self.counts.bytes_skipped = stats.bytes_skipped;
+            }
+            Some(Err(e)) => return Err(e.into()),
+            Some(Ok(record)) => self.record(record),
+        }
+        Ok(())
+    }
+
+    fn record(&mut self, record: Record) {
+        match record {
+            Record::Features { bytes, .. } => {
+                self.feature_bytes = self.feature_bytes.saturating_add(bytes.len() as u64);
+                let mut frames = Vec::new();
+                let mut rest: &[u8] = &bytes;
+                loop {
+                    let (used, event) = self.decoder.decode(rest);
+                    rest = rest.get(used..).unwrap_or_default();
+                    match event {
+                        Some(event) => take_event(event, &mut frames),
+                        None => break,
+                    }
+                }
+                self.hold_frames(frames);
+            }
+            Record::Odom(s) => {
+                self.counts.odometry += 1;
+                self.latest_odometry_t = self.latest_odometry_t.max(Some(s.t_us));
+                self.arrivals += 1;
+                self.odometry.push(Reverse(Held {
+                    t_us: s.t_us,
+                    arrival: self.arrivals,
+                    item: OdomSample {
+                        t_us: s.t_us,
+                        vx: s.vx,
+                        vy: s.vy,
+                        vtheta: s.vtheta,
+                    },
+                }));
+            }
+            // The first /rig counts (the rig is logged once, at the start).
+            Record::Rig(text) if self.rig_text.is_none() => self.rig_text = Some(text),
+            Record::TruthPose(p) => {
+                self.truth.any = true;
+                self.truth.poses.insert(p.t_us, p);
+            }
+            Record::TruthLandmarks(l) => {
+                self.truth.any = true;
+                if self.truth.landmarks.is_empty() {
+                    self.truth.landmarks = l;
+                }
+            }
+            Record::TruthCamera(c) => {
+                self.truth.any = true;
+                if self.truth.camera.is_none() {
+                    self.truth.camera = Some(c);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn hold_frames(&mut self, frames: Vec<DecodedFrame>) {
+        for frame in frames {
+            if self.last_decoded_t.is_some_and(|last| frame.t_us < last) {
+                self.counts.frames_out_of_order += 1;
+            }
+            self.last_decoded_t = Some(frame.t_us);
+            self.latest_frame_t = self.latest_frame_t.max(Some(frame.t_us));
+            self.arrivals += 1;
+            self.frames.push(Reverse(Held {
+                t_us: frame.t_us,
+                arrival: self.arrivals,
+                item: frame,
+            }));
+        }
+    }
+}
+
+/// A decoder event: a good frame is kept as pixels, a corrupt packet only counted (by the
+/// decoder).
+fn take_event(event: Event<'_>, frames: &mut Vec<DecodedFrame>) {
+    if let Event::Frame(f) = event {
+        let px = |x: fpga_link::Feature| Pixel::from_q4(x.x_q4, x.y_q4);
+        frames.push(DecodedFrame {
+            t_us: f.t_us(),
+            left: f.left().map(px).collect(),
+            right: f.right().map(px).collect(),
+        });
+    }
+}
