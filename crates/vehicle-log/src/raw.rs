@@ -389,6 +389,11 @@ impl<R> RawReader<R> {
         &self.damage
     }
 
+    /// Whether the file has chunks (met so far or in the summary's index).
+    pub(crate) fn chunked(&self) -> bool {
+        self.chunked
+    }
+
     /// Where the file is cut, once the iteration has ended (`None`: not cut).
     pub(crate) fn cut_at(&self) -> Option<CutAt> {
         self.cut_at
@@ -612,8 +617,14 @@ impl<R: Read + Seek> RawReader<R> {
         if first && opcode != op::HEADER {
             self.damage.header_damaged = true;
         }
+        // A record that would run over a chunk of the index (or into the summary) has a
+        // damaged length.
+        let overlong = end.is_some_and(|end| {
+            (end > self.data_end && opcode != op::FOOTER)
+                || self.indexed_chunk_inside(at + 1, end).is_some()
+        });
         match end {
-            Some(end) if known && len <= MAX_RECORD_LEN_U64 && end <= self.src.len => {
+            Some(end) if known && len <= MAX_RECORD_LEN_U64 && end <= self.src.len && !overlong => {
                 self.pos = end;
                 self.floor = self.floor.max(at + 1);
                 self.record(at, opcode, len)
@@ -632,6 +643,11 @@ impl<R: Read + Seek> RawReader<R> {
                 }
                 let why = if !known {
                     format!("unknown opcode {opcode:#04x}")
+                } else if overlong {
+                    format!(
+                        "{} record of {len} bytes would run over the next chunk",
+                        record_name(opcode)
+                    )
                 } else if len > MAX_RECORD_LEN_U64 {
                     format!(
                         "{} record of {len} bytes, more than the {MAX_RECORD_LEN} a record may have",
@@ -669,10 +685,7 @@ impl<R: Read + Seek> RawReader<R> {
             // Only the message index of a lost chunk is read (it counts what was lost).
             op::MESSAGE_INDEX if awaits_index => {}
             op::MESSAGE_INDEX => return Ok(()),
-            op::DATA_END | op::FOOTER => {
-                self.data_end_met = true;
-                return Ok(());
-            }
+            op::DATA_END | op::FOOTER => return self.end_record(at, opcode, len),
             // Attachments, metadata, indexes, statistics and summary offsets: not needed.
             _ => {
                 self.close_open_piece();
@@ -714,6 +727,46 @@ impl<R: Read + Seek> RawReader<R> {
             }
         }
         Ok(())
+    }
+
+    /// A data end or footer record: the end of the data, unless it cannot be (a damaged
+    /// opcode): then the framing is lost.
+    fn end_record(&mut self, at: u64, opcode: u8, len: u64) -> Result<()> {
+        let end = at + RECORD_HEADER_LEN + len;
+        let genuine = if self.damage.summary == SummaryState::Intact {
+            match opcode {
+                op::DATA_END => len == 4 && end == self.data_end,
+                _ => end + MAGIC_LEN == self.src.len,
+            }
+        } else {
+            // Nothing tells where the data ends: it does here if no chunk follows.
+            let next = self.resync_target(self.floor.max(end))?;
+            next.is_none()
+        };
+        if genuine {
+            self.data_end_met = true;
+            return Ok(());
+        }
+        self.resync(
+            at,
+            format!(
+                "the record framing is lost at offset {at} ({} record where the data goes on)",
+                record_name(opcode)
+            ),
+        )
+    }
+
+    /// The first chunk of the index that starts in `from..to`.
+    fn indexed_chunk_inside(&self, from: u64, to: u64) -> Option<u64> {
+        if self.damage.summary != SummaryState::Intact {
+            return None;
+        }
+        let i = self.summary.chunks.partition_point(|c| c.offset < from);
+        self.summary
+            .chunks
+            .get(i)
+            .map(|c| c.offset)
+            .filter(|&o| o < to)
     }
 
     /// A schema, channel or message outside chunks (or inside one).
@@ -792,11 +845,13 @@ impl<R: Read + Seek> RawReader<R> {
                 .checked_add(*n)
                 .is_some_and(|end| end <= len)
         };
+        // The records' length: the summary's (its CRC checked) first, then the shorter of
+        // the chunk's own two first: a zstd or lz4 frame decodes from any longer run of bytes
+        // that holds it, so the shortest length that checks is the chunk's.
+        let mut lengths = [Some(head.records_len), outer_records];
+        lengths.sort_unstable();
         let mut candidates: Vec<u64> = Vec::new();
-        for n in [Some(head.records_len), outer_records, index_records]
-            .into_iter()
-            .flatten()
-        {
+        for n in std::iter::once(index_records).chain(lengths).flatten() {
             if fits(&n) && n <= MAX_RECORD_LEN_U64 && !candidates.contains(&n) {
                 candidates.push(n);
             }

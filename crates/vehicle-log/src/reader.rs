@@ -263,8 +263,11 @@ impl<R: Read + Seek> Iterator for LogReader<R> {
                     Step::Nothing
                 }
                 Some(Ok(RawRecord::Message(message))) => {
-                    let trusted = message.verified
-                        || (self.raw.damage().is_clean() && !self.raw.damage().cut);
+                    // Outside a chunk whose CRC checks, a malformed message is the writer's
+                    // only in a file without chunks and without damage so far; in a chunked
+                    // file, a message outside the chunks is where damaged framing led.
+                    let trusted =
+                        message.verified || (!self.raw.chunked() && self.raw.damage().is_clean());
                     self.state.message(&message, trusted)
                 }
                 Some(Ok(RawRecord::Lost(span))) if self.state.concerns_us(&span) => {
