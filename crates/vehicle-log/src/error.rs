@@ -1,7 +1,8 @@
 //! Why a log could not be read or written.
 //!
-//! A log that is merely cut short (power lost while recording) is not an error: the reader
-//! returns what it could read and says why it stopped (see [`crate::Log::truncated`]).
+//! A log that is cut short (power lost while recording) or damaged is not an error: the
+//! reader returns what it could read and says what it lost (see [`crate::Log::damage`] and
+//! [`crate::Log::truncated`]).
 
 use std::path::PathBuf;
 
@@ -36,7 +37,8 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// The file does not start with the MCAP magic.
+    /// The file is not an MCAP file: it is empty, ends inside the magic, or neither starts
+    /// with the magic nor ends like an MCAP file nor holds a chunk whose CRC checks.
     #[error("{} is not an MCAP file: {why}", path.display())]
     NotMcap {
         /// The file, or the name given to the reader.
@@ -80,6 +82,12 @@ pub enum Error {
         /// What the stream said.
         #[source]
         source: std::io::Error,
+    },
+    /// [`crate::recover`] was asked to write over the log it reads.
+    #[error("{} is the log being recovered: write the recovered log to another file", path.display())]
+    SameFile {
+        /// The file.
+        path: PathBuf,
     },
     /// The MCAP writer refused an operation (not an I/O error).
     #[error("the MCAP writer failed: {detail}")]

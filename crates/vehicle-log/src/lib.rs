@@ -35,14 +35,20 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+mod damage;
 mod error;
 mod json;
+mod raw;
 mod reader;
+mod recover;
 pub mod topics;
 mod types;
 mod writer;
 
+pub use damage::{Damage, LostSpan, MAX_KEPT_SPANS, SummaryState};
 pub use error::{Error, NotMcap, Problem, Result};
-pub use reader::{Log, LogReader, MAX_RECORD_LEN, read_log};
+pub use raw::{MAX_RECORD_LEN, RawChannel, RawMessage, RawReader, RawRecord, RawSchema};
+pub use reader::{Log, LogReader, read_log};
+pub use recover::{Recovery, recover};
 pub use types::{OdomSample, Record, TruthCamera, TruthLandmark, TruthPose};
 pub use writer::{CHUNK_SPAN_NS, CHUNK_TARGET_BYTES, LogWriter, MAX_MESSAGE_LEN};

@@ -1,41 +1,30 @@
-//! Reading vehicle logs, whole or streaming.
+//! Reading vehicle logs, whole or streaming, on top of the damage-tolerant [`RawReader`].
 
 use std::collections::HashMap;
 use std::fs::File;
-use std::io::{ErrorKind, Read};
+use std::io::{Read, Seek};
 use std::path::{Path, PathBuf};
 
-use mcap::McapError;
-use mcap::records::{self, op};
-use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
-
-use crate::error::{Error, NotMcap, Result};
+use crate::damage::{Damage, LostSpan};
+use crate::error::{Error, Result};
 use crate::json;
+use crate::raw::{CutAt, RawChannel, RawMessage, RawReader, RawRecord};
 use crate::topics::{self, Topic};
 use crate::types::Record;
-
-/// The largest record or chunk the reader accepts, bytes: a corrupt length must not make it
-/// allocate without bound. Larger than any chunk [`crate::LogWriter`] writes.
-pub const MAX_RECORD_LEN: usize = 256 << 20;
-
-/// Bytes asked of the source per read when the MCAP reader needs less (it asks for a few
-/// bytes at a time when reading record headers).
-const MIN_READ: usize = 64 << 10;
-
-/// Most bytes asked of the source per read (the MCAP reader asks again for the rest).
-const MAX_READ: usize = 4 << 20;
 
 /// A whole vehicle log, read by [`read_log`].
 #[derive(Debug, Clone, PartialEq)]
 #[non_exhaustive]
 pub struct Log {
-    /// The messages of the vehicle topics, in log order (the order they were written in).
+    /// The messages of the vehicle topics, in log order (the order they were written in),
+    /// with a [`Record::Lost`] at each place where data that may have held some of them
+    /// could not be read.
     pub records: Vec<Record>,
     /// Things that looked wrong but did not stop the reading (a known topic with a foreign
-    /// encoding, a message on an undeclared channel).
+    /// encoding, a message on an undeclared channel, damage: one line each).
     pub warnings: Vec<String>,
-    /// Why the log ended early, when it did: a file cut short while recording, or damaged.
-    /// `records` then holds everything readable before that point.
+    /// Why the log ends early, when the file is cut short (power lost while recording):
+    /// `records` then holds everything readable before the cut.
     pub truncated: Option<String>,
     /// Messages on topics this crate does not know (or on foreign channels of known names).
     pub ignored_messages: u64,
@@ -43,6 +32,8 @@ pub struct Log {
     pub ignored_topics: Vec<String>,
     /// The vehicle topics that have a channel in the log, each once, in the order they were met.
     pub topics: Vec<&'static str>,
+    /// What could not be read, in total (the spans are also in `records`).
+    pub damage: Damage,
 }
 
 impl Log {
@@ -61,23 +52,24 @@ fn has_vehicle_topics(topics: &[&'static str]) -> bool {
 
 /// Reads the whole log at `path`.
 ///
-/// A log cut short (or damaged after its start) is not an error: the result holds the
-/// records read before that point and says why it stopped in [`Log::truncated`].
-/// Errors: the file cannot be opened or read, it is not an MCAP file, or a message of a
-/// vehicle topic is malformed.
+/// A damaged log is not an error: the result holds every record that could still be read,
+/// with [`Record::Lost`] where data was lost, [`Log::damage`] totals the losses and
+/// [`Log::truncated`] says whether the file is cut short. Errors: the file cannot be opened
+/// or read, it is not an MCAP file, or a message of a vehicle topic is malformed where the
+/// log shows no damage (or inside a chunk whose CRC checks).
 pub fn read_log(path: impl AsRef<Path>) -> Result<Log> {
     LogReader::open(path)?.into_log()
 }
 
 /// Streams the records of a log in log order, holding one chunk of the file at a time.
 ///
-/// Yields `Ok(record)` for each message of a vehicle topic; a malformed message yields one
-/// `Err` and ends the iteration. A log that is cut short or damaged ends the iteration early
-/// without an error; [`LogReader::truncated`] then says why. The counters and warnings
-/// ([`LogReader::ignored_messages`], ...) grow as the reading goes.
+/// Yields `Ok(record)` for each message of a vehicle topic, and [`Record::Lost`] where data
+/// that may have held some could not be read (just before the next good record: reset any
+/// stream decoder there). A malformed message yields one `Err` and ends the iteration, unless
+/// it comes from an unverified part of a damaged log (then it is dropped with a warning). The
+/// counters, warnings and [`LogReader::damage`] grow as the reading goes.
 pub struct LogReader<R = File> {
-    source: R,
-    mcap: LinearReader,
+    raw: RawReader<R>,
     state: State,
     done: bool,
 }
@@ -105,36 +97,13 @@ impl LogReader<File> {
     }
 }
 
-impl<R: Read> LogReader<R> {
-    /// Starts reading a log from `source`, checking that it starts with the MCAP magic;
-    /// `name` stands for the source in messages (a path, usually).
-    pub fn new(mut source: R, name: impl Into<PathBuf>) -> Result<Self> {
+impl<R: Read + Seek> LogReader<R> {
+    /// Starts reading a log from `source`, checking that it is an MCAP file (see
+    /// [`RawReader::new`]); `name` stands for the source in messages (a path, usually).
+    pub fn new(source: R, name: impl Into<PathBuf>) -> Result<Self> {
         let path = name.into();
-        let mut magic = [0u8; 8];
-        let len = read_up_to(&mut source, &mut magic).map_err(|source| Error::Read {
-            path: path.clone(),
-            source,
-        })?;
-        check_magic(&magic, len).map_err(|why| Error::NotMcap {
-            path: path.clone(),
-            why,
-        })?;
-        let options = LinearReaderOptions::default()
-            .with_prevalidate_chunk_crcs(true)
-            .with_validate_data_section_crc(true)
-            .with_validate_summary_section_crc(true)
-            .with_record_length_limit(MAX_RECORD_LEN);
-        let mut mcap = LinearReader::new_with_options(options);
-        let written = mcap
-            .insert(magic.len())
-            .iter_mut()
-            .zip(magic)
-            .map(|(to, from)| *to = from)
-            .count();
-        mcap.notify_read(written);
         Ok(Self {
-            source,
-            mcap,
+            raw: RawReader::new(source, path.clone())?,
             state: State::new(path),
             done: false,
         })
@@ -146,6 +115,7 @@ impl<R: Read> LogReader<R> {
         for record in &mut self {
             records.push(record?);
         }
+        let damage = self.raw.damage().clone();
         let state = self.state;
         Ok(Log {
             records,
@@ -154,27 +124,59 @@ impl<R: Read> LogReader<R> {
             ignored_messages: state.ignored_messages,
             ignored_topics: state.ignored_topics,
             topics: state.topics,
+            damage,
         })
     }
 
-    /// Passes up to about `need` more bytes of the source to the MCAP reader.
-    fn fill(&mut self, need: usize) -> Result<()> {
-        let buf = self.mcap.insert(need.clamp(MIN_READ, MAX_READ));
-        let n = loop {
-            match self.source.read(buf) {
-                Ok(n) => break n,
-                Err(err) if err.kind() == ErrorKind::Interrupted => continue,
-                Err(source) => {
-                    return Err(Error::Read {
-                        path: self.state.path.clone(),
-                        source,
-                    });
-                }
+    /// Ends the reading: why the file ends early, and one warning line for the damage.
+    fn finish(&mut self) {
+        let n = self.state.records;
+        self.state.truncated = self.raw.cut_at().map(|cut| match cut {
+            CutAt::Data => format!(
+                "the file ends inside its data section, after {n} records: cut short \
+                 (power lost while recording?)"
+            ),
+            CutAt::Summary => {
+                format!("the file ends inside its summary section: cut short after all {n} records")
             }
-        };
-        self.mcap.notify_read(n);
-        Ok(())
+        });
+        let damage = self.raw.damage();
+        if let Some(line) = damage_line(damage) {
+            self.state.warnings.push(line);
+        }
     }
+}
+
+/// One line for a log's damage other than the cut (which [`Log::truncated`] tells), or
+/// `None` when there is none.
+fn damage_line(damage: &Damage) -> Option<String> {
+    let mut parts = Vec::new();
+    if damage.header_damaged {
+        parts.push("its magic or header record is damaged".to_owned());
+    }
+    let lost: Vec<&LostSpan> = damage
+        .spans
+        .iter()
+        .filter(|s| !s.why.contains("(cut short)"))
+        .collect();
+    let cut_spans = damage.spans.len() - lost.len();
+    let spans = damage.spans_total.saturating_sub(cut_spans as u64);
+    if spans > 0 {
+        let first = lost.first().map_or(String::new(), |s| {
+            format!(", the first at offset {}: {}", s.offset, s.why)
+        });
+        parts.push(format!(
+            "{spans} stretches lost ({} bytes, {} chunks){first}",
+            damage.bytes_lost, damage.chunks_lost
+        ));
+    }
+    if let crate::damage::SummaryState::Damaged { why } = &damage.summary {
+        parts.push(format!("its summary section is unusable ({why})"));
+    }
+    if damage.tail_damaged {
+        parts.push("its closing magic is damaged".to_owned());
+    }
+    (!parts.is_empty()).then(|| format!("the log is damaged: {}", parts.join("; ")))
 }
 
 impl<R> LogReader<R> {
@@ -183,7 +185,7 @@ impl<R> LogReader<R> {
         &self.state.path
     }
 
-    /// Why the log ended early, once it has (see [`Log::truncated`]).
+    /// Why the log ends early, once the reading has ended (see [`Log::truncated`]).
     pub fn truncated(&self) -> Option<&str> {
         self.state.truncated.as_deref()
     }
@@ -213,58 +215,91 @@ impl<R> LogReader<R> {
     pub fn has_vehicle_topics(&self) -> bool {
         has_vehicle_topics(&self.state.topics)
     }
+
+    /// What could not be read so far; complete once the iteration has ended.
+    pub fn damage(&self) -> &Damage {
+        self.raw.damage()
+    }
+
+    /// How far the reading has come, bytes of the file (for progress bars).
+    pub fn position(&self) -> u64 {
+        self.raw.position()
+    }
+
+    /// The file's length, bytes.
+    pub fn file_len(&self) -> u64 {
+        self.raw.file_len()
+    }
+
+    /// Messages read so far per vehicle topic (decoded and yielded), in
+    /// [`Topic`](crate::topics) order: `(topic, count)`.
+    pub fn messages_read(&self) -> Vec<(&'static str, u64)> {
+        Topic::ALL
+            .iter()
+            .map(|t| (t.name(), self.state.counts[t.index()]))
+            .filter(|(_, n)| *n > 0)
+            .collect()
+    }
 }
 
-impl<R: Read> Iterator for LogReader<R> {
+impl<R: Read + Seek> Iterator for LogReader<R> {
     type Item = Result<Record>;
 
     fn next(&mut self) -> Option<Self::Item> {
         while !self.done {
-            let step = match self.mcap.next_event() {
-                None => Step::End,
-                Some(Err(err)) => Step::Broken(err),
-                Some(Ok(LinearReadEvent::ReadRequest(need))) => Step::Read(need),
-                Some(Ok(LinearReadEvent::Record { opcode, data })) => {
-                    self.state.record(opcode, data)
+            let step = match self.raw.next() {
+                None => {
+                    self.done = true;
+                    self.finish();
+                    return None;
                 }
+                Some(Err(err)) => Step::Bad(err),
+                Some(Ok(RawRecord::Schema(schema))) => {
+                    self.state.schemas.insert(schema.id, schema.name);
+                    Step::Nothing
+                }
+                Some(Ok(RawRecord::Channel(channel))) => {
+                    self.state.channel(channel);
+                    Step::Nothing
+                }
+                Some(Ok(RawRecord::Message(message))) => {
+                    // Outside a chunk whose CRC checks, a malformed message is the writer's
+                    // only in a file without chunks and without damage so far; in a chunked
+                    // file, a message outside the chunks is where damaged framing led.
+                    let trusted =
+                        message.verified || (!self.raw.chunked() && self.raw.damage().is_clean());
+                    self.state.message(&message, trusted)
+                }
+                Some(Ok(RawRecord::Lost(span))) if self.state.concerns_us(&span) => {
+                    Step::Record(Record::Lost(span))
+                }
+                Some(Ok(_)) => Step::Nothing,
             };
             match step {
                 Step::Nothing => {}
-                Step::Read(need) => {
-                    if let Err(err) = self.fill(need) {
-                        self.done = true;
-                        return Some(Err(err));
-                    }
-                }
                 Step::Record(record) => {
-                    self.state.records += 1;
+                    if !matches!(record, Record::Lost(_)) {
+                        self.state.records += 1;
+                    }
                     return Some(Ok(record));
                 }
                 Step::Bad(err) => {
                     self.done = true;
                     return Some(Err(err));
                 }
-                Step::Broken(err) => {
-                    self.state.broken(&err);
-                    self.done = true;
-                }
-                Step::End => self.done = true,
             }
         }
         None
     }
 }
 
-impl<R: Read> std::iter::FusedIterator for LogReader<R> {}
+impl<R: Read + Seek> std::iter::FusedIterator for LogReader<R> {}
 
-/// What one event of the MCAP reader leads to.
+/// What one raw record leads to.
 enum Step {
     Nothing,
-    Read(usize),
     Record(Record),
     Bad(Error),
-    Broken(McapError),
-    End,
 }
 
 /// What a channel is to this reader.
@@ -290,10 +325,9 @@ struct State {
     topics: Vec<&'static str>,
     warnings: Vec<String>,
     truncated: Option<String>,
-    /// The data end record was read: what follows is the summary, which repeats schemas
-    /// and channels.
-    past_data_end: bool,
     warned_undeclared_channel: bool,
+    /// Malformed vehicle messages dropped from unverified parts of a damaged log.
+    dropped_malformed: u64,
 }
 
 impl State {
@@ -309,38 +343,20 @@ impl State {
             topics: Vec::new(),
             warnings: Vec::new(),
             truncated: None,
-            past_data_end: false,
             warned_undeclared_channel: false,
+            dropped_malformed: 0,
         }
     }
 
-    fn record(&mut self, opcode: u8, data: &[u8]) -> Step {
-        if self.past_data_end {
-            return Step::Nothing;
-        }
-        if opcode == op::DATA_END {
-            self.past_data_end = true;
-            return Step::Nothing;
-        }
-        if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
-            return Step::Nothing;
-        }
-        match mcap::parse_record(opcode, data) {
-            Err(err) => Step::Broken(err),
-            Ok(records::Record::Schema { header, .. }) => {
-                self.schemas.insert(header.id, header.name);
-                Step::Nothing
-            }
-            Ok(records::Record::Channel(channel)) => {
-                self.channel(channel);
-                Step::Nothing
-            }
-            Ok(records::Record::Message { header, data }) => self.message(&header, &data),
-            Ok(_) => Step::Nothing,
-        }
+    /// Whether a lost span may have held messages of our channels (or nothing tells).
+    fn concerns_us(&self, span: &LostSpan) -> bool {
+        span.messages.as_ref().is_none_or(|m| {
+            m.iter()
+                .any(|(topic, n)| *n > 0 && Topic::from_name(topic).is_some())
+        })
     }
 
-    fn channel(&mut self, channel: records::Channel) {
+    fn channel(&mut self, channel: RawChannel) {
         let schema_name = self.schemas.get(&channel.schema_id).map(String::as_str);
         let kind = match Topic::from_name(&channel.topic) {
             Some(topic) => {
@@ -384,8 +400,11 @@ impl State {
         self.channels.insert(channel.id, kind);
     }
 
-    fn message(&mut self, header: &records::MessageHeader, data: &[u8]) -> Step {
-        let topic = match self.channels.get(&header.channel_id) {
+    /// A message; `trusted`: a malformed one is an error (it comes from a chunk whose CRC
+    /// checks, or the log shows no damage), else it is dropped with a warning.
+    fn message(&mut self, message: &RawMessage, trusted: bool) -> Step {
+        let data = message.data.as_slice();
+        let topic = match self.channels.get(&message.channel_id) {
             Some(Channel::Ours(topic)) => *topic,
             Some(Channel::Foreign) => {
                 self.ignored_messages += 1;
@@ -398,7 +417,7 @@ impl State {
                     self.warnings.push(format!(
                         "message on channel {}, which no channel record declares: ignored \
                          (and any more such)",
-                        header.channel_id
+                        message.channel_id
                     ));
                 }
                 return Step::Nothing;
@@ -409,7 +428,7 @@ impl State {
         *count += 1;
         let decoded = match topic {
             Topic::Features => Ok(Record::Features {
-                log_time_ns: header.log_time,
+                log_time_ns: message.log_time,
                 bytes: data.to_vec(),
             }),
             Topic::Odom => json::decode_odom(data).map(Record::Odom),
@@ -420,98 +439,24 @@ impl State {
         };
         match decoded {
             Ok(record) => Step::Record(record),
-            Err(problem) => Step::Bad(Error::BadMessage {
+            Err(problem) if trusted => Step::Bad(Error::BadMessage {
                 path: self.path.clone(),
                 topic: topic.name(),
                 index,
                 problem,
             }),
-        }
-    }
-
-    /// Records why the log ended early.
-    fn broken(&mut self, err: &McapError) {
-        let n = self.records;
-        self.truncated = Some(match (err, self.past_data_end) {
-            (McapError::UnexpectedEof, false) => format!(
-                "the file ends inside its data section, after {n} records: cut short \
-                 (power lost while recording?)"
-            ),
-            (McapError::UnexpectedEof, true) => {
-                format!("the file ends inside its summary section: cut short after all {n} records")
+            Err(problem) => {
+                self.dropped_malformed += 1;
+                if self.dropped_malformed == 1 {
+                    self.warnings.push(format!(
+                        "{} message {index} (log time {} ns) is malformed ({problem}) in a part \
+                         of the damaged log no CRC covers: dropped as damage (and any more such)",
+                        topic.name(),
+                        message.log_time
+                    ));
+                }
+                Step::Nothing
             }
-            (err, false) => format!("the log is unreadable after {n} records: {err}"),
-            (err, true) => {
-                format!("the summary section is unreadable ({err}), after all {n} records")
-            }
-        });
-    }
-}
-
-/// Reads until `buf` is full or the source ends; returns the bytes read.
-fn read_up_to(source: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut len = 0;
-    while let Some(rest) = buf.get_mut(len..) {
-        if rest.is_empty() {
-            break;
         }
-        match source.read(rest) {
-            Ok(0) => break,
-            Ok(n) => len += n,
-            Err(err) if err.kind() == ErrorKind::Interrupted => {}
-            Err(err) => return Err(err),
-        }
-    }
-    Ok(len)
-}
-
-/// Checks the first `len` bytes of `start` against the MCAP magic.
-fn check_magic(start: &[u8], len: usize) -> Result<(), NotMcap> {
-    let found = start.get(..len).unwrap_or(start);
-    if found == mcap::MAGIC {
-        return Ok(());
-    }
-    if found.is_empty() {
-        return Err(NotMcap::Empty);
-    }
-    if found.len() < mcap::MAGIC.len() && mcap::MAGIC.starts_with(found) {
-        return Err(NotMcap::ShorterThanMagic {
-            len: found.len(),
-            magic_len: mcap::MAGIC.len(),
-        });
-    }
-    Err(NotMcap::BadMagic {
-        found: hex(found),
-        expected: hex(mcap::MAGIC),
-    })
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn magic_checks() {
-        assert_eq!(check_magic(mcap::MAGIC, 8), Ok(()));
-        assert_eq!(check_magic(&[0; 8], 0), Err(NotMcap::Empty));
-        assert_eq!(
-            check_magic(mcap::MAGIC, 5),
-            Err(NotMcap::ShorterThanMagic {
-                len: 5,
-                magic_len: 8
-            })
-        );
-        assert_eq!(
-            check_magic(b"PK\x03\x04", 4).unwrap_err().to_string(),
-            "it starts with 50 4b 03 04, not the MCAP magic 89 4d 43 41 50 30 0d 0a"
-        );
     }
 }

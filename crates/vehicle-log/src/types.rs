@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::damage::LostSpan;
+
 /// One odometry sample on `/odom` (vehicle-interfaces.md section 2): robot-frame velocities,
 /// each held constant from `t_us` until the next sample.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -108,4 +110,9 @@ pub enum Record {
     TruthLandmarks(Vec<TruthLandmark>),
     /// Simulator truth: the camera parameters.
     TruthCamera(TruthCamera),
+    /// Data that could not be read (a damaged chunk, bytes skipped where the framing was
+    /// lost, the rest of a chunk cut by the end of the file), at the place of the loss: just
+    /// before the next good record. A stream decoder should be reset here (the bytes before
+    /// and after do not join); the span says how much log time was lost.
+    Lost(LostSpan),
 }

@@ -1,6 +1,8 @@
 //! Helpers shared by the tests: a seeded generator, sample logs, paths.
 #![allow(dead_code, unreachable_pub, clippy::unwrap_used, clippy::expect_used)]
 
+pub mod layout;
+
 use std::io::{Cursor, Seek, Write};
 use std::path::{Path, PathBuf};
 
