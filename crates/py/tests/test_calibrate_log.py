@@ -47,6 +47,10 @@ COUNTS = {
     "landmark_pairs",
     "tracker_resets",
     "phase1_solves",
+    "log_spans_lost",
+    "log_bytes_lost",
+    "log_chunks_lost",
+    "log_time_lost_ms",
 }
 
 

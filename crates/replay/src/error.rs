@@ -22,14 +22,22 @@ pub enum Error {
         /// The topics it has instead.
         topics: Vec<String>,
     },
-    /// No rig was given and the log has no `/rig` message.
+    /// No rig was given and the log has no `/rig` message (or lost it to damage).
     #[error(
-        "{}: no rig: the log has no /rig message and no rig file was given",
-        path.display()
+        "{}: no rig: {} and no rig file was given",
+        path.display(),
+        if *lost_to_damage {
+            "the log's start is damaged (its /rig message was in a lost stretch: see `stereonav log check`)"
+        } else {
+            "the log has no /rig message"
+        }
     )]
     NoRig {
         /// The file.
         path: PathBuf,
+        /// The log lost a stretch before its first readable data: the `/rig` message, written
+        /// at the start, was most likely in it.
+        lost_to_damage: bool,
     },
     /// The log's `/rig` message is not a usable rig (the message names the key and problem).
     #[error(transparent)]

@@ -431,6 +431,11 @@ impl At<'_> {
             tracker_resets: self.uint(c, "tracker_resets")?,
             // Absent from estimates files written before phase 1 became a batch.
             phase1_solves: self.uint(c, "phase1_solves").unwrap_or(0),
+            // Absent from estimates files written before the reader recovered damaged logs.
+            log_spans_lost: self.uint(c, "log_spans_lost").unwrap_or(0),
+            log_bytes_lost: self.uint(c, "log_bytes_lost").unwrap_or(0),
+            log_chunks_lost: self.uint(c, "log_chunks_lost").unwrap_or(0),
+            log_time_lost_ms: self.uint(c, "log_time_lost_ms").unwrap_or(0),
         })
     }
 
@@ -637,6 +642,7 @@ impl<'p> Reader<'p> {
                 counts: Counts::default(),
                 truth: None,
                 warnings,
+                log_damage: None,
             });
         };
         let landmarks = match last_map {
@@ -671,6 +677,9 @@ impl<'p> Reader<'p> {
             frames: self.frames,
             camera: self.camera,
             maps: self.maps,
+            // The summary's `log_damage` is for readers of the file; its counts and warnings
+            // say what was lost.
+            log_damage: None,
         })
     }
 }

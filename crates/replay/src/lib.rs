@@ -139,11 +139,20 @@ pub struct Counts {
     pub tracker_resets: u64,
     /// Solves of phase 1's batch over every frame (the replay's phase 1).
     pub phase1_solves: u64,
+    /// Stretches of the log file lost to damage (bad CRCs, broken records, a cut chunk's
+    /// unreadable rest): [`vehicle_log::Damage::spans_total`].
+    pub log_spans_lost: u64,
+    /// Bytes of the log file in them.
+    pub log_bytes_lost: u64,
+    /// Chunk records lost in them, wholly or in part.
+    pub log_chunks_lost: u64,
+    /// Log time the lost stretches covered, milliseconds (where both ends are known).
+    pub log_time_lost_ms: u64,
 }
 
 impl Counts {
     /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 13] {
+    pub fn named(&self) -> [(&'static str, u64); 17] {
         [
             ("frames", self.frames),
             ("corrupt", self.corrupt),
@@ -158,6 +167,10 @@ impl Counts {
             ("landmark_pairs", self.landmark_pairs),
             ("tracker_resets", self.tracker_resets),
             ("phase1_solves", self.phase1_solves),
+            ("log_spans_lost", self.log_spans_lost),
+            ("log_bytes_lost", self.log_bytes_lost),
+            ("log_chunks_lost", self.log_chunks_lost),
+            ("log_time_lost_ms", self.log_time_lost_ms),
         ]
     }
 }
@@ -245,9 +258,21 @@ pub fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput, Error
             _ => {}
         }
     }
-    let (rig, rig_source) = choose_rig(path, rig, logged_rig, &mut warnings)?;
+    let lost_before_data = log
+        .records
+        .iter()
+        .take_while(|r| !matches!(r, Record::Features { .. } | Record::Odom(_)))
+        .any(|r| matches!(r, Record::Lost(_)))
+        || log.damage.header_damaged;
+    let (rig, rig_source) = choose_rig(path, rig, logged_rig, lost_before_data, &mut warnings)?;
 
-    let mut counts = Counts::default();
+    let mut counts = Counts {
+        log_spans_lost: log.damage.spans_total,
+        log_bytes_lost: log.damage.bytes_lost,
+        log_chunks_lost: log.damage.chunks_lost,
+        log_time_lost_ms: navigate::time_lost_ms(&log.damage),
+        ..Counts::default()
+    };
     let (mut frames, stats) = decode_stream(&chunks);
     counts.frames = stats.packets;
     counts.corrupt = stats.corrupt;
@@ -384,6 +409,7 @@ fn choose_rig(
     path: &Path,
     given: Option<Rig>,
     logged: Option<&str>,
+    lost_before_data: bool,
     warnings: &mut Vec<String>,
 ) -> Result<(Rig, RigSource), Error> {
     let source_name = format!("{} /rig", path.display());
@@ -402,6 +428,7 @@ fn choose_rig(
         (None, Some(text)) => Ok((Rig::from_json_str(text, &source_name)?, RigSource::Log)),
         (None, None) => Err(Error::NoRig {
             path: PathBuf::from(path),
+            lost_to_damage: lost_before_data,
         }),
     }
 }

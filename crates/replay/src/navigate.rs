@@ -423,6 +423,12 @@ impl Replayer {
         counts.confirmed_tracks = tracker.confirmed;
         counts.tracker_resets = tracker.resets;
         counts.phase1_solves = stats.phase1_solves;
+        let damage = self.stream.reader().damage();
+        counts.log_spans_lost = damage.spans_total;
+        counts.log_bytes_lost = damage.bytes_lost;
+        counts.log_chunks_lost = damage.chunks_lost;
+        counts.log_time_lost_ms = time_lost_ms(damage);
+        let log_damage = (!damage.is_clean()).then(|| damage.clone());
         navigator_warnings(navigator, &self.refused, &mut warnings);
 
         let truth_stream = &self.stream.truth;
@@ -458,6 +464,7 @@ impl Replayer {
             counts,
             truth,
             warnings,
+            log_damage,
         })
     }
 
@@ -472,6 +479,18 @@ impl Replayer {
             ));
         }
         warnings.extend(reader.warnings().iter().cloned());
+        let damage = reader.damage();
+        for span in damage.spans.iter().take(MAX_SPAN_WARNINGS) {
+            warnings.push(span_warning(span));
+        }
+        if damage.spans_total > MAX_SPAN_WARNINGS as u64 {
+            warnings.push(format!(
+                "and {} more stretches of the log lost ({} bytes, {} chunks in all)",
+                damage.spans_total - MAX_SPAN_WARNINGS as u64,
+                damage.bytes_lost,
+                damage.chunks_lost
+            ));
+        }
         if self.given_rig
             && let Some(text) = &self.stream.rig_text
             && Rig::from_json_str(text, "/rig").is_ok_and(|l| l != self.rig)
@@ -483,6 +502,43 @@ impl Replayer {
         }
         warnings
     }
+}
+
+/// Lost stretches of a damaged log told one warning each (the rest in one more line).
+const MAX_SPAN_WARNINGS: usize = 10;
+
+/// One line for a lost stretch of the log: where, which log time, what it held, why.
+fn span_warning(span: &vehicle_log::LostSpan) -> String {
+    let s = |ns: u64| ns as f64 * 1e-9;
+    let bound = if span.exact_times { "" } else { "within " };
+    let time = match (span.start_ns, span.end_ns) {
+        (Some(a), Some(b)) => format!("{bound}log time {:.3} s to {:.3} s", s(a), s(b)),
+        (None, Some(b)) => format!("log time before {:.3} s", s(b)),
+        (Some(a), None) => format!("log time after {:.3} s", s(a)),
+        (None, None) => "log time unknown".to_owned(),
+    };
+    let held = span.messages.as_ref().map_or(String::new(), |m| {
+        let parts: Vec<String> = m.iter().map(|(t, n)| format!("{n} on {t}")).collect();
+        format!(
+            ", {} messages: {}",
+            m.values().sum::<u64>(),
+            parts.join(", ")
+        )
+    });
+    format!(
+        "lost {} bytes of the log at offset {} ({time}{held}): {}",
+        span.bytes, span.offset, span.why
+    )
+}
+
+/// Data time covered by the lost stretches whose both ends are known, milliseconds.
+pub(crate) fn time_lost_ms(damage: &vehicle_log::Damage) -> u64 {
+    damage
+        .spans
+        .iter()
+        .filter_map(|s| Some(s.end_ns?.saturating_sub(s.start_ns?)))
+        .sum::<u64>()
+        / 1_000_000
 }
 
 /// The navigator's warnings at the end of a replay.

@@ -296,6 +296,7 @@ struct SummaryParts<'a> {
     warnings: &'a [String],
     frames_processed: u64,
     truth: Option<&'a TruthErrors>,
+    log_damage: Option<&'a vehicle_log::Damage>,
 }
 
 /// The content of `SUMMARY.json`, and of the `/est/summary` message.
@@ -319,7 +320,12 @@ struct SummaryParts<'a> {
 /// - `truth`: `null`, or the errors against the simulator's truth: `landmark_rms_m`,
 ///   `landmark_rms_aligned_m`, `landmarks_matched`, `landmarks_unmatched`, `lamps_missed`,
 ///   `match_radius_m`, `ate_rms_m`, `ate_max_m`, `heading_rms_rad`, `camera` and `vehicle`
-///   (`{name: estimate - truth}`).
+///   (`{name: estimate - truth}`);
+/// - `log_damage`: `null` for a log read whole, or what the reader could not read:
+///   `spans_total`, `bytes_lost`, `chunks_lost`, `messages_lost` (`{topic: n}` or `null`),
+///   `header_damaged`, `tail_damaged`, `cut`, `summary` (`"intact"`, `"absent"` or
+///   `"damaged: why"`), `unverified_chunks`, and `spans`, the first 100 stretches lost:
+///   `{offset, bytes, start_ns, end_ns, exact_times, chunks, messages, why}`.
 ///
 /// Non-finite numbers are `null` (see the module docs).
 pub fn summary_json(replay: &Replay) -> Value {
@@ -333,6 +339,7 @@ pub fn summary_json(replay: &Replay) -> Value {
         warnings: &replay.warnings,
         frames_processed: replay.frames.len() as u64,
         truth: replay.truth.as_ref(),
+        log_damage: replay.log_damage.as_ref(),
     })
 }
 
@@ -349,6 +356,7 @@ pub fn end_summary_json(end: &ReplayEnd) -> Value {
         warnings: &end.warnings,
         frames_processed: end.frames_processed,
         truth: end.truth.as_ref(),
+        log_damage: end.log_damage.as_ref(),
     })
 }
 
@@ -371,6 +379,47 @@ fn summary_value(s: &SummaryParts<'_>) -> Value {
         "warnings": s.warnings,
         "counts": counts_json(c, s.frames_processed),
         "truth": s.truth.map_or(Value::Null, truth_json),
+        "log_damage": s.log_damage.map_or(Value::Null, damage_json),
+    })
+}
+
+/// Lost stretches listed in the summary's `log_damage` (the counts hold the totals).
+const MAX_SUMMARY_SPANS: usize = 100;
+
+fn damage_json(d: &vehicle_log::Damage) -> Value {
+    let summary = match &d.summary {
+        vehicle_log::SummaryState::Intact => "intact".to_owned(),
+        vehicle_log::SummaryState::Damaged { why } => format!("damaged: {why}"),
+        _ => "absent".to_owned(),
+    };
+    let spans: Vec<Value> = d
+        .spans
+        .iter()
+        .take(MAX_SUMMARY_SPANS)
+        .map(|s| {
+            json!({
+                "offset": s.offset,
+                "bytes": s.bytes,
+                "start_ns": s.start_ns,
+                "end_ns": s.end_ns,
+                "exact_times": s.exact_times,
+                "chunks": s.chunks,
+                "messages": s.messages,
+                "why": s.why,
+            })
+        })
+        .collect();
+    json!({
+        "spans_total": d.spans_total,
+        "bytes_lost": d.bytes_lost,
+        "chunks_lost": d.chunks_lost,
+        "messages_lost": d.messages_lost,
+        "header_damaged": d.header_damaged,
+        "tail_damaged": d.tail_damaged,
+        "cut": d.cut,
+        "summary": summary,
+        "unverified_chunks": d.unverified_chunks,
+        "spans": spans,
     })
 }
 
@@ -1516,6 +1565,76 @@ mod schema {
                     "phase1_solves",
                     integer("Solves of phase 1's batch over every frame"),
                 ),
+                (
+                    "log_spans_lost",
+                    integer("Stretches of the log file lost to damage"),
+                ),
+                ("log_bytes_lost", integer("Bytes of the log file in them")),
+                ("log_chunks_lost", integer("Chunk records lost in them")),
+                (
+                    "log_time_lost_ms",
+                    integer("Log time they covered, milliseconds"),
+                ),
+            ],
+        );
+        let counts_by_topic = json!({
+            "oneOf": [
+                {"type": "null"},
+                {"type": "object", "additionalProperties": {"type": "integer", "minimum": 0}},
+            ],
+            "description": "Messages by topic, when known",
+        });
+        let nullable_integer = |description: &str| json!({"type": ["integer", "null"], "minimum": 0, "description": description});
+        let span = strict_object(
+            "stereonav.LostSpan",
+            "A stretch of the log that could not be read",
+            &[
+                ("offset", integer("File offset of its first byte")),
+                ("bytes", integer("Bytes not used")),
+                (
+                    "start_ns",
+                    nullable_integer(
+                        "Log time of the first message lost, or the last good one before",
+                    ),
+                ),
+                (
+                    "end_ns",
+                    nullable_integer(
+                        "Log time of the last message lost, or the first good one after",
+                    ),
+                ),
+                (
+                    "exact_times",
+                    boolean("The times are the lost messages' own, not bounds"),
+                ),
+                ("chunks", integer("Chunk records lost")),
+                ("messages", counts_by_topic.clone()),
+                ("why", string("What was wrong, one line")),
+            ],
+        );
+        let damage = strict_object(
+            "stereonav.LogDamage",
+            "What the reader could not read in the log",
+            &[
+                ("spans_total", integer("Stretches lost")),
+                ("bytes_lost", integer("Bytes lost")),
+                ("chunks_lost", integer("Chunk records lost")),
+                ("messages_lost", counts_by_topic),
+                (
+                    "header_damaged",
+                    boolean("The magic or header record is damaged"),
+                ),
+                ("tail_damaged", boolean("The closing magic is damaged")),
+                ("cut", boolean("The file is cut short")),
+                (
+                    "summary",
+                    string("The summary section: intact, absent or damaged: why"),
+                ),
+                (
+                    "unverified_chunks",
+                    integer("Chunks used without a CRC check"),
+                ),
+                ("spans", array(span, "The first 100 stretches lost")),
             ],
         );
         let camera_errors: Vec<(&str, Value)> = Param::CAMERA
@@ -1618,6 +1737,7 @@ mod schema {
                 ),
                 ("counts", counts),
                 ("truth", nullable(truth)),
+                ("log_damage", nullable(damage)),
             ],
         ))
     }

@@ -148,6 +148,8 @@ pub(crate) struct LogStream {
     pub(crate) counts: Counts,
     /// Bytes of `/fpga/features` read so far.
     feature_bytes: u64,
+    /// A stretch of the log was lost before its first board bytes or odometry.
+    lost_before_data: bool,
 }
 
 impl std::fmt::Debug for LogStream {
@@ -193,6 +195,7 @@ impl LogStream {
             truth: TruthStream::default(),
             counts: Counts::default(),
             feature_bytes: 0,
+            lost_before_data: false,
         })
     }
 
@@ -231,6 +234,7 @@ impl LogStream {
         if need_rig && self.rig_text.is_none() {
             return Err(Error::NoRig {
                 path: self.path.clone(),
+                lost_to_damage: self.lost_before_data || self.reader.damage().header_damaged,
             });
         }
         Ok(())
@@ -352,6 +356,11 @@ impl LogStream {
             }
             // The first /rig counts (the rig is logged once, at the start).
             Record::Rig(text) if self.rig_text.is_none() => self.rig_text = Some(text),
+            // The reader counts what was lost; the board stream's decoder resynchronises
+            // after the gap by itself (a packet cut by it fails its CRC).
+            Record::Lost(_) if self.feature_bytes == 0 && self.counts.odometry == 0 => {
+                self.lost_before_data = true;
+            }
             Record::TruthPose(p) => {
                 self.truth.any = true;
                 self.truth.poses.insert(p.t_us, p);

@@ -206,6 +206,8 @@ pub struct ReplayEnd {
     pub truth: Option<TruthErrors>,
     /// Things that did not stop the replay but limit what it says, one line each.
     pub warnings: Vec<String>,
+    /// What the log lost to damage, when it is damaged (`None`: every record was read).
+    pub log_damage: Option<vehicle_log::Damage>,
 }
 
 /// A whole log replayed.
@@ -232,6 +234,9 @@ pub struct Replay {
     pub truth: Option<TruthErrors>,
     /// Things that did not stop the replay but limit what it says, one line each.
     pub warnings: Vec<String>,
+    /// What the log lost to damage, when it is damaged (`None`: every record was read, or the
+    /// replay was read back from an estimates file, whose counts and warnings say it).
+    pub log_damage: Option<vehicle_log::Damage>,
 }
 
 impl Replay {
@@ -253,6 +258,7 @@ impl Replay {
             counts: end.counts,
             truth: end.truth,
             warnings: end.warnings,
+            log_damage: end.log_damage,
         }
     }
 }

@@ -179,6 +179,7 @@ fn synthetic() -> Replay {
             consistency: None,
         }),
         warnings: vec!["mount_yaw is held at its nominal value: test".to_string()],
+        log_damage: None,
         frames,
         camera,
         maps,
@@ -641,8 +642,10 @@ fn summary_has_the_contract_keys_and_types() {
             "warnings",
             "counts",
             "truth",
+            "log_damage",
         ])
     );
+    assert_eq!(s["log_damage"], Value::Null);
     assert_eq!(s["frames"].as_u64(), Some(25));
     assert_eq!(s["corrupt"].as_u64(), Some(1));
     assert_eq!(s["lost"].as_u64(), Some(2));
@@ -709,6 +712,10 @@ fn summary_has_the_contract_keys_and_types() {
             "landmark_pairs",
             "tracker_resets",
             "phase1_solves",
+            "log_spans_lost",
+            "log_bytes_lost",
+            "log_chunks_lost",
+            "log_time_lost_ms",
         ])
     );
     assert!(s["counts"].as_object().unwrap().values().all(Value::is_u64));
@@ -932,6 +939,7 @@ fn an_empty_replay_writes_valid_files() {
         counts: Counts::default(),
         truth: None,
         warnings: vec![],
+        log_damage: None,
     };
     let dir = write_all("empty", &replay);
     let est = read_est(&std::fs::read(dir.join("EST.mcap")).unwrap(), false);

@@ -1051,8 +1051,9 @@ impl ScenarioSpec {
 /// Largest lamp radius, metres: the simulator's lamps are points, drawn as small disks.
 pub const MAX_LAMP_RADIUS_M: f64 = 0.5;
 
-/// Longest path a scenario may have, seconds (4 hours).
-pub const MAX_DURATION_S: f64 = 14_400.0;
+/// Longest path a scenario may have, seconds (12 hours: a long shift; the simulator holds
+/// the whole run in memory, about 3 MiB per simulated minute of the warehouse).
+pub const MAX_DURATION_S: f64 = 43_200.0;
 
 /// Collects the first impossible value.
 struct Validator<'a> {

@@ -192,7 +192,7 @@ fn impossible_values() {
         (
             "repeat = 2",
             "repeat = 1000",
-            "bad.toml: path: the path takes 46333 s; at most 14400 s",
+            "bad.toml: path: the path takes 46333 s; at most 43200 s",
         ),
         (
             "camera_hz = 20.0",

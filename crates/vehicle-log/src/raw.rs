@@ -530,10 +530,20 @@ impl<R: Read + Seek> RawReader<R> {
         if crc != 0 {
             let computed = crc32fast::hash(&bytes);
             if computed != crc {
+                // Its chunk index and statistics are not trusted, but the schemas and
+                // channels that still parse are used for messages whose channel record was
+                // lost (in a damaged first chunk, where writers put them): a flipped bit in
+                // one of them makes it foreign (topic, encoding) or a duplicate id (dropped).
+                let records_len = usize::try_from(footer_at - summary_start).unwrap_or(usize::MAX);
+                let salvaged = salvage_summary(bytes.get(..records_len).unwrap_or(&[]));
+                let kept = salvaged.channels.len();
+                self.summary.schemas = salvaged.schemas;
+                self.summary.channels = salvaged.channels;
                 self.damage.summary = SummaryState::Damaged {
                     why: format!(
                         "its CRC fails (saved {crc:08x}, computed {computed:08x}) at offsets \
-                         {summary_start}..{footer_at}"
+                         {summary_start}..{footer_at}; {kept} channel records of it still \
+                         parse and were used for channels the data section lost"
                     ),
                 };
                 return Ok(true);
@@ -1634,6 +1644,70 @@ fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
     summary.chunks.sort_by_key(|c| c.offset);
     summary.chunks.dedup_by_key(|c| c.offset);
     Ok(summary)
+}
+
+/// The schemas and channels of a summary section whose CRC fails: its records read in
+/// order until the framing breaks, each schema and channel record that parses kept, and any
+/// id met twice dropped (a correct summary has each once, so a repeat is a flipped bit).
+fn salvage_summary(bytes: &[u8]) -> Summary {
+    let mut summary = Summary::default();
+    let mut repeated_schemas = Vec::new();
+    let mut repeated_channels = Vec::new();
+    let mut rest = bytes;
+    while let (Some(&opcode), Some(len)) = (rest.first(), le_u64(rest, 1)) {
+        let Some(body) = usize::try_from(len)
+            .ok()
+            .and_then(|len| rest.get(9..9usize.checked_add(len)?))
+        else {
+            break;
+        };
+        match mcap::parse_record(opcode, body) {
+            Ok(records::Record::Schema { header, data }) => {
+                let schema = RawSchema {
+                    id: header.id,
+                    name: header.name,
+                    encoding: header.encoding,
+                    data: data.into_owned(),
+                };
+                if summary.schemas.insert(header.id, schema).is_some() {
+                    repeated_schemas.push(header.id);
+                }
+            }
+            Ok(records::Record::Channel(c)) => {
+                let id = c.id;
+                let channel = RawChannel {
+                    id,
+                    schema_id: c.schema_id,
+                    topic: c.topic,
+                    message_encoding: c.message_encoding,
+                    metadata: c.metadata,
+                };
+                if summary.channels.insert(id, channel).is_some() {
+                    repeated_channels.push(id);
+                }
+            }
+            Ok(_) => {}
+            // An opcode that is no record's: the framing is lost.
+            Err(_) if !(op::HEADER..=op::DATA_END).contains(&opcode) => break,
+            Err(_) => {}
+        }
+        rest = rest.get(9 + body.len()..).unwrap_or(&[]);
+    }
+    for id in repeated_schemas {
+        summary.schemas.remove(&id);
+    }
+    for id in repeated_channels {
+        summary.channels.remove(&id);
+    }
+    // Two channels of one topic: one of them has a flipped id.
+    let mut topics: BTreeMap<String, u32> = BTreeMap::new();
+    for c in summary.channels.values() {
+        *topics.entry(c.topic.clone()).or_default() += 1;
+    }
+    summary
+        .channels
+        .retain(|_, c| topics.get(&c.topic).copied().unwrap_or(0) == 1);
+    summary
 }
 
 /// The header of a chunk record at `at`, from the bytes `peek` read there; `None` when they

@@ -802,6 +802,7 @@ mod tests {
             counts: Counts::default(),
             truth: None,
             warnings: Vec::new(),
+            log_damage: None,
             frames,
         };
         let mut features = Features::default();
