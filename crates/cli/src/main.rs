@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 mod calibrate;
 mod fpga;
 mod harris;
+mod log;
 mod progress;
 mod replay;
 mod rig_import;
@@ -42,6 +43,9 @@ enum Command {
     /// SLAM; prints a short summary and writes the estimates (MCAP), the summary (JSON) and the
     /// trajectory (CSV) on request.
     Replay(replay::Args),
+    /// Vehicle logs: `log check` says what is damaged and what a replay will use (exit 0 only
+    /// for an undamaged log); `log recover` writes every readable record to a clean log.
+    Log(log::Args),
     /// Rig files: `rig import` writes one from a stereo calibration by Kalibr, ROS or OpenCV.
     Rig(rig_import::Args),
     /// The viewer: a vehicle log (replayed on the fly) or an estimates file, with the image
@@ -81,17 +85,20 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(code) => return code,
     };
+    let done = |r: anyhow::Result<()>| r.map(|()| ExitCode::SUCCESS);
     let result = match cli.command {
-        Command::Harris(args) => harris::run(&args),
-        Command::Fpga(args) => fpga::run(&args),
-        Command::Simulate(args) => simulate::run(&args),
-        Command::Calibrate(args) => calibrate::run(&args),
-        Command::Replay(args) => replay::run(&args),
-        Command::Rig(args) => rig_import::run(&args),
-        Command::View(args) => view::run(&args),
+        Command::Harris(args) => done(harris::run(&args)),
+        Command::Fpga(args) => done(fpga::run(&args)),
+        Command::Simulate(args) => done(simulate::run(&args)),
+        Command::Calibrate(args) => done(calibrate::run(&args)),
+        Command::Replay(args) => done(replay::run(&args)),
+        // `log check` exits 1 for a damaged log, without an error line.
+        Command::Log(args) => log::run(&args),
+        Command::Rig(args) => done(rig_import::run(&args)),
+        Command::View(args) => done(view::run(&args)),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(err) => {
             // A closed pipe (`stereonav harris img.png | head`) is not a failure.
             if err

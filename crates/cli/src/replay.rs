@@ -19,7 +19,7 @@ use anyhow::{Context, Result};
 use calib::{Param, Rig};
 use replay::{NavSettings, OutputFiles, ReplayEnd, Replayer};
 
-use crate::progress::FrameProgress;
+use crate::progress::ByteProgress;
 use calib::smoother::SmootherSettings;
 
 /// Arguments of `stereonav replay`.
@@ -90,7 +90,7 @@ pub(crate) fn nav_settings(
 pub(crate) fn run(args: &Args) -> Result<()> {
     let settings = nav_settings(args.skip_phase1, args.phase1_frames, args.consider_camera)?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
-    let mut bar = FrameProgress::bytes("replaying");
+    let mut bar = ByteProgress::new("replaying");
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let started = Instant::now();
     // The log's start first: a foreign file or one without a rig makes no output.

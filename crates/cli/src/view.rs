@@ -10,7 +10,7 @@
 use std::io::{self, Write};
 use std::path::PathBuf;
 
-use crate::progress::FrameProgress;
+use crate::progress::ByteProgress;
 use anyhow::{Context, Result, bail};
 use calib::Rig;
 use calib::smoother::SmootherSettings;
@@ -70,7 +70,7 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     }
     let options = viewer::LoadOptions { rig, settings };
 
-    let mut bar = FrameProgress::bytes("replaying");
+    let mut bar = ByteProgress::new("replaying");
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let loaded = viewer::load(&args.log, &options, &mut progress);
     bar.finish();

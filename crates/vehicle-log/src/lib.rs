@@ -1,5 +1,6 @@
 //! Vehicle logs (vehicle-interfaces.md section 4): one MCAP file per run, written with
-//! [`LogWriter`], read whole with [`read_log`] or streamed with [`LogReader`].
+//! [`LogWriter`], read whole with [`read_log`] or streamed with [`LogReader`] (or, every
+//! topic, with [`RawReader`]).
 //!
 //! | topic | message encoding | schema (encoding `jsonschema`) | message | log time |
 //! |---|---|---|---|---|
@@ -25,13 +26,39 @@
 //! [`Log::ignored_topics`]), so a ROS `/odom` in CDR is ignored, and a foreign MCAP file
 //! reads as a log with no records ([`Log::has_vehicle_topics`] is false).
 //!
-//! **Damage**: a file cut short (power lost while recording) or damaged after its start
-//! is read up to the last chunk whose CRC checks, and [`Log::truncated`] says why it stopped;
-//! only a file that is not MCAP at all (wrong magic, empty), an I/O error, or a malformed
-//! message on one of our topics is an [`Error`]. The writer closes a chunk every
-//! [`CHUNK_SPAN_NS`] of log time, so a power loss costs about that much of the recording.
+//! **Damage**: a log is written on a vehicle, so it may be cut anywhere (power lost) or
+//! damaged (bit errors); the readers use every record they can still read, as `mcap recover`
+//! does ([`RawReader`] walks the records itself; the `mcap` crate's readers stop at the first
+//! error):
 //!
-//! The MCAP format itself is the `mcap` crate's; this crate only maps the topics.
+//! - a chunk whose CRC fails, that does not decompress or names an unknown compression is
+//!   skipped, and reading goes on at the next record; every other chunk is read;
+//! - schemas and channels come from the summary section first when it is intact (found
+//!   through the footer, its CRC checked), so a damaged first chunk, where writers put the
+//!   channel records, orphans no later message;
+//! - where the record framing is lost (an unknown opcode, a length past the end or over the
+//!   next chunk, a chunk whose two lengths disagree and neither checks), reading resumes at
+//!   the next chunk of the summary's chunk index, or else at the next plausible chunk record
+//!   found by scanning; damaged message indexes, statistics, summary or footer never stop it;
+//! - a file whose magic or header is damaged is read all the same when it ends like an MCAP
+//!   file or holds a chunk whose CRC checks ([`Damage::header_damaged`]); anything else that
+//!   does not start with the magic stays [`Error::NotMcap`];
+//! - a chunk cut by the end of the file yields the whole records of its readable prefix
+//!   (zstd and lz4 decode block by block: a zstd chunk smaller than one 128 KiB block has
+//!   none), without a CRC check ([`Damage::unverified_chunks`]).
+//!
+//! What is lost is told in band, [`Record::Lost`] with a [`LostSpan`] (file offset and bytes,
+//! the log-time span, messages per topic when the message index or summary tells, why) just
+//! before the next good record, where a stream decoder must be reset; and in total,
+//! [`Log::damage`] ([`Damage`]). [`Log::truncated`] says whether the file is cut short. Only
+//! a file that is not MCAP, an I/O error, or a malformed message on one of our topics where
+//! no damage explains it (inside a chunk whose CRC checks, or in a log without chunks and
+//! without damage) is an [`Error`]. The writer closes a chunk every [`CHUNK_SPAN_NS`] of log
+//! time, so a power loss or a damaged chunk costs about that much of the recording.
+//! [`recover`] writes every readable record of a damaged file to a clean one.
+//!
+//! The MCAP records are parsed and written by the `mcap` crate; this crate maps the topics
+//! and finds its way through damage.
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 

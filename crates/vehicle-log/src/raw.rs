@@ -189,6 +189,8 @@ struct OpenChunk {
 struct ChunkPiece {
     /// Times: (start, end, trusted): trusted from the summary's chunk index.
     times: Option<(u64, u64, bool)>,
+    /// The chunk is cut by the end of the file.
+    cut: bool,
     header_times: (u64, u64),
     /// Messages per channel from the message index records met after the chunk.
     counts: Option<BTreeMap<u16, u64>>,
@@ -217,6 +219,9 @@ struct PendingLoss {
     before_ns: Option<u64>,
     /// The last lost chunk, still open to its message index records.
     open: Option<ChunkPiece>,
+    /// A chunk cut by the end of the file is among the pieces: its span runs from the last
+    /// message read to its header's end time, bounds rather than the lost messages' own.
+    cut: bool,
 }
 
 /// A file source with a read buffer, its length known.
@@ -961,6 +966,7 @@ impl<R: Read + Seek> RawReader<R> {
         let length = indexed.map_or(whole, |c| c.length);
         let piece = ChunkPiece {
             times: indexed.map(|c| (c.start_ns, c.end_ns, true)),
+            cut: false,
             header_times: (head.start_ns, head.end_ns),
             counts: None,
             index_times: None,
@@ -1070,6 +1076,7 @@ impl<R: Read + Seek> RawReader<R> {
                 let start = self.last_ns.unwrap_or(head.start_ns);
                 let piece = ChunkPiece {
                     times: (head.end_ns >= start).then_some((start, head.end_ns, false)),
+                    cut: true,
                     header_times: (head.start_ns, head.end_ns),
                     counts: None,
                     index_times: None,
@@ -1324,6 +1331,7 @@ impl<R: Read + Seek> RawReader<R> {
             times: Some(NO_TIMES),
             before_ns: before,
             open: None,
+            cut: false,
         });
         // A loss that may have held messages has no times of its own.
         if !messages.as_ref().is_some_and(BTreeMap::is_empty) {
@@ -1357,6 +1365,7 @@ impl<R: Read + Seek> RawReader<R> {
             times: Some(NO_TIMES),
             before_ns: before,
             open: None,
+            cut: false,
         });
         pending.pieces += 1;
         pending.bytes += bytes;
@@ -1372,6 +1381,7 @@ impl<R: Read + Seek> RawReader<R> {
         let Some(piece) = pending.open.take() else {
             return;
         };
+        pending.cut |= piece.cut;
         let counts = match (&piece.counts, &piece.expected) {
             (Some(c), Some(expected)) if expected.iter().all(|ch| c.contains_key(ch)) => {
                 Some(c.clone())
@@ -1412,7 +1422,7 @@ impl<R: Read + Seek> RawReader<R> {
             a <= b && (trusted || (before.is_none_or(|p| p <= a) && next_ns.is_none_or(|n| b <= n)))
         });
         let (start_ns, end_ns, exact_times) = match exact {
-            Some((a, b, _)) => (Some(a), Some(b), true),
+            Some((a, b, _)) => (Some(a), Some(b), !pending.cut),
             None => (before, next_ns, false),
         };
         let messages = pending.counts.map(|counts| {
