@@ -164,6 +164,7 @@ fn synthetic() -> Replay {
             landmark_pairs: 12,
             tracker_resets: 0,
             phase1_solves: 4,
+            ..Counts::default()
         },
         truth: Some(TruthErrors {
             landmark_rms: 0.02,
