@@ -103,6 +103,10 @@ pub struct Damage {
     /// Chunks whose records were used without a CRC check: the writer wrote no CRC, or the
     /// chunk is cut by the end of the file (its readable prefix was used).
     pub unverified_chunks: u64,
+    /// Chunks whose CRC failed (or that did not decompress) mended: one flipped bit, in the
+    /// header or the compressed records, explained the damage and the CRC checks after the
+    /// mend (they are used whole, and are not a loss).
+    pub repaired_chunks: u64,
 }
 
 impl Damage {
