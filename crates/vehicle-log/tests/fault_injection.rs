@@ -79,6 +79,10 @@ fn check(layout: &Layout, bytes: &[u8], damage: &Damage, what: &str) -> Option<O
         reader.damage()
     );
     let damage_report = reader.damage().clone();
+    assert!(
+        damage_report.bytes_lost <= damaged.len() as u64,
+        "{what}: {damage_report:?}"
+    );
     if damage.flips.is_empty() && damage.cut.is_none() {
         assert!(damage_report.is_clean(), "{what}: {damage_report:?}");
     }
