@@ -535,27 +535,32 @@ impl<R: Read + Seek> RawReader<R> {
         self.src
             .read_into(summary_start, covered, &mut bytes)
             .map_err(|e| self.io_error(e))?;
-        if crc != 0 {
-            let computed = crc32fast::hash(&bytes);
-            if computed != crc {
-                self.damage.summary = SummaryState::Damaged {
-                    why: format!(
-                        "its CRC fails (saved {crc:08x}, computed {computed:08x}) at offsets \
-                         {summary_start}..{footer_at}"
-                    ),
-                };
-                return Ok(true);
-            }
-        }
         let records_len = usize::try_from(footer_at - summary_start).unwrap_or(usize::MAX);
-        match parse_summary(bytes.get(..records_len).unwrap_or(&[]), summary_start) {
-            Ok(summary) => {
+        let parsed = parse_summary(bytes.get(..records_len).unwrap_or(&[]), summary_start);
+        let computed = crc32fast::hash(&bytes);
+        let why = match parsed {
+            Ok(summary) if crc == 0 || computed == crc => {
                 self.summary = summary;
                 self.damage.summary = SummaryState::Intact;
                 self.data_end = summary_start;
+                return Ok(true);
             }
-            Err(why) => self.damage.summary = SummaryState::Damaged { why },
-        }
+            Ok(summary) => (
+                summary,
+                format!(
+                    "its CRC fails (saved {crc:08x}, computed {computed:08x}) at offsets \
+                     {summary_start}..{footer_at}"
+                ),
+            ),
+            Err(partial) => partial,
+        };
+        // A damaged summary still names the channels (and their schemas) that parse in it:
+        // they stand in for channel records the data has lost; its index and statistics are
+        // not trusted.
+        let (summary, why) = why;
+        self.summary.schemas = summary.schemas;
+        self.summary.channels = summary.channels;
+        self.damage.summary = SummaryState::Damaged { why };
         Ok(true)
     }
 
@@ -1676,20 +1681,28 @@ impl Fields<'_> {
 }
 
 /// The summary's records (`bytes` from offset `at`).
-fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
+/// Or, where a record is unreadable, what came before it and why.
+fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, (Summary, String)> {
     let mut summary = Summary::default();
+    let mut first_error = None;
     let mut rest = bytes;
     let mut offset = at;
     while !rest.is_empty() {
         let (Some(&opcode), Some(len)) = (rest.first(), le_u64(rest, 1)) else {
-            return Err(format!(
-                "a record header at offset {offset} is cut by the footer"
+            return Err((
+                summary,
+                format!("a record header at offset {offset} is cut by the footer"),
             ));
         };
-        let body = usize::try_from(len)
+        let Some(body) = usize::try_from(len)
             .ok()
             .and_then(|len| rest.get(9..9usize.checked_add(len)?))
-            .ok_or_else(|| format!("a record at offset {offset} runs into the footer"))?;
+        else {
+            return Err((
+                summary,
+                format!("a record at offset {offset} runs into the footer"),
+            ));
+        };
         let used = matches!(
             opcode,
             op::SCHEMA | op::CHANNEL | op::CHUNK_INDEX | op::STATISTICS
@@ -1735,11 +1748,14 @@ fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
             }),
             Ok(records::Record::Statistics(s)) => summary.counts = Some(s.channel_message_counts),
             Ok(_) => {}
+            // The records after it may still be good (their framing is): read on.
             Err(err) => {
-                return Err(format!(
-                    "{} record at offset {offset} is unreadable ({err})",
-                    record_name(opcode)
-                ));
+                first_error.get_or_insert_with(|| {
+                    format!(
+                        "{} record at offset {offset} is unreadable ({err})",
+                        record_name(opcode)
+                    )
+                });
             }
         }
         let step = 9 + body.len();
@@ -1748,7 +1764,10 @@ fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
     }
     summary.chunks.sort_by_key(|c| c.offset);
     summary.chunks.dedup_by_key(|c| c.offset);
-    Ok(summary)
+    match first_error {
+        None => Ok(summary),
+        Some(why) => Err((summary, why)),
+    }
 }
 
 /// The header of a chunk record at `at`, from the bytes `peek` read there; `None` when they
