@@ -31,16 +31,24 @@ impl Rng {
 }
 
 /// `/fpga/features` and `/odom` messages the damage-tolerant reader yields.
+/// An error (there should be none) is printed and counts as nothing read.
 fn read_new(bytes: &[u8]) -> u64 {
-    let Ok(reader) = LogReader::new(Cursor::new(bytes), "copy.mcap") else {
-        return 0;
+    let reader = match LogReader::new(Cursor::new(bytes), "copy.mcap") {
+        Ok(reader) => reader,
+        Err(err) => {
+            println!("error: {err}");
+            return 0;
+        }
     };
     let mut n = 0;
     for record in reader {
         match record {
             Ok(Record::Features { .. } | Record::Odom(_)) => n += 1,
             Ok(_) => {}
-            Err(_) => break,
+            Err(err) => {
+                println!("error: {err}");
+                break;
+            }
         }
     }
     n
@@ -141,6 +149,7 @@ fn main() {
         let old = read_old(&damaged) as f64;
         if read < spared {
             below_spared += 1;
+            println!("fewer than spared: flips {:?}", damage.flips);
         }
         println!(
             "{copy:4} {n:5}  {:7.1}  {:5.1}  {:11.1}",

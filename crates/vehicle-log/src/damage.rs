@@ -64,7 +64,9 @@ pub enum SummaryState {
     /// record of it parsed): its schemas and channels were read first, its chunk index guided
     /// the reader past damage, and its statistics count what was lost.
     Intact,
-    /// There is one, but it cannot be used: the reason. The data section was read without it.
+    /// There is one, but its CRC fails or a record of it is unreadable: the reason. The data
+    /// section was read without its chunk index and statistics; the channels and schemas
+    /// that still parse in it stand in only for those whose records the data lost.
     Damaged {
         /// Why, one line.
         why: String,

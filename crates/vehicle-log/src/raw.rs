@@ -342,6 +342,8 @@ pub struct RawReader<R = File> {
     done: bool,
     /// Scratch buffer for a chunk's compressed bytes.
     compressed: Vec<u8>,
+    /// Lost bytes are counted up to here (the reader may look at a region twice).
+    lost_to: u64,
 }
 
 impl<R> std::fmt::Debug for RawReader<R> {
@@ -462,6 +464,7 @@ impl<R: Read + Seek> RawReader<R> {
             data_end_met: false,
             done: false,
             compressed: Vec::new(),
+            lost_to: 0,
         };
         match magic {
             Ok(()) => {
@@ -532,37 +535,32 @@ impl<R: Read + Seek> RawReader<R> {
         self.src
             .read_into(summary_start, covered, &mut bytes)
             .map_err(|e| self.io_error(e))?;
-        if crc != 0 {
-            let computed = crc32fast::hash(&bytes);
-            if computed != crc {
-                // Its chunk index and statistics are not trusted, but the schemas and
-                // channels that still parse are used for messages whose channel record was
-                // lost (in a damaged first chunk, where writers put them): a flipped bit in
-                // one of them makes it foreign (topic, encoding) or a duplicate id (dropped).
-                let records_len = usize::try_from(footer_at - summary_start).unwrap_or(usize::MAX);
-                let salvaged = salvage_summary(bytes.get(..records_len).unwrap_or(&[]));
-                let kept = salvaged.channels.len();
-                self.summary.schemas = salvaged.schemas;
-                self.summary.channels = salvaged.channels;
-                self.damage.summary = SummaryState::Damaged {
-                    why: format!(
-                        "its CRC fails (saved {crc:08x}, computed {computed:08x}) at offsets \
-                         {summary_start}..{footer_at}; {kept} channel records of it still \
-                         parse and were used for channels the data section lost"
-                    ),
-                };
-                return Ok(true);
-            }
-        }
         let records_len = usize::try_from(footer_at - summary_start).unwrap_or(usize::MAX);
-        match parse_summary(bytes.get(..records_len).unwrap_or(&[]), summary_start) {
-            Ok(summary) => {
+        let parsed = parse_summary(bytes.get(..records_len).unwrap_or(&[]), summary_start);
+        let computed = crc32fast::hash(&bytes);
+        let why = match parsed {
+            Ok(summary) if crc == 0 || computed == crc => {
                 self.summary = summary;
                 self.damage.summary = SummaryState::Intact;
                 self.data_end = summary_start;
+                return Ok(true);
             }
-            Err(why) => self.damage.summary = SummaryState::Damaged { why },
-        }
+            Ok(summary) => (
+                summary,
+                format!(
+                    "its CRC fails (saved {crc:08x}, computed {computed:08x}) at offsets \
+                     {summary_start}..{footer_at}"
+                ),
+            ),
+            Err(partial) => partial,
+        };
+        // A damaged summary still names the channels (and their schemas) that parse in it:
+        // they stand in for channel records the data has lost; its index and statistics are
+        // not trusted.
+        let (summary, why) = why;
+        self.summary.schemas = summary.schemas;
+        self.summary.channels = summary.channels;
+        self.damage.summary = SummaryState::Damaged { why };
         Ok(true)
     }
 
@@ -713,7 +711,7 @@ impl<R: Read + Seek> RawReader<R> {
             self.compressed = body;
             return Err(self.io_error(e));
         }
-        let parsed = mcap::parse_record(opcode, &body).map(owned);
+        let parsed = parse_checked(opcode, &body).map(owned);
         self.compressed = body;
         match parsed {
             Ok(Some(Parsed::Header(profile))) => self.profile = Some(profile),
@@ -1039,11 +1037,13 @@ impl<R: Read + Seek> RawReader<R> {
                     .ok()
                     .and_then(|len| rest.get(9..9usize.checked_add(len)?));
                 body.map(|body| {
-                    (
-                        opcode,
-                        body.len(),
-                        mcap::parse_record(opcode, body).map(owned),
-                    )
+                    // Only schemas, channels and messages are used from a chunk.
+                    let parsed = if matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                        parse_checked(opcode, body).map(owned)
+                    } else {
+                        Ok(None)
+                    };
+                    (opcode, body.len(), parsed)
                 })
             }
             _ => None,
@@ -1333,6 +1333,7 @@ impl<R: Read + Seek> RawReader<R> {
         messages: Option<BTreeMap<u16, u64>>,
         why: String,
     ) {
+        let bytes = self.uncounted(offset, bytes);
         let before = self.last_ns;
         let pending = self.pending.get_or_insert_with(|| PendingLoss {
             offset,
@@ -1364,9 +1365,21 @@ impl<R: Read + Seek> RawReader<R> {
         };
     }
 
+    /// The bytes of `offset..offset + bytes` not counted as lost yet; counts them.
+    fn uncounted(&mut self, offset: u64, bytes: u64) -> u64 {
+        let end = offset.saturating_add(bytes).min(self.src.len);
+        let start = offset.max(self.lost_to);
+        if end <= start {
+            return 0;
+        }
+        self.lost_to = end;
+        end - start
+    }
+
     /// Records the loss of a chunk that message index records after it may describe.
     fn lose_chunk(&mut self, offset: u64, bytes: u64, piece: ChunkPiece, why: String) {
         self.close_open_piece();
+        let bytes = self.uncounted(offset, bytes);
         let before = self.last_ns;
         let pending = self.pending.get_or_insert_with(|| PendingLoss {
             offset,
@@ -1605,22 +1618,117 @@ fn record_name(opcode: u8) -> &'static str {
     }
 }
 
+/// [`mcap::parse_record`], after checking that every string length prefix of the body fits in
+/// it: the `mcap` crate reserves a string's stated length before reading it, and a damaged
+/// length must not make the reader allocate gigabytes (or abort where it cannot).
+fn parse_checked(opcode: u8, body: &[u8]) -> Result<records::Record<'_>, String> {
+    if !strings_fit(opcode, body) {
+        return Err("a string length runs past the record".to_owned());
+    }
+    mcap::parse_record(opcode, body).map_err(|e| e.to_string())
+}
+
+/// Whether the strings of a header, schema, channel or chunk index record body lie inside it.
+fn strings_fit(opcode: u8, body: &[u8]) -> bool {
+    let mut c = Fields { body, at: 0 };
+    let fits = match opcode {
+        op::HEADER => c.string().and_then(|()| c.string()),
+        op::SCHEMA => c
+            .skip(2)
+            .and_then(|()| c.string())
+            .and_then(|()| c.string()),
+        op::CHANNEL => c
+            .skip(4)
+            .and_then(|()| c.string())
+            .and_then(|()| c.string())
+            .and_then(|()| c.string_map()),
+        // Start and end times, offset, length; the message index offsets (fixed-size pairs);
+        // the message index length; the compression.
+        op::CHUNK_INDEX => c
+            .skip(32)
+            .and_then(|()| c.sized())
+            .and_then(|()| c.skip(8))
+            .and_then(|()| c.string()),
+        _ => Some(()),
+    };
+    fits.is_some()
+}
+
+/// A walk over a record body's length-prefixed fields.
+struct Fields<'a> {
+    body: &'a [u8],
+    at: usize,
+}
+
+impl Fields<'_> {
+    fn skip(&mut self, n: usize) -> Option<()> {
+        self.at = self.at.checked_add(n)?;
+        (self.at <= self.body.len()).then_some(())
+    }
+
+    /// A u32 length, then that many bytes.
+    fn sized(&mut self) -> Option<()> {
+        let n = usize::try_from(le_u32(self.body, self.at)?).ok()?;
+        self.skip(4)?;
+        self.skip(n)
+    }
+
+    fn string(&mut self) -> Option<()> {
+        self.sized()
+    }
+
+    /// A u32 byte length, then key and value strings.
+    fn string_map(&mut self) -> Option<()> {
+        let n = usize::try_from(le_u32(self.body, self.at)?).ok()?;
+        self.skip(4)?;
+        let end = self.at.checked_add(n)?;
+        if end > self.body.len() {
+            return None;
+        }
+        while self.at < end {
+            self.string()?;
+            self.string()?;
+        }
+        (self.at == end).then_some(())
+    }
+}
+
 /// The summary's records (`bytes` from offset `at`).
-fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
+/// Or, where a record is unreadable, what came before it and why.
+fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, (Summary, String)> {
     let mut summary = Summary::default();
+    let mut first_error = None;
     let mut rest = bytes;
     let mut offset = at;
     while !rest.is_empty() {
         let (Some(&opcode), Some(len)) = (rest.first(), le_u64(rest, 1)) else {
-            return Err(format!(
-                "a record header at offset {offset} is cut by the footer"
+            return Err((
+                summary,
+                format!("a record header at offset {offset} is cut by the footer"),
             ));
         };
-        let body = usize::try_from(len)
+        let Some(body) = usize::try_from(len)
             .ok()
             .and_then(|len| rest.get(9..9usize.checked_add(len)?))
-            .ok_or_else(|| format!("a record at offset {offset} runs into the footer"))?;
-        match mcap::parse_record(opcode, body) {
+        else {
+            return Err((
+                summary,
+                format!("a record at offset {offset} runs into the footer"),
+            ));
+        };
+        let used = matches!(
+            opcode,
+            op::SCHEMA | op::CHANNEL | op::CHUNK_INDEX | op::STATISTICS
+        );
+        let parsed = if used {
+            parse_checked(opcode, body)
+        } else {
+            Ok(records::Record::Unknown {
+                opcode,
+                data: std::borrow::Cow::Borrowed(&[]),
+            })
+        };
+        match parsed {
             Ok(records::Record::Schema { header, data }) => {
                 summary.schemas.insert(
                     header.id,
@@ -1653,11 +1761,14 @@ fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
             }),
             Ok(records::Record::Statistics(s)) => summary.counts = Some(s.channel_message_counts),
             Ok(_) => {}
+            // The records after it may still be good (their framing is): read on.
             Err(err) => {
-                return Err(format!(
-                    "{} record at offset {offset} is unreadable ({err})",
-                    record_name(opcode)
-                ));
+                first_error.get_or_insert_with(|| {
+                    format!(
+                        "{} record at offset {offset} is unreadable ({err})",
+                        record_name(opcode)
+                    )
+                });
             }
         }
         let step = 9 + body.len();
@@ -1666,71 +1777,10 @@ fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, String> {
     }
     summary.chunks.sort_by_key(|c| c.offset);
     summary.chunks.dedup_by_key(|c| c.offset);
-    Ok(summary)
-}
-
-/// The schemas and channels of a summary section whose CRC fails: its records read in
-/// order until the framing breaks, each schema and channel record that parses kept, and any
-/// id met twice dropped (a correct summary has each once, so a repeat is a flipped bit).
-fn salvage_summary(bytes: &[u8]) -> Summary {
-    let mut summary = Summary::default();
-    let mut repeated_schemas = Vec::new();
-    let mut repeated_channels = Vec::new();
-    let mut rest = bytes;
-    while let (Some(&opcode), Some(len)) = (rest.first(), le_u64(rest, 1)) {
-        let Some(body) = usize::try_from(len)
-            .ok()
-            .and_then(|len| rest.get(9..9usize.checked_add(len)?))
-        else {
-            break;
-        };
-        match mcap::parse_record(opcode, body) {
-            Ok(records::Record::Schema { header, data }) => {
-                let schema = RawSchema {
-                    id: header.id,
-                    name: header.name,
-                    encoding: header.encoding,
-                    data: data.into_owned(),
-                };
-                if summary.schemas.insert(header.id, schema).is_some() {
-                    repeated_schemas.push(header.id);
-                }
-            }
-            Ok(records::Record::Channel(c)) => {
-                let id = c.id;
-                let channel = RawChannel {
-                    id,
-                    schema_id: c.schema_id,
-                    topic: c.topic,
-                    message_encoding: c.message_encoding,
-                    metadata: c.metadata,
-                };
-                if summary.channels.insert(id, channel).is_some() {
-                    repeated_channels.push(id);
-                }
-            }
-            Ok(_) => {}
-            // An opcode that is no record's: the framing is lost.
-            Err(_) if !(op::HEADER..=op::DATA_END).contains(&opcode) => break,
-            Err(_) => {}
-        }
-        rest = rest.get(9 + body.len()..).unwrap_or(&[]);
+    match first_error {
+        None => Ok(summary),
+        Some(why) => Err((summary, why)),
     }
-    for id in repeated_schemas {
-        summary.schemas.remove(&id);
-    }
-    for id in repeated_channels {
-        summary.channels.remove(&id);
-    }
-    // Two channels of one topic: one of them has a flipped id.
-    let mut topics: BTreeMap<String, u32> = BTreeMap::new();
-    for c in summary.channels.values() {
-        *topics.entry(c.topic.clone()).or_default() += 1;
-    }
-    summary
-        .channels
-        .retain(|_, c| topics.get(&c.topic).copied().unwrap_or(0) == 1);
-    summary
 }
 
 /// The header of a chunk record at `at`, from the bytes `peek` read there; `None` when they
@@ -2014,6 +2064,28 @@ mod tests {
             check_magic(b"PK\x03\x04").unwrap_err().to_string(),
             "it starts with 50 4b 03 04, not the MCAP magic 89 4d 43 41 50 30 0d 0a"
         );
+    }
+
+    #[test]
+    fn string_lengths_past_the_body_are_refused_before_the_mcap_crate_allocates() {
+        let mut header = 4u32.to_le_bytes().to_vec();
+        header.extend(b"ros2");
+        header.extend(0u32.to_le_bytes());
+        assert!(strings_fit(op::HEADER, &header));
+        assert!(parse_checked(op::HEADER, &header).is_ok());
+        header[4 + 4..].copy_from_slice(&0xFEFF_FFFEu32.to_le_bytes());
+        assert!(!strings_fit(op::HEADER, &header));
+        assert!(parse_checked(op::HEADER, &header).is_err());
+        // A channel whose metadata map holds a string longer than the map.
+        let mut channel = vec![1, 0, 0, 0];
+        for s in [&b"/odom"[..], b"json"] {
+            channel.extend((s.len() as u32).to_le_bytes());
+            channel.extend(s);
+        }
+        channel.extend(12u32.to_le_bytes());
+        channel.extend(100u32.to_le_bytes());
+        channel.extend([0; 8]);
+        assert!(!strings_fit(op::CHANNEL, &channel));
     }
 
     #[test]

@@ -79,6 +79,10 @@ fn check(layout: &Layout, bytes: &[u8], damage: &Damage, what: &str) -> Option<O
         reader.damage()
     );
     let damage_report = reader.damage().clone();
+    assert!(
+        damage_report.bytes_lost <= damaged.len() as u64,
+        "{what}: {damage_report:?}"
+    );
     if damage.flips.is_empty() && damage.cut.is_none() {
         assert!(damage_report.is_clean(), "{what}: {damage_report:?}");
     }
@@ -320,6 +324,30 @@ fn a_vehicle_log_cut_inside_a_chunk_keeps_every_whole_chunk_and_says_it_is_cut()
         assert!(log.has_vehicle_topics(), "{name}: {:?}", log.topics);
         assert!(log.truncated.unwrap().contains("cut short"));
     }
+}
+
+#[test]
+fn the_first_chunk_and_the_summary_damaged_together_orphan_no_message() {
+    // The Python writer declares every channel in the first chunk only: with the summary's
+    // CRC failing too, the channels that still parse in the summary stand in for them.
+    let bytes = fixture(LOGS[1]);
+    let layout = Layout::of(&bytes);
+    let first = &layout.chunks[0];
+    let damage = Damage {
+        flips: vec![
+            ((first.data.start + first.data.end) / 2, 7),
+            (layout.summary.end - 20, 1),
+        ],
+        cut: None,
+    };
+    let out = check(&layout, &bytes, &damage, "first chunk and summary").unwrap();
+    assert!(matches!(out.damage.summary, SummaryState::Damaged { .. }));
+    let vehicle = out
+        .records
+        .iter()
+        .filter(|r| matches!(r, Record::Odom(_)))
+        .count();
+    assert!(vehicle > 4000, "{vehicle}");
 }
 
 #[test]
