@@ -342,6 +342,8 @@ pub struct RawReader<R = File> {
     done: bool,
     /// Scratch buffer for a chunk's compressed bytes.
     compressed: Vec<u8>,
+    /// Whether chunks damaged by one flipped bit are mended ([`RawReader::mend_bit_errors`]).
+    mend: bool,
     /// Lost bytes are counted up to here (the reader may look at a region twice).
     lost_to: u64,
 }
@@ -389,6 +391,14 @@ impl<R> RawReader<R> {
     /// The file (or the name given to [`RawReader::new`]).
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Whether a chunk whose CRC fails (or that does not decompress) is mended when one
+    /// flipped bit explains it (on by default; see [`Damage::repaired_chunks`]). The search
+    /// tries every bit of the compressed chunk, about a second for a 32 KiB chunk: off, such a
+    /// chunk is lost at once.
+    pub fn mend_bit_errors(&mut self, on: bool) {
+        self.mend = on;
     }
 
     /// What was lost so far; complete once the iteration has ended.
@@ -464,6 +474,7 @@ impl<R: Read + Seek> RawReader<R> {
             data_end_met: false,
             done: false,
             compressed: Vec::new(),
+            mend: true,
             lost_to: 0,
         };
         match magic {
@@ -919,7 +930,7 @@ impl<R: Read + Seek> RawReader<R> {
             }
         }
         // Every length failed: a single flipped bit, found by the chunk's CRC, is mended.
-        if accepted.is_none() && head.crc != 0 {
+        if accepted.is_none() && head.crc != 0 && self.mend {
             for &n in &candidates {
                 let Some(bytes) = compressed.get(..usize::try_from(n).unwrap_or(usize::MAX)) else {
                     continue;
@@ -1897,7 +1908,8 @@ fn repair(head: &ChunkHead, compressed: &[u8]) -> Option<Vec<u8>> {
     if streamed {
         let crc = crc32fast::hash(&whole);
         let size_ok = whole.len() == size || one_bit(whole.len() as u64, head.uncompressed_size);
-        if (crc == head.crc && size_ok) || (whole.len() == size && one_bit(crc.into(), head.crc.into()))
+        if (crc == head.crc && size_ok)
+            || (whole.len() == size && one_bit(crc.into(), head.crc.into()))
         {
             return Some(whole);
         }

@@ -216,6 +216,12 @@ impl<R> LogReader<R> {
         has_vehicle_topics(&self.state.topics)
     }
 
+    /// Whether chunks damaged by one flipped bit are mended (on by default:
+    /// [`RawReader::mend_bit_errors`]).
+    pub fn mend_bit_errors(&mut self, on: bool) {
+        self.raw.mend_bit_errors(on);
+    }
+
     /// What could not be read so far; complete once the iteration has ended.
     pub fn damage(&self) -> &Damage {
         self.raw.damage()
