@@ -656,7 +656,7 @@ impl<R: Read + Seek> RawReader<R> {
             Some(_) if known && len <= MAX_RECORD_LEN_U64 && self.damage.cut => {
                 self.past_end(at, Some(opcode))
             }
-            _ if !known && opcode >= 0x80 && self.private_record_fits(at, end) => {
+            _ if !known && opcode >= 0x80 && self.private_record_fits(end) => {
                 // A private record (the spec reserves 0x80..=0xff): skipped.
                 self.pos = end.unwrap_or(self.src.len);
                 Ok(())
@@ -692,7 +692,7 @@ impl<R: Read + Seek> RawReader<R> {
     }
 
     /// Whether a private record ending at `end` is followed by a plausible record (or the end).
-    fn private_record_fits(&mut self, _at: u64, end: Option<u64>) -> bool {
+    fn private_record_fits(&mut self, end: Option<u64>) -> bool {
         let Some(end) = end else { return false };
         if end == self.data_end {
             return true;
