@@ -563,7 +563,7 @@ impl<R: Read + Seek> RawReader<R> {
                      {summary_start}..{footer_at}"
                 ),
             ),
-            Err(partial) => partial,
+            Err(partial) => *partial,
         };
         // A damaged summary still names the channels (and their schemas) that parse in it:
         // they stand in for channel records the data has lost; its index and statistics are
@@ -1706,26 +1706,26 @@ impl Fields<'_> {
 
 /// The summary's records (`bytes` from offset `at`).
 /// Or, where a record is unreadable, what came before it and why.
-fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, (Summary, String)> {
+fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, Box<(Summary, String)>> {
     let mut summary = Summary::default();
     let mut first_error = None;
     let mut rest = bytes;
     let mut offset = at;
     while !rest.is_empty() {
         let (Some(&opcode), Some(len)) = (rest.first(), le_u64(rest, 1)) else {
-            return Err((
+            return Err(Box::new((
                 summary,
                 format!("a record header at offset {offset} is cut by the footer"),
-            ));
+            )));
         };
         let Some(body) = usize::try_from(len)
             .ok()
             .and_then(|len| rest.get(9..9usize.checked_add(len)?))
         else {
-            return Err((
+            return Err(Box::new((
                 summary,
                 format!("a record at offset {offset} runs into the footer"),
-            ));
+            )));
         };
         let used = matches!(
             opcode,
@@ -1790,7 +1790,7 @@ fn parse_summary(bytes: &[u8], at: u64) -> Result<Summary, (Summary, String)> {
     summary.chunks.dedup_by_key(|c| c.offset);
     match first_error {
         None => Ok(summary),
-        Some(why) => Err((summary, why)),
+        Some(why) => Err(Box::new((summary, why))),
     }
 }
 
