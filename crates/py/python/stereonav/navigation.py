@@ -203,7 +203,9 @@ class Replay:
         ``lost``, ``bytes_skipped``, ``frames_out_of_order``, ``odometry``,
         ``stereo_matches``, ``tracks``, ``confirmed_tracks``, ``pairs``, ``landmark_pairs``
         (frame pairs: ``calibrate_log`` only), ``tracker_resets``, ``phase1_solves`` (solves
-        of phase 1's batch over every frame).
+        of phase 1's batch over every frame), and what a damaged log lost:
+        ``log_spans_lost``, ``log_bytes_lost``, ``log_chunks_lost``, ``log_time_lost_ms``
+        (docs/logs.md).
     warnings : tuple of str
         What limits the result without stopping it (a log cut short, phase 1 never stable,
         frames without odometry, updates the filter refused), one line each.
