@@ -245,6 +245,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(navigator::replay_log, m)?)?;
     m.add_function(wrap_pyfunction!(navigator::phase_names, m)?)?;
     m.add_class::<logs::LogContents>()?;
+    m.add_class::<logs::LogDamage>()?;
+    m.add_class::<logs::LostSpan>()?;
     m.add_function(wrap_pyfunction!(logs::read_log, m)?)?;
     Ok(())
 }

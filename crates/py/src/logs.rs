@@ -9,9 +9,11 @@
 //! A file without the vehicle topics is refused as the replay refuses it, with the replay's
 //! message; a file that cannot be opened or read, is not MCAP, or has a malformed vehicle
 //! message raises `stereonav.InputError` naming it, with the `OSError` as the cause when the
-//! operating system refused the file. A log cut short is not an error: `truncated` says why it
-//! ends early.
+//! operating system refused the file. A damaged or cut log is not an error: every record that
+//! can still be read is here, `damage` says what was lost and where ([`LogDamage`],
+//! [`LostSpan`]) and `truncated` says why it ends early.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use calib::Rig;
@@ -72,6 +74,176 @@ pub(crate) struct LogContents {
     ignored_topics: Vec<String>,
     /// The vehicle topics with a channel in the log, each once, in the order met.
     topics: Vec<&'static str>,
+    /// What could not be read.
+    damage: vehicle_log::Damage,
+}
+
+/// One stretch of a log that could not be read (`vehicle_log::LostSpan`).
+#[pyclass(module = "stereonav._native", frozen)]
+#[derive(Clone)]
+pub(crate) struct LostSpan(vehicle_log::LostSpan);
+
+#[pymethods]
+impl LostSpan {
+    /// File offset of the first byte not used.
+    #[getter]
+    fn offset(&self) -> u64 {
+        self.0.offset
+    }
+
+    /// Bytes of the file not used.
+    #[getter]
+    fn bytes(&self) -> u64 {
+        self.0.bytes
+    }
+
+    /// Log time (ns) of the first message lost, or of the last good one before (see
+    /// `exact_times`); None at the start.
+    #[getter]
+    fn start_ns(&self) -> Option<u64> {
+        self.0.start_ns
+    }
+
+    /// Log time (ns) of the last message lost, or of the first good one after; None when
+    /// nothing good came after.
+    #[getter]
+    fn end_ns(&self) -> Option<u64> {
+        self.0.end_ns
+    }
+
+    /// Whether `start_ns..end_ns` is the lost messages' own span (else: the bounds set by
+    /// the good messages around the loss).
+    #[getter]
+    fn exact_times(&self) -> bool {
+        self.0.exact_times
+    }
+
+    /// Chunk records lost, wholly or in part.
+    #[getter]
+    fn chunks(&self) -> u64 {
+        self.0.chunks
+    }
+
+    /// Messages lost per topic, or None when nothing tells.
+    #[getter]
+    fn messages(&self) -> Option<BTreeMap<String, u64>> {
+        self.0.messages.clone()
+    }
+
+    /// What was wrong, one line.
+    #[getter]
+    fn why(&self) -> &str {
+        &self.0.why
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<stereonav.LostSpan at offset {}, {} bytes: {}>",
+            self.0.offset, self.0.bytes, self.0.why
+        )
+    }
+}
+
+/// What could not be read in a log, in total (`vehicle_log::Damage`).
+#[pyclass(module = "stereonav._native", frozen)]
+pub(crate) struct LogDamage(vehicle_log::Damage);
+
+#[pymethods]
+impl LogDamage {
+    /// Whether anything is damaged (a loss, the magic or header, the summary, the closing
+    /// magic, a cut).
+    #[getter]
+    fn damaged(&self) -> bool {
+        !self.0.is_clean()
+    }
+
+    /// The first `MAX_KEPT_SPANS` (256) spans lost, in file order.
+    #[getter]
+    fn spans(&self) -> Vec<LostSpan> {
+        self.0.spans.iter().cloned().map(LostSpan).collect()
+    }
+
+    /// Spans lost in all.
+    #[getter]
+    fn spans_total(&self) -> u64 {
+        self.0.spans_total
+    }
+
+    /// Bytes of the file not used, in all.
+    #[getter]
+    fn bytes_lost(&self) -> u64 {
+        self.0.bytes_lost
+    }
+
+    /// Chunk records lost (wholly or in part), in all.
+    #[getter]
+    fn chunks_lost(&self) -> u64 {
+        self.0.chunks_lost
+    }
+
+    /// Messages lost per topic (by the summary's statistics, or the spans' counts), or None
+    /// when nothing counts them.
+    #[getter]
+    fn messages_lost(&self) -> Option<BTreeMap<String, u64>> {
+        self.0.messages_lost.clone()
+    }
+
+    /// The magic or the header record at the start is damaged (the file was read past it).
+    #[getter]
+    fn header_damaged(&self) -> bool {
+        self.0.header_damaged
+    }
+
+    /// The closing magic is damaged.
+    #[getter]
+    fn tail_damaged(&self) -> bool {
+        self.0.tail_damaged
+    }
+
+    /// The file is cut short.
+    #[getter]
+    fn cut(&self) -> bool {
+        self.0.cut
+    }
+
+    /// The summary section: "intact", "damaged" or "absent".
+    #[getter]
+    fn summary(&self) -> &'static str {
+        match self.0.summary {
+            vehicle_log::SummaryState::Intact => "intact",
+            vehicle_log::SummaryState::Damaged { .. } => "damaged",
+            _ => "absent",
+        }
+    }
+
+    /// Why the summary could not be used, or None.
+    #[getter]
+    fn summary_problem(&self) -> Option<&str> {
+        match &self.0.summary {
+            vehicle_log::SummaryState::Damaged { why } => Some(why),
+            _ => None,
+        }
+    }
+
+    /// Chunks read without a CRC check (cut by the end of the file, or without a CRC).
+    #[getter]
+    fn unverified_chunks(&self) -> u64 {
+        self.0.unverified_chunks
+    }
+
+    fn __repr__(&self) -> String {
+        if self.0.is_clean() {
+            return "<stereonav.LogDamage: none>".to_owned();
+        }
+        format!(
+            "<stereonav.LogDamage: {} spans, {} bytes, {} chunks lost; summary {}{}>",
+            self.0.spans_total,
+            self.0.bytes_lost,
+            self.0.chunks_lost,
+            self.summary(),
+            if self.0.cut { ", cut" } else { "" }
+        )
+    }
 }
 
 impl LogContents {
@@ -91,6 +263,7 @@ impl LogContents {
             ignored_messages: log.ignored_messages,
             ignored_topics: log.ignored_topics,
             topics: log.topics,
+            damage: log.damage,
         };
         let mut landmarks_seen = false;
         for record in log.records {
@@ -240,10 +413,16 @@ impl LogContents {
         self.warnings.clone()
     }
 
-    /// Why the log ends early (cut short or damaged), or None.
+    /// Why the log ends early (cut short), or None.
     #[getter]
     fn truncated(&self) -> Option<&str> {
         self.truncated.as_deref()
+    }
+
+    /// What could not be read.
+    #[getter]
+    fn damage(&self) -> LogDamage {
+        LogDamage(self.damage.clone())
     }
 
     /// Messages on topics that are not vehicle topics.

@@ -95,7 +95,7 @@ from .navigation import (
     Replay,
     replay,
 )
-from .logs import LogTruth, VehicleLog, read_log
+from .logs import LogDamage, LogTruth, LostSpan, VehicleLog, read_log
 from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
     CAMERA_PARAMETERS,
@@ -110,7 +110,9 @@ from .rig import (
 )
 
 __all__ = [
+    "LogDamage",
     "LogTruth",
+    "LostSpan",
     "VehicleLog",
     "read_log",
     "FRAME_INFO_DTYPE",

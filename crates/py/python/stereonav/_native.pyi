@@ -11,6 +11,8 @@ import numpy.typing as npt
 __all__ = [
     "__version__",
     "LogContents",
+    "LogDamage",
+    "LostSpan",
     "read_log",
     "Navigator",
     "ReplayResult",
@@ -546,11 +548,76 @@ class LogContents:
     @property
     def truncated(self) -> str | None: ...
     @property
+    def damage(self) -> LogDamage:
+        """What could not be read."""
+    @property
     def ignored_messages(self) -> int: ...
     @property
     def ignored_topics(self) -> list[str]: ...
     @property
     def topics(self) -> list[str]: ...
+
+@final
+class LostSpan:
+    """One stretch of a log that could not be read, in file order."""
+
+    @property
+    def offset(self) -> int:
+        """File offset of the first byte not used."""
+    @property
+    def bytes(self) -> int:
+        """Bytes of the file not used."""
+    @property
+    def start_ns(self) -> int | None:
+        """Log time (ns) of the first message lost, or of the last good one before."""
+    @property
+    def end_ns(self) -> int | None:
+        """Log time (ns) of the last message lost, or of the first good one after."""
+    @property
+    def exact_times(self) -> bool:
+        """Whether ``start_ns..end_ns`` is the lost messages' own span (else the bounds)."""
+    @property
+    def chunks(self) -> int:
+        """Chunk records lost, wholly or in part."""
+    @property
+    def messages(self) -> dict[str, int] | None:
+        """Messages lost per topic, or None when nothing tells."""
+    @property
+    def why(self) -> str:
+        """What was wrong, one line."""
+
+@final
+class LogDamage:
+    """What could not be read in a log, in total."""
+
+    @property
+    def damaged(self) -> bool:
+        """Whether anything is damaged."""
+    @property
+    def spans(self) -> list[LostSpan]:
+        """The first 256 spans lost, in file order."""
+    @property
+    def spans_total(self) -> int: ...
+    @property
+    def bytes_lost(self) -> int: ...
+    @property
+    def chunks_lost(self) -> int: ...
+    @property
+    def messages_lost(self) -> dict[str, int] | None:
+        """Messages lost per topic, or None when nothing counts them."""
+    @property
+    def header_damaged(self) -> bool: ...
+    @property
+    def tail_damaged(self) -> bool: ...
+    @property
+    def cut(self) -> bool: ...
+    @property
+    def summary(self) -> str:
+        """``"intact"``, ``"damaged"`` or ``"absent"``."""
+    @property
+    def summary_problem(self) -> str | None: ...
+    @property
+    def unverified_chunks(self) -> int: ...
 
 def read_log(path: str) -> LogContents:
     """Read a vehicle log whole with the GIL released; raises ``stereonav.InputError`` (the

@@ -22,7 +22,20 @@ from .navigation import _path
 from .rig import Camera, RigConfig, _rig_config
 from .simulation import ODOMETRY_DTYPE, TRAJECTORY_DTYPE
 
-__all__ = ["LogTruth", "VehicleLog", "read_log"]
+__all__ = ["LogDamage", "LogTruth", "LostSpan", "VehicleLog", "read_log"]
+
+#: What could not be read in a damaged log, in total (frozen; see :attr:`VehicleLog.damage`):
+#: ``damaged`` (bool), ``spans`` (list of :class:`LostSpan`, the first 256 in file order),
+#: ``spans_total``, ``bytes_lost``, ``chunks_lost``, ``messages_lost`` (dict topic -> count,
+#: or None when nothing counts them), ``header_damaged``, ``tail_damaged``, ``cut``,
+#: ``summary`` (``"intact"``, ``"damaged"``, ``"absent"``), ``summary_problem``,
+#: ``unverified_chunks`` (chunks read without a CRC check).
+LogDamage = _native.LogDamage
+#: One stretch of a log that could not be read (frozen): ``offset`` and ``bytes`` in the file,
+#: ``start_ns`` and ``end_ns`` (the lost messages' log times when ``exact_times``, else the
+#: good messages' around the loss), ``chunks``, ``messages`` (dict topic -> count, or None),
+#: ``why`` (one line).
+LostSpan = _native.LostSpan
 
 
 def _table(
@@ -106,8 +119,14 @@ class VehicleLog:
         What looked wrong but did not stop the reading (a known topic with a foreign
         encoding, a message on an undeclared channel), one line each.
     truncated : str or None
-        Why the log ends early (a file cut short while recording, or damaged), or None when
-        it was read to its end. Everything before that point is here.
+        Why the log ends early (a file cut short while recording), or None when it was read
+        to its end. Everything readable before that point is here.
+    damage : LogDamage
+        What could not be read: chunks whose CRC failed, bytes skipped where the record
+        framing was lost, the rest of a chunk cut by the end of the file, a damaged header or
+        summary. ``damage.damaged`` is False for an intact log. Everything else was read:
+        the records after a damaged chunk are here (the stream of a lost stretch is simply
+        missing from :attr:`stream`; the decoder resynchronises).
     ignored_topics : tuple of str
         The topics that are not vehicle topics (or foreign channels of their names), each
         once, in the order met; their messages are skipped.
@@ -127,6 +146,7 @@ class VehicleLog:
     truth: Optional[LogTruth]
     warnings: tuple[str, ...]
     truncated: Optional[str]
+    damage: LogDamage
     ignored_topics: tuple[str, ...]
     ignored_messages: int
     topics: tuple[str, ...]
@@ -149,6 +169,7 @@ class VehicleLog:
             truth=_truth(native),
             warnings=tuple(native.warnings),
             truncated=native.truncated,
+            damage=native.damage,
             ignored_topics=tuple(native.ignored_topics),
             ignored_messages=native.ignored_messages,
             topics=tuple(native.topics),
@@ -171,6 +192,8 @@ class VehicleLog:
 
     def __repr__(self) -> str:
         ends = f", truncated ({self.truncated})" if self.truncated is not None else ""
+        if self.damage.damaged and self.truncated is None:
+            ends = f", damaged ({self.damage.spans_total} spans lost)"
         truth = ", with truth" if self.truth is not None else ""
         return (
             f"<stereonav.VehicleLog {self.path!r}: {len(self.frames)} frames, "
@@ -219,8 +242,9 @@ def read_log(path: Union[str, "os.PathLike[str]"]) -> VehicleLog:
         ``OSError``, e.g. ``FileNotFoundError``, is the ``__cause__``), is not an MCAP file,
         has a malformed message on a vehicle topic, or is an MCAP file without the vehicle
         topics (``... is not a vehicle log: it has no /fpga/features or /odom channel ...``,
-        naming the topics it has, as :func:`stereonav.replay` says). A log cut short is not
-        an error: it is read as far as it goes and :attr:`VehicleLog.truncated` says why.
+        naming the topics it has, as :func:`stereonav.replay` says). A damaged or cut log is
+        not an error: every record that can still be read is read, :attr:`VehicleLog.damage`
+        says what was lost and where, :attr:`VehicleLog.truncated` why it ends early.
 
     Examples
     --------
