@@ -234,6 +234,13 @@ fn damage_lines(d: &Damage) -> Vec<String> {
     if more > 0 {
         lines.push(format!("  ... and {more} more"));
     }
+    if d.repaired_chunks > 0 {
+        lines.push(format!(
+            "mended {} chunks: one flipped bit explained each one's damage, and its CRC checks \
+             after the mend (used whole, nothing lost)",
+            d.repaired_chunks
+        ));
+    }
     if d.unverified_chunks > 0 {
         lines.push(format!(
             "{} chunks read without a CRC check (cut by the end of the file, or written \
@@ -309,6 +316,7 @@ fn damage_json(d: &Damage) -> Value {
         "bytes_lost": d.bytes_lost,
         "chunks_lost": d.chunks_lost,
         "unverified_chunks": d.unverified_chunks,
+        "repaired_chunks": d.repaired_chunks,
         "messages_lost": d.messages_lost,
         "spans": d.spans.iter().map(span_json).collect::<Vec<_>>(),
     })

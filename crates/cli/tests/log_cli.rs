@@ -65,11 +65,12 @@ fn an_undamaged_log_checks_clean_with_exit_status_0() {
 
 #[test]
 fn a_damaged_log_is_reported_with_offsets_times_and_exit_status_1() {
-    // A flip in the compressed data of a chunk in the middle of the Python-written log.
+    // Two flips in the compressed data of a chunk in the middle of the Python-written log
+    // (one alone would be mended).
     let log = damaged(
         "paper-experiment-pymcap.mcap",
         "flipped.mcap",
-        &[(200_000, 4)],
+        &[(200_000, 4), (200_040, 1)],
         None,
     );
     let out = stereonav(&["log", "check", s(&log)]);
@@ -207,4 +208,23 @@ fn bad_input_is_one_line_and_non_zero() {
 
     let out = stereonav(&["log", "recover", s(&log), "/nonexistent-dir/out.mcap"]);
     assert_one_line_error(&out, "cannot create /nonexistent-dir/out.mcap");
+}
+
+#[test]
+fn a_log_with_one_flipped_bit_is_mended_and_still_reported() {
+    let log = damaged(
+        "paper-experiment-pymcap.mcap",
+        "one-flip.mcap",
+        &[(200_000, 4)],
+        None,
+    );
+    let out = stereonav(&["log", "check", s(&log)]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(stdout.contains("mended 1 chunks"), "{stdout}");
+    let out = stereonav(&["log", "check", "--json", s(&log)]);
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["damage"]["repaired_chunks"], 1);
+    assert_eq!(doc["damage"]["spans_total"], 0);
+    assert_eq!(doc["topics"]["/odom"]["read"], 4801);
 }

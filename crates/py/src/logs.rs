@@ -231,6 +231,12 @@ impl LogDamage {
         self.0.unverified_chunks
     }
 
+    /// Chunks mended: one flipped bit explained their damage, and their CRC checks after it.
+    #[getter]
+    fn repaired_chunks(&self) -> u64 {
+        self.0.repaired_chunks
+    }
+
     fn __repr__(&self) -> String {
         if self.0.is_clean() {
             return "<stereonav.LogDamage: none>".to_owned();

@@ -91,13 +91,23 @@ def test_an_intact_log_has_no_damage(written: pathlib.Path) -> None:
     assert "none" in repr(log.damage)
 
 
-def test_a_flipped_bit_costs_only_the_chunk_it_hits(written: pathlib.Path, tmp_path: pathlib.Path) -> None:
+def test_one_flipped_bit_is_mended(written: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    layout = chunks(written)
+    start, end, _ = layout[len(layout) // 2]
+    log = stereonav.read_log(damaged(written, tmp_path / "one-flip.mcap", [(start + end) // 2]))
+    assert log.damage.repaired_chunks == 1 and log.damage.spans_total == 0
+    assert len(log.odometry) == ODOMETRY
+
+
+def test_a_chunk_it_cannot_mend_costs_only_that_chunk(written: pathlib.Path, tmp_path: pathlib.Path) -> None:
     layout = chunks(written)
     assert len(layout) > 10
     for k in (0, len(layout) // 2):
         start, end, odom_in_chunk = layout[k]
         assert odom_in_chunk > 0
-        path = damaged(written, tmp_path / f"flip-{k}.mcap", [(start + end) // 2])
+        # Two flipped bits in one chunk: no single bit explains them, the chunk is lost.
+        mid = (start + end) // 2
+        path = damaged(written, tmp_path / f"flip-{k}.mcap", [mid, mid + 40])
         log = stereonav.read_log(path)
         assert log.damage.damaged
         assert log.damage.spans_total == 1 and log.damage.chunks_lost == 1

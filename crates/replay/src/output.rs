@@ -324,7 +324,7 @@ struct SummaryParts<'a> {
 /// - `log_damage`: `null` for a log read whole, or what the reader could not read:
 ///   `spans_total`, `bytes_lost`, `chunks_lost`, `messages_lost` (`{topic: n}` or `null`),
 ///   `header_damaged`, `tail_damaged`, `cut`, `summary` (`"intact"`, `"absent"` or
-///   `"damaged: why"`), `unverified_chunks`, and `spans`, the first 100 stretches lost:
+///   `"damaged: why"`), `unverified_chunks`, `repaired_chunks`, and `spans`, the first 100 stretches lost:
 ///   `{offset, bytes, start_ns, end_ns, exact_times, chunks, messages, why}`.
 ///
 /// Non-finite numbers are `null` (see the module docs).
@@ -419,6 +419,7 @@ fn damage_json(d: &vehicle_log::Damage) -> Value {
         "cut": d.cut,
         "summary": summary,
         "unverified_chunks": d.unverified_chunks,
+        "repaired_chunks": d.repaired_chunks,
         "spans": spans,
     })
 }
@@ -1633,6 +1634,10 @@ mod schema {
                 (
                     "unverified_chunks",
                     integer("Chunks used without a CRC check"),
+                ),
+                (
+                    "repaired_chunks",
+                    integer("Chunks mended: one flipped bit, their CRC checks after it"),
                 ),
                 ("spans", array(span, "The first 100 stretches lost")),
             ],

@@ -113,13 +113,14 @@ pub struct Damage {
 
 impl Damage {
     /// Whether nothing is damaged: no loss, intact magic and header, no damaged summary,
-    /// not cut. (A log without a summary, or with chunks without CRCs, may be clean.)
+    /// not cut, no chunk mended. (A log without a summary, or with chunks without CRCs, may be clean.)
     pub fn is_clean(&self) -> bool {
         self.spans_total == 0
             && !self.header_damaged
             && !self.tail_damaged
             && !self.cut
             && !matches!(self.summary, SummaryState::Damaged { .. })
+            && self.repaired_chunks == 0
     }
 
     /// Adds a span to the totals.

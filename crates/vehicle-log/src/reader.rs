@@ -176,6 +176,12 @@ fn damage_line(damage: &Damage) -> Option<String> {
     if damage.tail_damaged {
         parts.push("its closing magic is damaged".to_owned());
     }
+    if damage.repaired_chunks > 0 {
+        parts.push(format!(
+            "{} chunks had one flipped bit, mended (their CRC checks)",
+            damage.repaired_chunks
+        ));
+    }
     (!parts.is_empty()).then(|| format!("the log is damaged: {}", parts.join("; ")))
 }
 

@@ -29,7 +29,8 @@ __all__ = ["LogDamage", "LogTruth", "LostSpan", "VehicleLog", "read_log"]
 #: ``spans_total``, ``bytes_lost``, ``chunks_lost``, ``messages_lost`` (dict topic -> count,
 #: or None when nothing counts them), ``header_damaged``, ``tail_damaged``, ``cut``,
 #: ``summary`` (``"intact"``, ``"damaged"``, ``"absent"``), ``summary_problem``,
-#: ``unverified_chunks`` (chunks read without a CRC check).
+#: ``unverified_chunks`` (chunks read without a CRC check), ``repaired_chunks`` (chunks mended:
+#: one flipped bit explained the damage).
 LogDamage = _native.LogDamage
 #: One stretch of a log that could not be read (frozen): ``offset`` and ``bytes`` in the file,
 #: ``start_ns`` and ``end_ns`` (the lost messages' log times when ``exact_times``, else the
