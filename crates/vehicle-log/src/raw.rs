@@ -224,6 +224,36 @@ struct PendingLoss {
     cut: bool,
 }
 
+impl PendingLoss {
+    /// A loss starting at `offset`, after a good message at `before_ns`.
+    fn new(offset: u64, why: String, before_ns: Option<u64>) -> Self {
+        Self {
+            offset,
+            bytes: 0,
+            chunks: 0,
+            why,
+            pieces: 0,
+            counts: Some(BTreeMap::new()),
+            times: Some(NO_TIMES),
+            before_ns,
+            open: None,
+            cut: false,
+        }
+    }
+}
+
+/// Messages per channel of two losses together; `None` when either does not know.
+fn add_counts(
+    a: Option<BTreeMap<u16, u64>>,
+    b: Option<BTreeMap<u16, u64>>,
+) -> Option<BTreeMap<u16, u64>> {
+    let (mut a, b) = (a?, b?);
+    for (channel, n) in b {
+        *a.entry(channel).or_default() += n;
+    }
+    Some(a)
+}
+
 /// A file source with a read buffer, its length known.
 struct Source<R> {
     inner: R,
@@ -1346,18 +1376,9 @@ impl<R: Read + Seek> RawReader<R> {
     ) {
         let bytes = self.uncounted(offset, bytes);
         let before = self.last_ns;
-        let pending = self.pending.get_or_insert_with(|| PendingLoss {
-            offset,
-            bytes: 0,
-            chunks: 0,
-            why,
-            pieces: 0,
-            counts: Some(BTreeMap::new()),
-            times: Some(NO_TIMES),
-            before_ns: before,
-            open: None,
-            cut: false,
-        });
+        let pending = self
+            .pending
+            .get_or_insert_with(|| PendingLoss::new(offset, why, before));
         // A loss that may have held messages has no times of its own.
         if !messages.as_ref().is_some_and(BTreeMap::is_empty) {
             pending.times = None;
@@ -1365,15 +1386,7 @@ impl<R: Read + Seek> RawReader<R> {
         pending.pieces += 1;
         pending.bytes += bytes;
         pending.chunks += chunks;
-        pending.counts = match (pending.counts.take(), messages) {
-            (Some(mut a), Some(b)) => {
-                for (k, v) in b {
-                    *a.entry(k).or_default() += v;
-                }
-                Some(a)
-            }
-            _ => None,
-        };
+        pending.counts = add_counts(pending.counts.take(), messages);
     }
 
     /// The bytes of `offset..offset + bytes` not counted as lost yet; counts them.
@@ -1392,18 +1405,9 @@ impl<R: Read + Seek> RawReader<R> {
         self.close_open_piece();
         let bytes = self.uncounted(offset, bytes);
         let before = self.last_ns;
-        let pending = self.pending.get_or_insert_with(|| PendingLoss {
-            offset,
-            bytes: 0,
-            chunks: 0,
-            why,
-            pieces: 0,
-            counts: Some(BTreeMap::new()),
-            times: Some(NO_TIMES),
-            before_ns: before,
-            open: None,
-            cut: false,
-        });
+        let pending = self
+            .pending
+            .get_or_insert_with(|| PendingLoss::new(offset, why, before));
         pending.pieces += 1;
         pending.bytes += bytes;
         pending.chunks += 1;
@@ -1427,15 +1431,7 @@ impl<R: Read + Seek> RawReader<R> {
             (Some(c), None) => Some(c.clone()),
             _ => None,
         };
-        pending.counts = match (pending.counts.take(), counts) {
-            (Some(mut a), Some(b)) => {
-                for (k, v) in b {
-                    *a.entry(k).or_default() += v;
-                }
-                Some(a)
-            }
-            _ => None,
-        };
+        pending.counts = add_counts(pending.counts.take(), counts);
         // Times: the summary's (trusted), else the message index's, else the header's.
         let times = piece
             .times

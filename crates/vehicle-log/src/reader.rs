@@ -89,11 +89,11 @@ impl LogReader<File> {
     /// Opens the log at `path` and checks that it is an MCAP file.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let file = File::open(path).map_err(|source| Error::Open {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::new(file, path)
+        Ok(Self {
+            raw: RawReader::open(path)?,
+            state: State::new(path.to_path_buf()),
+            done: false,
+        })
     }
 }
 
