@@ -51,7 +51,7 @@ use calib::selfcal::{
     Calibration, FramePair, Handover, SelfCalibrator, SolveStatus, SolverSettings, StableRule,
     calibrate,
 };
-use fpga_link::{Decoder, Event};
+use fpga_link::Decoder;
 use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel};
 use vehicle_log::Record;
 
@@ -308,32 +308,10 @@ pub fn read_vehicle_log(path: &Path, rig: Option<Rig>) -> Result<LogInput, Error
 pub fn decode_stream(chunks: &[&[u8]]) -> (Vec<DecodedFrame>, fpga_link::Stats) {
     let mut decoder = Decoder::new();
     let mut frames = Vec::new();
-    let mut take = |event: Option<Event<'_>>| -> bool {
-        match event {
-            Some(Event::Frame(f)) => {
-                let px = |x: fpga_link::Feature| Pixel::from_q4(x.x_q4, x.y_q4);
-                frames.push(DecodedFrame {
-                    t_us: f.t_us(),
-                    left: f.left().map(px).collect(),
-                    right: f.right().map(px).collect(),
-                });
-                true
-            }
-            Some(Event::Corrupt(_)) => true,
-            None => false,
-        }
-    };
     for chunk in chunks {
-        let mut rest: &[u8] = chunk;
-        loop {
-            let (used, event) = decoder.decode(rest);
-            rest = rest.get(used..).unwrap_or_default();
-            if !take(event) {
-                break;
-            }
-        }
+        stream::decode_chunk(&mut decoder, chunk, &mut frames);
     }
-    while take(decoder.decode_end()) {}
+    stream::decode_end(&mut decoder, &mut frames);
     (frames, decoder.stats())
 }
 
@@ -415,14 +393,7 @@ fn choose_rig(
     let source_name = format!("{} /rig", path.display());
     match (given, logged) {
         (Some(rig), logged) => {
-            if let Some(text) = logged
-                && Rig::from_json_str(text, &source_name).is_ok_and(|l| l != rig)
-            {
-                warnings.push(format!(
-                    "{}: the rig given differs from the log's /rig message; using the one given",
-                    path.display()
-                ));
-            }
+            warnings.extend(logged.and_then(|text| rig_differs(path, &rig, text)));
             Ok((rig, RigSource::Given))
         }
         (None, Some(text)) => Ok((Rig::from_json_str(text, &source_name)?, RigSource::Log)),
@@ -431,6 +402,19 @@ fn choose_rig(
             lost_to_damage: lost_before_data,
         }),
     }
+}
+
+/// The warning when the rig given differs from the log's `/rig` message (`text`).
+pub(crate) fn rig_differs(path: &Path, given: &Rig, text: &str) -> Option<String> {
+    let source_name = format!("{} /rig", path.display());
+    Rig::from_json_str(text, &source_name)
+        .is_ok_and(|logged| logged != *given)
+        .then(|| {
+            format!(
+                "{}: the rig given differs from the log's /rig message; using the one given",
+                path.display()
+            )
+        })
 }
 
 fn add_warnings(counts: &Counts, calibration: &Calibration, warnings: &mut Vec<String>) {

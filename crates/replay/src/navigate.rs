@@ -493,12 +493,8 @@ impl Replayer {
         }
         if self.given_rig
             && let Some(text) = &self.stream.rig_text
-            && Rig::from_json_str(text, "/rig").is_ok_and(|l| l != self.rig)
         {
-            warnings.push(format!(
-                "{}: the rig given differs from the log's /rig message; using the one given",
-                self.path.display()
-            ));
+            warnings.extend(crate::rig_differs(&self.path, &self.rig, text));
         }
         warnings
     }

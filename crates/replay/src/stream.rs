@@ -11,13 +11,9 @@
 //! replayed, in arrival order; the navigator then refuses it if it is older than the frame
 //! before, and the replay counts it.
 
-use std::cell::Cell;
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
-use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
 
 use calib::odometry::OdomSample;
 use fpga_link::{Decoder, Event};
@@ -102,36 +98,10 @@ impl TruthStream {
     }
 }
 
-/// A reader's position in its source, shared with whoever reports progress.
-#[derive(Debug)]
-pub(crate) struct Counting<R> {
-    inner: R,
-    position: Rc<Cell<u64>>,
-}
-
-impl<R: Read> Read for Counting<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        self.position
-            .set(self.position.get().saturating_add(n as u64));
-        Ok(n)
-    }
-}
-
-impl<R: Seek> Seek for Counting<R> {
-    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
-        let at = self.inner.seek(pos)?;
-        self.position.set(at);
-        Ok(at)
-    }
-}
-
 /// A vehicle log as a stream of navigator inputs in data-time order (see the module docs).
 pub(crate) struct LogStream {
     path: PathBuf,
-    reader: LogReader<Counting<File>>,
-    position: Rc<Cell<u64>>,
-    size: u64,
+    reader: LogReader,
     decoder: Decoder,
     frames: BinaryHeap<Reverse<Held<DecodedFrame>>>,
     odometry: BinaryHeap<Reverse<Held<OdomSample>>>,
@@ -166,22 +136,10 @@ impl std::fmt::Debug for LogStream {
 impl LogStream {
     /// Opens the log at `path` (an MCAP file, or an error).
     pub(crate) fn open(path: &Path) -> Result<Self, Error> {
-        let file = File::open(path).map_err(|source| vehicle_log::Error::Open {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let size = file.metadata().map_or(0, |m| m.len());
-        let position = Rc::new(Cell::new(0));
-        let source = Counting {
-            inner: file,
-            position: Rc::clone(&position),
-        };
-        let reader = LogReader::new(source, path)?;
+        let reader = LogReader::open(path)?;
         Ok(Self {
             path: path.to_path_buf(),
             reader,
-            position,
-            size,
             decoder: Decoder::new(),
             frames: BinaryHeap::new(),
             odometry: BinaryHeap::new(),
@@ -201,11 +159,12 @@ impl LogStream {
 
     /// `(bytes read, file size)`.
     pub(crate) fn progress(&self) -> (u64, u64) {
-        (self.position.get().min(self.size), self.size)
+        let size = self.reader.file_len();
+        (self.reader.position().min(size), size)
     }
 
     /// The underlying reader (its warnings, topics, truncation).
-    pub(crate) fn reader(&self) -> &LogReader<Counting<File>> {
+    pub(crate) fn reader(&self) -> &LogReader {
         &self.reader
     }
 
@@ -307,9 +266,7 @@ impl LogStream {
             None => {
                 self.ended = true;
                 let mut frames = Vec::new();
-                while let Some(event) = self.decoder.decode_end() {
-                    take_event(event, &mut frames);
-                }
+                decode_end(&mut self.decoder, &mut frames);
                 self.hold_frames(frames);
                 let stats = self.decoder.stats();
                 self.counts.frames = stats.packets;
@@ -328,15 +285,7 @@ impl LogStream {
             Record::Features { bytes, .. } => {
                 self.feature_bytes = self.feature_bytes.saturating_add(bytes.len() as u64);
                 let mut frames = Vec::new();
-                let mut rest: &[u8] = &bytes;
-                loop {
-                    let (used, event) = self.decoder.decode(rest);
-                    rest = rest.get(used..).unwrap_or_default();
-                    match event {
-                        Some(event) => take_event(event, &mut frames),
-                        None => break,
-                    }
-                }
+                decode_chunk(&mut self.decoder, &bytes, &mut frames);
                 self.hold_frames(frames);
             }
             Record::Odom(s) => {
@@ -395,6 +344,26 @@ impl LogStream {
                 item: frame,
             }));
         }
+    }
+}
+
+/// A chunk of the board's byte stream through `decoder`: its good frames onto `frames`.
+pub(crate) fn decode_chunk(decoder: &mut Decoder, chunk: &[u8], frames: &mut Vec<DecodedFrame>) {
+    let mut rest = chunk;
+    loop {
+        let (used, event) = decoder.decode(rest);
+        rest = rest.get(used..).unwrap_or_default();
+        match event {
+            Some(event) => take_event(event, frames),
+            None => break,
+        }
+    }
+}
+
+/// The end of the stream: the frames `decoder` still holds onto `frames`.
+pub(crate) fn decode_end(decoder: &mut Decoder, frames: &mut Vec<DecodedFrame>) {
+    while let Some(event) = decoder.decode_end() {
+        take_event(event, frames);
     }
 }
 
