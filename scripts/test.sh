@@ -20,7 +20,7 @@ cargo fmt --all -- --check
 step "cargo clippy (-D warnings)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 cargo clippy -p harris-core -p fpga-link --no-default-features --locked -- -D warnings
-cargo clippy -p calib -p track -p vslam-ekf -p nav --no-default-features --features alloc --locked -- -D warnings
+cargo clippy -p rig-model -p selfcal -p track -p vslam-ekf -p nav --no-default-features --features alloc --locked -- -D warnings
 
 step "cargo test"
 cargo test --workspace --locked

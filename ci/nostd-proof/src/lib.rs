@@ -1,5 +1,9 @@
-//! Links the firmware crates, and `calib` with `alloc` only, into a `#![no_std]` static
-//! library (see Cargo.toml). `calib`'s rig configuration needs a heap, so the library brings
+//! Links the firmware crates, and `rig-model`, `selfcal`, `track`, `vslam-ekf` and `nav` with
+//! `alloc` only, into a `#![no_std]` static library (see Cargo.toml). The rig configuration
+//! needs a heap, so the library brings its own global allocator: a bump allocator over a
+//! static buffer.
+#![no_std]` static
+//! library (see Cargo.toml). the rig configuration needs a heap, so the library brings
 //! its own global allocator: a bump allocator over a static buffer.
 #![no_std]
 
@@ -10,14 +14,15 @@ use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicUsize, Ordering};
 
 use alloc::vec::Vec;
-use calib::odometry::{Motion, OdomSample};
-use calib::selfcal::{FramePair, LandmarkPair, SolverSettings, calibrate};
-use calib::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, triangulate};
 use fpga_link::{Decoder, Event, Header, MAX_PACKET_LEN, encode_packet};
 use harris_core::{Feature, HarrisStream, Registers};
+use nalgebra::Vector3;
+use rig_model::handover::{FramePair, LandmarkPair};
+use rig_model::odometry::{Motion, OdomSample};
+use rig_model::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, triangulate};
+use selfcal::solver::{SolverSettings, calibrate};
 use track::{FrontEnd, FrontEndSettings, Model, Pixel};
 use vslam_ekf::{Ekf, Settings};
-use nalgebra::Vector3;
 
 /// Width of the test image: the detector's line buffers are sized for it at compile time.
 const WIDTH: usize = 32;
@@ -26,7 +31,11 @@ const WIDTH: usize = 32;
 /// number of features (1), or -1 on a configuration error. No heap, no std.
 #[unsafe(no_mangle)]
 pub extern "C" fn stereonav_nostd_harris_features() -> i32 {
-    let regs = Registers { width: WIDTH, height: WIDTH, ..Registers::default() };
+    let regs = Registers {
+        width: WIDTH,
+        height: WIDTH,
+        ..Registers::default()
+    };
     let Ok(mut stream) = HarrisStream::<WIDTH>::new(regs) else {
         return -1;
     };
@@ -48,11 +57,26 @@ pub extern "C" fn stereonav_nostd_harris_features() -> i32 {
 /// relays the board's stream would; returns the number of features decoded (2), or -1.
 #[unsafe(no_mangle)]
 pub extern "C" fn stereonav_nostd_stream_round_trip() -> i32 {
-    let left = [Feature { x_q4: 160, y_q4: 320, r: 1 << 20 }];
-    let right = [Feature { x_q4: 150, y_q4: 320, r: 1 << 19 }];
+    let left = [Feature {
+        x_q4: 160,
+        y_q4: 320,
+        r: 1 << 20,
+    }];
+    let right = [Feature {
+        x_q4: 150,
+        y_q4: 320,
+        r: 1 << 19,
+    }];
     let mut packet = [0u8; MAX_PACKET_LEN];
-    let Ok(n) = encode_packet(&Header { frame: 1, ..Header::default() }, &left, &right, &mut packet)
-    else {
+    let Ok(n) = encode_packet(
+        &Header {
+            frame: 1,
+            ..Header::default()
+        },
+        &left,
+        &right,
+        &mut packet,
+    ) else {
         return -1;
     };
     let mut decoder = Decoder::new();
@@ -98,14 +122,16 @@ unsafe impl GlobalAlloc for BumpAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         let base = self.heap.0.get().cast::<u8>();
         let mut start = 0;
-        let reserved = self.next.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |next| {
-            // Padding to the next aligned address (alignments are powers of two).
-            let addr = base.addr().checked_add(next)?;
-            let pad = addr.wrapping_neg() & (layout.align() - 1);
-            start = next.checked_add(pad)?;
-            let end = start.checked_add(layout.size())?;
-            (end <= HEAP_BYTES).then_some(end)
-        });
+        let reserved = self
+            .next
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |next| {
+                // Padding to the next aligned address (alignments are powers of two).
+                let addr = base.addr().checked_add(next)?;
+                let pad = addr.wrapping_neg() & (layout.align() - 1);
+                start = next.checked_add(pad)?;
+                let end = start.checked_add(layout.size())?;
+                (end <= HEAP_BYTES).then_some(end)
+            });
         match reserved {
             // SAFETY: `start + size <= HEAP_BYTES`, so the pointer stays inside the buffer.
             Ok(_) => unsafe { base.add(start) },
@@ -137,11 +163,22 @@ fn rig() -> Rig {
             cx: 376.0,
             cy: 240.0,
             baseline: 0.12,
-            mount: Mount { x: 0.2, y: -0.1, z: 1.0, roll: 0.05, pitch: 0.2, yaw: -0.1 },
+            mount: Mount {
+                x: 0.2,
+                y: -0.1,
+                z: 1.0,
+                roll: 0.05,
+                pitch: 0.2,
+                yaw: -0.1,
+            },
         },
         estimate: alloc::vec![Param::F, Param::Baseline],
         prior,
-        noise: Noise { pixel: 0.3, velocity: 0.02, yaw_rate: 0.01 },
+        noise: Noise {
+            pixel: 0.3,
+            velocity: 0.02,
+            yaw_rate: 0.01,
+        },
         lens: None,
     }
 }
@@ -181,8 +218,8 @@ pub extern "C" fn stereonav_nostd_selfcal() -> i32 {
     let rig = rig();
     let mut truth = rig.nominal;
     truth.f = 720.0;
-    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
-        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    let lamps =
+        [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)].map(|(x, y)| Vector3::new(x, y, 4.0));
     let mut pairs = Vec::new();
     for k in 0..12u32 {
         let theta = 0.2 * f64::from(k);
@@ -200,11 +237,21 @@ pub extern "C" fn stereonav_nostd_selfcal() -> i32 {
         };
         let mut landmarks = Vec::new();
         for lamp in &lamps {
-            if let (Ok(a), Ok(b)) = (project(&truth, &first, lamp), project(&truth, &second, lamp)) {
-                landmarks.push(LandmarkPair { first: a, second: b });
+            if let (Ok(a), Ok(b)) = (
+                project(&truth, &first, lamp),
+                project(&truth, &second, lamp),
+            ) {
+                landmarks.push(LandmarkPair {
+                    first: a,
+                    second: b,
+                });
             }
         }
-        pairs.push(FramePair { t_us: u64::from(k) * 1_000_000, motion, landmarks });
+        pairs.push(FramePair {
+            t_us: u64::from(k) * 1_000_000,
+            motion,
+            landmarks,
+        });
     }
     let cal = calibrate(&pairs, &rig, &rig.nominal, &SolverSettings::default());
     i32::from(libm::fabs(cal.camera.f - truth.f) <= cal.sigma(Param::F))
@@ -219,13 +266,18 @@ pub extern "C" fn stereonav_nostd_tracking() -> i32 {
     let Ok(mut front) = FrontEnd::new(Model::from_rig(&rig), FrontEndSettings::default()) else {
         return -1;
     };
-    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
-        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    let lamps =
+        [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)].map(|(x, y)| Vector3::new(x, y, 4.0));
     let mut confirmed = 0;
     for k in 0..5u32 {
         let t_us = u64::from(k) * 50_000;
         // 0.2 m/s forward, sampled at the frame times.
-        front.push_odometry(OdomSample { t_us, vx: 0.2, vy: 0.0, vtheta: 0.0 });
+        front.push_odometry(OdomSample {
+            t_us,
+            vx: 0.2,
+            vy: 0.0,
+            vtheta: 0.0,
+        });
         let pose = Pose2::new(0.01 * f64::from(k), 0.0, 0.0);
         let (mut left, mut right) = (Vec::new(), Vec::new());
         for lamp in &lamps {
@@ -251,8 +303,8 @@ pub extern "C" fn stereonav_nostd_ekf() -> i32 {
     let Ok(mut ekf) = Ekf::from_prior(&rig, Settings::default()) else {
         return -1;
     };
-    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
-        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    let lamps =
+        [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)].map(|(x, y)| Vector3::new(x, y, 4.0));
     let mut ids = Vec::new();
     for lamp in &lamps {
         let Ok(z) = project(&rig.nominal, &Pose2::default(), lamp) else {
@@ -263,7 +315,8 @@ pub extern "C" fn stereonav_nostd_ekf() -> i32 {
             Err(_) => return -1,
         }
     }
-    let variance = |ekf: &Ekf| ekf.camera_covariance()[(Param::Baseline.index(), Param::Baseline.index())];
+    let variance =
+        |ekf: &Ekf| ekf.camera_covariance()[(Param::Baseline.index(), Param::Baseline.index())];
     let before = variance(&ekf);
     for k in 1..=10u32 {
         if ekf.predict(0.2, 0.0, 0.0, 0.05).is_err() {
@@ -294,15 +347,26 @@ pub extern "C" fn stereonav_nostd_ekf() -> i32 {
 #[unsafe(no_mangle)]
 pub extern "C" fn stereonav_nostd_navigator() -> i32 {
     let rig = rig();
-    let settings = nav::NavSettings { skip_phase1: true, ..nav::NavSettings::default() };
+    let settings = nav::NavSettings {
+        skip_phase1: true,
+        ..nav::NavSettings::default()
+    };
     let Ok(mut navigator) = nav::Navigator::new(rig.clone(), settings) else {
         return -1;
     };
-    let lamps = [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)]
-        .map(|(x, y)| Vector3::new(x, y, 4.0));
+    let lamps =
+        [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)].map(|(x, y)| Vector3::new(x, y, 4.0));
     for k in 0..=200u64 {
         let t_us = k * 10_000;
-        if navigator.push_odometry(OdomSample { t_us, vx: 0.1, vy: 0.0, vtheta: 0.0 }).is_err() {
+        if navigator
+            .push_odometry(OdomSample {
+                t_us,
+                vx: 0.1,
+                vy: 0.0,
+                vtheta: 0.0,
+            })
+            .is_err()
+        {
             return -1;
         }
         if k % 5 != 0 {
@@ -321,7 +385,9 @@ pub extern "C" fn stereonav_nostd_navigator() -> i32 {
             return -1;
         }
     }
-    navigator.ekf().map_or(-1, |e| i32::try_from(e.landmark_count()).unwrap_or(-1))
+    navigator
+        .ekf()
+        .map_or(-1, |e| i32::try_from(e.landmark_count()).unwrap_or(-1))
 }
 
 #[panic_handler]

@@ -13,9 +13,10 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use calib::selfcal::{Calibration, Handover, ObservabilityReport, SolveStatus};
-use calib::{CameraParams, Param, ParamVector, Rig};
 use replay::{Counts, LogCalibration, Options, RigSource};
+use rig_model::handover::{Handover, ObservabilityReport};
+use rig_model::{CameraParams, Param, ParamVector, Rig};
+use selfcal::solver::{Calibration, SolveStatus};
 use serde_json::{Map, Value, json};
 use track::{PairSettings, PairingScheme};
 

@@ -16,11 +16,11 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use calib::{Param, Rig};
 use replay::{NavSettings, OutputFiles, ReplayEnd, Replayer};
+use rig_model::{Param, Rig};
 
 use crate::progress::ByteProgress;
-use calib::smoother::SmootherSettings;
+use selfcal::smoother::SmootherSettings;
 
 /// Arguments of `stereonav replay`.
 #[derive(Debug, clap::Args)]

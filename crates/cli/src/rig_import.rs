@@ -10,25 +10,25 @@
 //! * OpenCV (`FileStorage` YAML with `K1 D1 K2 D2 R T`, `width`, `height` and
 //!   `model: equidistant` for `cv2.fisheye.stereoCalibrate`'s, else `plumb_bob`).
 //!
-//! Kalibr and OpenCV calibrations are rectified by [`calib::stereo_rectify`], as OpenCV's
+//! Kalibr and OpenCV calibrations are rectified by [`rig_model::stereo_rectify`], as OpenCV's
 //! `stereoRectify` (`fisheye.stereoRectify`) with `CALIB_ZERO_DISPARITY` and `alpha = 0`
 //! (`balance = 0`) at the calibration's image size. The baseline is in the calibration's
 //! length unit, taken as metres (Kalibr's and EuRoC's are; OpenCV's `T` is in the unit of
 //! the calibration target's square size). The tables a calibration does not give (`[mount]`,
 //! `[estimate]`, `[prior]`, `[noise]`) get defaults, commented for the user to fill in. The
-//! file written is read back with [`calib::Rig::from_toml_str`] before it is saved.
+//! file written is read back with [`rig_model::Rig::from_toml_str`] before it is saved.
 
 use std::fmt::Write as _;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
-use calib::Rig;
-use calib::lens::{Lens, LensModel, StereoLens};
-use calib::stereo_rectify::{
+use nalgebra::{Matrix3, Matrix3x4, Vector3};
+use rig_model::Rig;
+use rig_model::lens::{Lens, LensModel, StereoLens};
+use rig_model::stereo_rectify::{
     ROTATION_TOLERANCE, RawCamera, StereoCalibration, rotation_deviation, stereo_rectify,
 };
-use nalgebra::{Matrix3, Matrix3x4, Vector3};
 use saphyr::{LoadableYamlNode, ScalarOwned, YamlOwned};
 
 /// Arguments of `stereonav rig`.

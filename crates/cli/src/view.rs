@@ -12,8 +12,8 @@ use std::path::PathBuf;
 
 use crate::progress::ByteProgress;
 use anyhow::{Context, Result, bail};
-use calib::Rig;
-use calib::smoother::SmootherSettings;
+use rig_model::Rig;
+use selfcal::smoother::SmootherSettings;
 
 /// Arguments of `stereonav view`.
 #[derive(Debug, clap::Args)]

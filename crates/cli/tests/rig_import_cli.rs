@@ -9,9 +9,9 @@ mod common;
 
 use std::path::PathBuf;
 
-use calib::Rig;
-use calib::lens::LensModel;
 use common::{assert_one_line_error, s, stereonav};
+use rig_model::Rig;
+use rig_model::lens::LensModel;
 
 fn scratch(name: &str) -> PathBuf {
     common::scratch("rig-import-cli", name)
@@ -170,7 +170,7 @@ fn assert_opencv_euroc(rig: &Rig, tolerance_px: f64) {
     ));
     // The defaults a calibration does not give.
     assert_eq!(rig.nominal.mount.z, 1.0);
-    assert_eq!(rig.estimate, vec![calib::Param::Baseline]);
+    assert_eq!(rig.estimate, vec![rig_model::Param::Baseline]);
     assert_eq!(rig.noise.pixel, 0.3);
 }
 

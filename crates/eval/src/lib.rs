@@ -15,13 +15,18 @@
 //! section 5.4): with `N` runs, `N` times the NEES averaged over the runs at one frame is
 //! chi-square with `N` times the dof, which gives the 95 % band of the average; the same for
 //! the NIS of the accepted observations.
+//!
+//! [`phase1`]: phase 1's frame pairs built with the simulator's lamp labels instead of the
+//! navigator's association, for judging the calibration apart from association.
+
+pub mod phase1;
 
 use std::collections::BTreeMap;
 
-use calib::camera::{CameraParams, Param};
 use nalgebra::{DMatrix, DVector, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rig_model::camera::{CameraParams, Param};
 use vslam_ekf::chi2::chi2_quantile;
 use vslam_ekf::{CameraStart, CandidateSettings, Candidates, Ekf, Settings};
 
@@ -203,7 +208,7 @@ pub fn run(
     };
     let mut ekf = Ekf::new(rig, &start, settings.ekf)?;
     let mut candidates = Candidates::new(settings.candidates)?;
-    let odometry = sim_run.odometry_samples();
+    let odometry = sim_run.odometry.clone();
     let truth: BTreeMap<u32, Vector3<f64>> = sim_run
         .landmarks
         .iter()
@@ -238,11 +243,11 @@ pub fn run(
             ekf.predict_odometry(&odometry, t0, frame.t_us)?;
         }
         previous_t = Some(frame.t_us);
-        let mut observations: Vec<(u64, calib::Measurement)> =
-            sim::phase1::lamp_measurements(frame)
-                .into_iter()
-                .map(|(lamp, z)| (u64::from(lamp), z))
-                .collect();
+        let mut observations: Vec<(u64, rig_model::Measurement)> = frame
+            .lamp_measurements()
+            .into_iter()
+            .map(|(lamp, z)| (u64::from(lamp), z))
+            .collect();
         observations.sort_by_key(|(lamp, _)| *lamp);
         let mut outlier_ids = Vec::new();
         for (lamp, z) in &mut observations {

@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use calib::Param;
 use eval::{RunSettings, Summary, monte_carlo};
+use rig_model::Param;
 
 fn scenario(name: &str) -> sim::Scenario {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

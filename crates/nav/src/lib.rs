@@ -4,7 +4,7 @@
 //! 1. **Phase 1, self-calibration.** Every frame goes through the association
 //!    ([`track::FrontEnd`]: left-right matching on the rectified rig, frame-to-frame tracking
 //!    predicted by the odometry); every frame's confirmed tracks and the odometry since the
-//!    frame before feed [`calib::smoother::Smoother`], the batch over every frame (every pose,
+//!    frame before feed [`selfcal::smoother::Smoother`], the batch over every frame (every pose,
 //!    every landmark and `C` at once), re-solved every half second. Between solves the pose is
 //!    dead reckoning from the batch's last one.
 //! 2. **The switch**, at the frame where the calibration became stable (the smoother's stable
@@ -13,7 +13,7 @@
 //!    phase 1 are in the map and the map is in the first frame's world frame; the association
 //!    continues with the calibrated camera. The phase-1 trajectory, smoothed, is
 //!    [`Navigator::phase1_trajectory`]. The batch's buffer is bounded
-//!    ([`calib::smoother::SmootherSettings::max_frames`]): when it is full the hand-over is
+//!    ([`selfcal::smoother::SmootherSettings::max_frames`]): when it is full the hand-over is
 //!    forced, and so it is by [`Navigator::finish`] at the end of a log, so that phase 2
 //!    always maps; [`Navigator::uninformed`] names the parameters the data did not give (they
 //!    enter phase 2 with about their prior).
@@ -53,13 +53,14 @@ mod error;
 use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
 
-use calib::camera::Param;
-use calib::camera::{CameraParams, Pose2};
-use calib::config::Rig;
-use calib::odometry::{OdomSample, OdometryFactor};
-use calib::selfcal::Handover;
-use calib::smoother::{BatchHandover, HandoverReason, Smoother, SmootherSettings};
 use nalgebra::{Matrix3, Matrix4, Vector4};
+use rig_model::camera::Param;
+use rig_model::camera::{CameraParams, Pose2};
+use rig_model::config::Rig;
+use rig_model::handover::Handover;
+use rig_model::handover::{BatchHandover, HandoverReason};
+use rig_model::odometry::{OdomSample, OdometryFactor};
+use selfcal::smoother::{Smoother, SmootherSettings};
 use track::{FrontEnd, FrontEndSettings, Model, Pixel, TrackedFrame};
 use vslam_ekf::chi2::chi2_quantile;
 use vslam_ekf::{
@@ -108,7 +109,7 @@ pub struct NavSettings {
     /// Hold (consider, not refine) in phase 2 every estimated camera parameter the motion so
     /// far cannot inform: all of them until the vehicle has translated
     /// [`NavSettings::min_translation_m`], and those with a structural trap
-    /// (`calib::selfcal::structural_trap`: f with the head looking straight up, the camera
+    /// (`selfcal::solver::structural_trap`: f with the head looking straight up, the camera
     /// height, the offsets before the vehicle turned). Otherwise a model error elsewhere
     /// (the camera wobbling while the odometry says the vehicle stands) is absorbed by them
     /// (docs/real-images.md).
@@ -381,7 +382,7 @@ impl Navigator {
 
     /// The current estimate of the vehicle's parameters V: the filter's in phase 2, the
     /// batch's in phase 1 (a prediction does not change it).
-    fn vehicle(&self) -> calib::Vehicle {
+    fn vehicle(&self) -> rig_model::Vehicle {
         self.ekf
             .as_ref()
             .map_or_else(|| self.smoother.camera().vehicle, |e| e.camera().vehicle)
@@ -394,7 +395,7 @@ impl Navigator {
         &self,
         t0_us: u64,
         t1_us: u64,
-        vehicle: &calib::Vehicle,
+        vehicle: &rig_model::Vehicle,
         estimates_vehicle: bool,
     ) -> Vec<OdomSample> {
         if !estimates_vehicle {
@@ -419,7 +420,7 @@ impl Navigator {
 
     /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
     /// 3 sigma of its noise: a standing vehicle's noise is not motion).
-    fn excite(&mut self, m: &calib::odometry::Motion, cov: &Matrix3<f64>) {
+    fn excite(&mut self, m: &rig_model::odometry::Motion, cov: &Matrix3<f64>) {
         let d = nalgebra::Vector2::new(m.dx, m.dy);
         let c2 = cov.fixed_view::<2, 2>(0, 0).into_owned();
         if let Some(inv) = c2.try_inverse()
@@ -491,7 +492,7 @@ impl Navigator {
             .filter(|p| !p.is_vehicle())
             .filter(|&p| {
                 !moved
-                    || calib::selfcal::structural_trap(
+                    || selfcal::solver::structural_trap(
                         p,
                         tilted,
                         rotation,
@@ -705,19 +706,20 @@ impl Navigator {
         // model; a feature that cannot be mapped is dropped and counted.
         let rectified = self.rig.lens.map(|lens| {
             let c = &self.rig.nominal;
-            let map = |lens: &calib::lens::Lens, side: &[Pixel], dropped: &mut u64| -> Vec<Pixel> {
-                side.iter()
-                    .filter_map(|p| {
-                        let r = lens
-                            .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
-                            .map(|q| Pixel { u: q.x, v: q.y });
-                        if r.is_none() {
-                            *dropped += 1;
-                        }
-                        r
-                    })
-                    .collect()
-            };
+            let map =
+                |lens: &rig_model::lens::Lens, side: &[Pixel], dropped: &mut u64| -> Vec<Pixel> {
+                    side.iter()
+                        .filter_map(|p| {
+                            let r = lens
+                                .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
+                                .map(|q| Pixel { u: q.x, v: q.y });
+                            if r.is_none() {
+                                *dropped += 1;
+                            }
+                            r
+                        })
+                        .collect()
+                };
             let mut dropped = 0;
             let l = map(&lens.left, left, &mut dropped);
             let r = map(&lens.right, right, &mut dropped);
@@ -755,13 +757,13 @@ impl Navigator {
         motion: Option<OdometryFactor>,
         outcome: &mut FrameOutcome,
     ) -> Result<(), Error> {
-        let observations: Vec<(u64, calib::Measurement)> = tracked
+        let observations: Vec<(u64, rig_model::Measurement)> = tracked
             .observations
             .iter()
             .filter(|o| o.confirmed)
             .map(|o| (o.track.0, o.measurement))
             .collect();
-        let tentative: Vec<(u64, calib::Measurement)> = tracked
+        let tentative: Vec<(u64, rig_model::Measurement)> = tracked
             .observations
             .iter()
             .filter(|o| !o.confirmed)
@@ -855,8 +857,8 @@ impl Navigator {
                 .find(|o| o.track.0 == track)
                 .map(|o| (track, o.measurement))
         };
-        let mut observations: Vec<(usize, calib::Measurement)> = Vec::new();
-        let mut added: Vec<(LandmarkId, u64, calib::Measurement)> = Vec::new();
+        let mut observations: Vec<(usize, rig_model::Measurement)> = Vec::new();
+        let mut added: Vec<(LandmarkId, u64, rig_model::Measurement)> = Vec::new();
         for id in &outcome.added {
             if let Some((track, z)) = measurement_of(*id) {
                 added.push((*id, track, z));
@@ -958,7 +960,7 @@ impl Navigator {
         }
         // Bound tracks are observations; unbound ones become candidates once the tracker has
         // confirmed them.
-        let frame: Vec<(u64, calib::Measurement)> = tracked
+        let frame: Vec<(u64, rig_model::Measurement)> = tracked
             .observations
             .iter()
             .filter(|o| o.confirmed || self.candidates.landmark_of(o.track.0).is_some())

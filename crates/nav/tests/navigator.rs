@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use calib::odometry::OdomSample;
 use nav::{Error, NavSettings, Navigator, Phase};
+use rig_model::odometry::OdomSample;
 use track::Pixel;
 
 fn run(name: &str) -> sim::SimRun {
@@ -55,7 +55,7 @@ fn phase_1_hands_over_to_phase_2_on_the_calibration_drive() {
     // Every lamp mapped once, no clutter landmark.
     assert_eq!(ekf.landmark_count(), run.landmarks.len());
     // The filter continued from the hand-over: the baseline's sigma no larger than phase 1's.
-    let i = calib::Param::Baseline.index();
+    let i = rig_model::Param::Baseline.index();
     let s_handover = handover.covariance[(i, i)].sqrt();
     let s_now = ekf.camera_covariance()[(i, i)].sqrt();
     assert!(s_now <= s_handover * 1.0001, "{s_now} > {s_handover}");
@@ -142,5 +142,5 @@ fn frames_without_odometry_hold_the_pose() {
         }
     }
     assert_eq!(nav.stats().frames_without_odometry, 19);
-    assert_eq!(nav.pose().0, calib::Pose2::default());
+    assert_eq!(nav.pose().0, rig_model::Pose2::default());
 }

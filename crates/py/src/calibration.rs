@@ -1,4 +1,4 @@
-//! Phase 1 of the method, self-calibration (`calib::selfcal`), for Python.
+//! Phase 1 of the method, self-calibration (`selfcal::solver`), for Python.
 //!
 //! The data come as plain NumPy arrays, checked here and turned into
 //! [`FramePair`]s:
@@ -9,7 +9,7 @@
 //!   `dx, dy, dtheta, dt_s` ([`Motion`], eq. (1)'s `dT` and `dtheta`) and `samples` (u64).
 //!
 //! [`frame_pairs`] builds those arrays from per-frame measurements with landmark ids and the
-//! odometry, with `calib::odometry::integrate`. Whatever the source of the pairs (these
+//! odometry, with `rig_model::odometry::integrate`. Whatever the source of the pairs (these
 //! arrays here, or the association of a vehicle log in [`calibrate_log`]), the batch solve
 //! ends in a [`CalibrationResult`] that hands the answer to Python.
 //!
@@ -20,16 +20,14 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::PathBuf;
 
-use calib::odometry::{Motion, OdomSample, integrate};
-use calib::selfcal::{
-    Calibration, FramePair, Handover, LandmarkPair, ObservabilityReport, SolveStatus,
-    SolverSettings, StableRule,
-};
-use calib::{CameraParams, Measurement, N_CAMERA, Param, ParamVector, Rig, RigFileError};
 use numpy::ndarray::{Array2, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use replay::{LogCalibration, RigSource};
+use rig_model::handover::{FramePair, Handover, LandmarkPair, ObservabilityReport};
+use rig_model::odometry::{Motion, OdomSample, integrate};
+use rig_model::{CameraParams, Measurement, N_CAMERA, Param, ParamVector, Rig, RigFileError};
+use selfcal::solver::{Calibration, SolveStatus, SolverSettings, StableRule};
 use track::{PairSettings, PairingScheme, SettingsError};
 
 use crate::input_error;
@@ -73,7 +71,7 @@ type PyIntegrated<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u64>>);
 type SettingsTuple = (f64, usize, f64, f64);
 /// [`StableRule`] as passed: `(min_pairs, sigma_fraction, step_fraction, consecutive)`.
 type RuleTuple = (usize, f64, f64, usize);
-/// One [`calib::selfcal::ParamObservability`]: `(name, prior_sigma, data_sigma,
+/// One [`rig_model::handover::ParamObservability`]: `(name, prior_sigma, data_sigma,
 /// posterior_sigma, observable, reason, structural)`.
 type ParamTuple = (
     &'static str,
@@ -485,7 +483,7 @@ fn odometry_samples(
 }
 
 /// The motion of each span `t0_us[i] .. t1_us[i]`, integrated from the odometry
-/// (`calib::odometry::integrate`).
+/// (`rig_model::odometry::integrate`).
 fn integrate_spans(
     odometry: &[OdomSample],
     t0_us: &[u64],
@@ -631,7 +629,10 @@ fn start_camera(values: &[f64]) -> Result<CameraParams, CalibInputError> {
             return Err(CalibInputError::Camera { param, value });
         }
     }
-    Ok(crate::camera_from_values(values, &calib::Vehicle::NOMINAL))
+    Ok(crate::camera_from_values(
+        values,
+        &rig_model::Vehicle::NOMINAL,
+    ))
 }
 
 /// The rig from the JSON form of its file; `source` names it in errors.
@@ -639,7 +640,7 @@ fn rig_from_json(text: &str, source: &str) -> Result<Rig, CalibInputError> {
     Rig::from_json_str(text, source).map_err(CalibInputError::Rig)
 }
 
-/// The batch solve (`calib::selfcal::calibrate`) of checked frame pairs, with the GIL
+/// The batch solve (`selfcal::solver::calibrate`) of checked frame pairs, with the GIL
 /// released. Every source of frame pairs ends here.
 fn solve(
     py: Python<'_>,
@@ -649,7 +650,7 @@ fn solve(
     settings: &SolverSettings,
 ) -> CalibrationResult {
     let start = start.unwrap_or(rig.nominal);
-    let calibration = py.detach(|| calib::selfcal::calibrate(pairs, rig, &start, settings));
+    let calibration = py.detach(|| selfcal::solver::calibrate(pairs, rig, &start, settings));
     CalibrationResult { calibration }
 }
 
@@ -665,7 +666,7 @@ fn vector_array<'py>(py: Python<'py>, v: &ParamVector) -> Bound<'py, PyArray1<f6
 /// The camera's block of a covariance over C and V.
 fn covariance_array<'py>(
     py: Python<'py>,
-    cov: &nalgebra::SMatrix<f64, { calib::N_PARAMS }, { calib::N_PARAMS }>,
+    cov: &nalgebra::SMatrix<f64, { rig_model::N_PARAMS }, { rig_model::N_PARAMS }>,
 ) -> Bound<'py, PyArray2<f64>> {
     Array2::from_shape_fn((N_CAMERA, N_CAMERA), |(i, j)| cov[(i, j)]).into_pyarray(py)
 }
@@ -797,7 +798,7 @@ fn motions_out<'py>(
     )
 }
 
-/// The result of a phase-1 solve (`calib::selfcal::Calibration`). Arrays are copied out on
+/// The result of a phase-1 solve (`selfcal::solver::Calibration`). Arrays are copied out on
 /// access.
 #[pyclass(module = "stereonav._native", frozen)]
 pub(crate) struct CalibrationResult {
@@ -1097,11 +1098,11 @@ impl LogCalibrationResult {
     }
 }
 
-/// Phase 1 fed pair by pair (`calib::selfcal::SelfCalibrator`): re-solves every
+/// Phase 1 fed pair by pair (`selfcal::solver::SelfCalibrator`): re-solves every
 /// `solve_every` pairs, warm-started, until the stability rule hands over to phase 2.
 #[pyclass(module = "stereonav._native")]
 pub(crate) struct SelfCalibrator {
-    inner: calib::selfcal::SelfCalibrator,
+    inner: selfcal::solver::SelfCalibrator,
 }
 
 #[pymethods]
@@ -1130,7 +1131,7 @@ impl SelfCalibrator {
             .into_pyerr(py));
         }
         Ok(Self {
-            inner: calib::selfcal::SelfCalibrator::new(rig, settings, rule, solve_every),
+            inner: selfcal::solver::SelfCalibrator::new(rig, settings, rule, solve_every),
         })
     }
 

@@ -16,8 +16,6 @@
 
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
-use calib::odometry::OdomSample;
-use calib::{Measurement, N_CAMERA, Param, Rig};
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array2, Array3, ArrayView1, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
@@ -25,6 +23,8 @@ use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyType;
+use rig_model::odometry::OdomSample;
+use rig_model::{Measurement, N_CAMERA, Param, Rig};
 use vslam_ekf::{
     CameraCovariance, CameraStart, CandidateSettings, Candidates, CovarianceUpdate, Ekf,
     FrameReport, Health, LandmarkId, Settings, UpdateReport,
@@ -247,7 +247,7 @@ fn camera_start(
     Ok(CameraStart {
         camera: crate::camera_from_values(
             &camera.iter().copied().collect::<Vec<_>>(),
-            &calib::Vehicle::NOMINAL,
+            &rig_model::Vehicle::NOMINAL,
         ),
         covariance: CameraCovariance::from_fn(|i, j| {
             if i < N_CAMERA && j < N_CAMERA {

@@ -251,20 +251,23 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     Ok(())
 }
 
-/// A camera from the ten values of `C` in [`calib::Param::CAMERA`] order (the Python
+/// A camera from the ten values of `C` in [`rig_model::Param::CAMERA`] order (the Python
 /// arrays hold C only) and the vehicle's parameters `vehicle`.
-pub(crate) fn camera_from_values(values: &[f64], vehicle: &calib::Vehicle) -> calib::CameraParams {
-    let mut c = calib::CameraParams::from_vector(&calib::ParamVector::zeros());
+pub(crate) fn camera_from_values(
+    values: &[f64],
+    vehicle: &rig_model::Vehicle,
+) -> rig_model::CameraParams {
+    let mut c = rig_model::CameraParams::from_vector(&rig_model::ParamVector::zeros());
     c.vehicle = *vehicle;
-    for (&p, &v) in calib::Param::CAMERA.iter().zip(values) {
+    for (&p, &v) in rig_model::Param::CAMERA.iter().zip(values) {
         c.set(p, v);
     }
     c
 }
 
-/// The ten values of `C`, [`calib::Param::CAMERA`] order.
-pub(crate) fn camera_values(c: &calib::CameraParams) -> Vec<f64> {
-    calib::Param::CAMERA.iter().map(|&p| c.get(p)).collect()
+/// The ten values of `C`, [`rig_model::Param::CAMERA`] order.
+pub(crate) fn camera_values(c: &rig_model::CameraParams) -> Vec<f64> {
+    rig_model::Param::CAMERA.iter().map(|&p| c.get(p)).collect()
 }
 
 #[cfg(test)]

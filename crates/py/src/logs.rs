@@ -16,11 +16,11 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use calib::Rig;
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
+use rig_model::Rig;
 use vehicle_log::{OdomSample, Record, TruthCamera, TruthLandmark, TruthPose};
 
 use crate::calibration::replay_error;
@@ -320,7 +320,7 @@ fn read_contents(path: &Path) -> Result<LogContents, replay::Error> {
 /// The ten camera parameters of the simulator's truth, in `Param::CAMERA` order.
 fn truth_camera_vector(t: &TruthCamera) -> Vec<f64> {
     let c = replay::truth_camera(t);
-    calib::Param::CAMERA.iter().map(|&p| c.get(p)).collect()
+    rig_model::Param::CAMERA.iter().map(|&p| c.get(p)).collect()
 }
 
 /// Rows of three values as a `(K, 3)` array.
@@ -496,7 +496,7 @@ mod tests {
         ];
         let values = truth_camera_vector(&t);
         assert_eq!(values.len(), names.len());
-        for (param, value) in calib::Param::CAMERA.iter().zip(values) {
+        for (param, value) in rig_model::Param::CAMERA.iter().zip(values) {
             let expected = names
                 .iter()
                 .position(|n| *n == param.name())

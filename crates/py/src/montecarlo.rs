@@ -50,7 +50,7 @@ pub(crate) struct MonteCarloResult {
 
 impl MonteCarloResult {
     /// The estimated camera parameters (those of the first run; every run has the same rig).
-    fn params(&self) -> Vec<calib::Param> {
+    fn params(&self) -> Vec<rig_model::Param> {
         self.summary
             .runs
             .first()

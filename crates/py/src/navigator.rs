@@ -26,15 +26,15 @@
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
-use calib::odometry::OdomSample;
-use calib::smoother::SmootherSettings;
-use calib::{N_CAMERA, Rig};
 use numpy::ndarray::{Array2, Array3, ArrayView1, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use replay::{
     CameraSample, FrameEstimate, LandmarkEstimate, NavSettings, ParamEstimate, Phase, Replay,
 };
+use rig_model::odometry::OdomSample;
+use rig_model::{N_CAMERA, Rig};
+use selfcal::smoother::SmootherSettings;
 use track::Pixel;
 
 use crate::calibration::replay_error;
@@ -832,12 +832,12 @@ mod tests {
     #[test]
     fn camera_arrays_are_in_param_order() {
         let rig_camera =
-            calib::CameraParams::from_vector(&calib::ParamVector::from_fn(|i, _| i as f64));
+            rig_model::CameraParams::from_vector(&rig_model::ParamVector::from_fn(|i, _| i as f64));
         let mut cov = vslam_ekf::CameraCovariance::zeros();
         cov[(3, 3)] = 4e-6;
         let params = ParamEstimate::all(&rig_camera, &cov);
-        assert_eq!(params.len(), calib::N_PARAMS);
-        assert_eq!(params[3].param, calib::Param::Baseline);
+        assert_eq!(params.len(), rig_model::N_PARAMS);
+        assert_eq!(params[3].param, rig_model::Param::Baseline);
         assert!((params[3].sigma - 2e-3).abs() < 1e-15);
         assert_eq!(params[0].sigma, 0.0);
         for (i, p) in params.iter().enumerate() {

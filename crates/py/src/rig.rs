@@ -1,11 +1,11 @@
 //! The stereo rig model (`vehicle-interfaces.md` sections 1 and 3) for Python: projection with
 //! Jacobians and triangulation over NumPy arrays, and rig files.
 
-use calib::{CameraParams, N_CAMERA, Param, Pose2, Rig};
 use nalgebra::Vector3;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
+use rig_model::{CameraParams, N_CAMERA, Param, Pose2, Rig};
 
 use crate::input_error;
 
@@ -26,7 +26,7 @@ fn camera(py: Python<'_>, c: &PyReadonlyArray1<'_, f64>) -> PyResult<CameraParam
     }
     Ok(crate::camera_from_values(
         &c.iter().copied().collect::<Vec<_>>(),
-        &calib::Vehicle::NOMINAL,
+        &rig_model::Vehicle::NOMINAL,
     ))
 }
 
@@ -98,7 +98,7 @@ pub(crate) fn project<'py>(
     let mut jl = Array3::from_elem((n, 4, 3), f64::NAN);
     let mut jc = Array3::from_elem((n, 4, N_CAMERA), f64::NAN);
     for (i, p) in points.iter().enumerate() {
-        let Ok((m, j)) = calib::project_with_jacobians(&c, &pose, &Vector3::from(*p)) else {
+        let Ok((m, j)) = rig_model::project_with_jacobians(&c, &pose, &Vector3::from(*p)) else {
             continue;
         };
         for r in 0..4 {
@@ -152,7 +152,7 @@ pub(crate) fn triangulate<'py>(
     let mut world = Array2::from_elem((n, 3), f64::NAN);
     let mut cov = Array3::from_elem((n, 3, 3), f64::NAN);
     for (i, z) in zs.iter().enumerate() {
-        let Ok(t) = calib::triangulate(&c, &calib::Measurement::from(*z)) else {
+        let Ok(t) = rig_model::triangulate(&c, &rig_model::Measurement::from(*z)) else {
             continue;
         };
         let (pr, pw) = (t.p_in_robot(&c), t.p_in_world(&c, &pose));

@@ -16,7 +16,7 @@ use replay::{LogInput, NavSettings, Navigator, read_vehicle_log};
 fn euroc() -> Option<LogInput> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/euroc-v101-static");
     let text = std::fs::read_to_string(dir.join("rig.toml")).ok()?;
-    let rig = calib::config::Rig::from_toml_str(&text, "rig.toml").ok()?;
+    let rig = rig_model::config::Rig::from_toml_str(&text, "rig.toml").ok()?;
     read_vehicle_log(&dir.join("log.mcap"), Some(rig)).ok()
 }
 

@@ -1,7 +1,7 @@
 //! How close the navigator's final map comes to what the data allow: each seed of a scenario
 //! is simulated to a vehicle log and replayed (the whole method, no flags), and the same
 //! frames are solved as one batch (every pose, lamp and estimated camera parameter at once,
-//! Levenberg-Marquardt on every frame's pixels and the odometry, `calib::smoother` never
+//! Levenberg-Marquardt on every frame's pixels and the odometry, `selfcal::smoother` never
 //! handing over) with the association taken from the truth: each feature the simulator made
 //! of a lamp is that lamp's observation, clutter is left out.
 //!
@@ -14,9 +14,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use calib::Param;
-use calib::smoother::{Smoother, SmootherSettings};
 use replay::{NavSettings, replay_log};
+use rig_model::Param;
+use selfcal::smoother::{Smoother, SmootherSettings};
 use vslam_ekf::Increment;
 
 fn main() -> ExitCode {
@@ -112,7 +112,7 @@ fn run() -> Result<(), String> {
         };
         let mut batch = Smoother::new(sc.rig.clone(), settings);
         let decoded: std::collections::BTreeSet<u64> = r.frames.iter().map(|f| f.t_us).collect();
-        let odometry_samples = sim_run.odometry_samples();
+        let odometry_samples = sim_run.odometry.clone();
         let mut previous: Option<u64> = None;
         for f in sim_run.frames.iter().filter(|f| decoded.contains(&f.t_us)) {
             let vehicle = sc.rig.nominal.vehicle;
@@ -126,7 +126,7 @@ fn run() -> Result<(), String> {
                     true,
                 )
                 .ok()
-                .map(|(inc, reported, jv)| calib::odometry::OdometryFactor {
+                .map(|(inc, reported, jv)| rig_model::odometry::OdometryFactor {
                     motion: inc.motion,
                     covariance: reported,
                     vehicle,
@@ -151,7 +151,7 @@ fn run() -> Result<(), String> {
                     let (a, b) = (a.feature(), b.feature());
                     observations.push((
                         u64::from(v.id),
-                        calib::Measurement::new(a.u(), a.v(), b.u(), b.v()),
+                        rig_model::Measurement::new(a.u(), a.v(), b.u(), b.v()),
                     ));
                 }
             }

@@ -26,7 +26,8 @@ fn run() -> Result<(), String> {
     let log = args.first().ok_or(usage)?;
     let rig_path = args.get(1).ok_or(usage)?;
     let text = std::fs::read_to_string(rig_path).map_err(|e| format!("{rig_path}: {e}"))?;
-    let mut rig = calib::config::Rig::from_toml_str(&text, rig_path).map_err(|e| e.to_string())?;
+    let mut rig =
+        rig_model::config::Rig::from_toml_str(&text, rig_path).map_err(|e| e.to_string())?;
     let mut settings = NavSettings::default();
     let mut every = 5usize;
     let mut rest = args.iter().skip(2);

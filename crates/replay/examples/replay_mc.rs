@@ -15,8 +15,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use calib::Param;
 use replay::{NavSettings, replay_log};
+use rig_model::Param;
 
 fn main() -> ExitCode {
     match run() {

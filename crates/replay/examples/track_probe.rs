@@ -26,13 +26,13 @@ fn run() -> Result<(), String> {
     let log = args.first().ok_or(usage)?;
     let rig_path = args.get(1).ok_or(usage)?;
     let text = std::fs::read_to_string(rig_path).map_err(|e| format!("{rig_path}: {e}"))?;
-    let rig = calib::config::Rig::from_toml_str(&text, rig_path).map_err(|e| e.to_string())?;
+    let rig = rig_model::config::Rig::from_toml_str(&text, rig_path).map_err(|e| e.to_string())?;
     let input = replay::read_vehicle_log(std::path::Path::new(log), Some(rig.clone()))
         .map_err(|e| e.to_string())?;
     let mut fe = FrontEnd::new(Model::from_rig(&rig), FrontEndSettings::default())
         .map_err(|e| e.to_string())?;
     let mut odometry = input.odometry.iter().peekable();
-    let mut tracks: BTreeMap<u64, Vec<(usize, calib::Measurement, bool)>> = BTreeMap::new();
+    let mut tracks: BTreeMap<u64, Vec<(usize, rig_model::Measurement, bool)>> = BTreeMap::new();
     let mut per_frame = Vec::new();
     for (k, f) in input.frames.iter().enumerate() {
         while let Some(s) = odometry.next_if(|s| s.t_us <= f.t_us) {

@@ -41,7 +41,7 @@ pub enum Error {
     },
     /// The log's `/rig` message is not a usable rig (the message names the key and problem).
     #[error(transparent)]
-    BadRig(#[from] calib::RigFileError),
+    BadRig(#[from] rig_model::RigFileError),
     /// A setting of the replay is out of range.
     #[error("replay settings: {0}")]
     Settings(#[from] track::SettingsError),

@@ -24,8 +24,8 @@
 
 use std::path::{Path, PathBuf};
 
-use calib::camera::Param;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use rig_model::camera::Param;
 use serde_json::Value;
 
 use crate::{
@@ -262,13 +262,13 @@ impl At<'_> {
             .filter(|o| o.is_object())
             .ok_or_else(|| self.bad(field, "an object of parameters", v.get(field)))?;
         let vehicle = v.get("vehicle").filter(|o| o.is_object());
-        let nominal = calib::CameraParams {
-            vehicle: calib::Vehicle::NOMINAL,
+        let nominal = rig_model::CameraParams {
+            vehicle: rig_model::Vehicle::NOMINAL,
             f: 0.0,
             cx: 0.0,
             cy: 0.0,
             baseline: 0.0,
-            mount: calib::Mount::default(),
+            mount: rig_model::Mount::default(),
         };
         Param::ALL
             .iter()

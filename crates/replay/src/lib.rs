@@ -44,14 +44,14 @@ mod types;
 
 use std::path::{Path, PathBuf};
 
-use calib::camera::ParamVector;
-use calib::config::Rig;
-use calib::odometry::OdomSample;
-use calib::selfcal::{
-    Calibration, FramePair, Handover, SelfCalibrator, SolveStatus, SolverSettings, StableRule,
-    calibrate,
-};
 use fpga_link::Decoder;
+use rig_model::camera::ParamVector;
+use rig_model::config::Rig;
+use rig_model::handover::{FramePair, Handover};
+use rig_model::odometry::OdomSample;
+use selfcal::solver::{
+    Calibration, SelfCalibrator, SolveStatus, SolverSettings, StableRule, calibrate,
+};
 use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel};
 use vehicle_log::Record;
 

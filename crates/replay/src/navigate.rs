@@ -6,9 +6,9 @@ use std::collections::{BTreeMap, VecDeque};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-use calib::camera::{CameraParams, Param, Pose2};
-use calib::config::Rig;
 use nav::{NavSettings, Navigator};
+use rig_model::camera::{CameraParams, Param, Pose2};
+use rig_model::config::Rig;
 use vehicle_log::{TruthCamera, TruthPose};
 
 use crate::stream::{Input, LogStream, TruthStream};
@@ -570,14 +570,14 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
         ));
     }
     if let Some((reason, uninformed)) = navigator.uninformed()
-        && (reason != calib::smoother::HandoverReason::Stable || !uninformed.is_empty())
+        && (reason != rig_model::handover::HandoverReason::Stable || !uninformed.is_empty())
     {
         let why = match reason {
-            calib::smoother::HandoverReason::Stable => "phase 1 became stable",
-            calib::smoother::HandoverReason::BufferFull => {
+            rig_model::handover::HandoverReason::Stable => "phase 1 became stable",
+            rig_model::handover::HandoverReason::BufferFull => {
                 "phase 1 was not stable when its buffer (frames or landmarks) filled"
             }
-            calib::smoother::HandoverReason::Requested => {
+            rig_model::handover::HandoverReason::Requested => {
                 "phase 1 was not stable by the end of the log"
             }
         };
@@ -680,7 +680,7 @@ impl TruthAccumulator {
         let pose = Pose2::new(p.x, p.y, p.theta);
         for (lamp, count) in truth.landmarks.iter().zip(self.seen.iter_mut()) {
             let l = nalgebra::Vector3::new(lamp.x, lamp.y, lamp.z);
-            if let Ok(z) = calib::project(&true_camera, &pose, &l)
+            if let Ok(z) = rig_model::project(&true_camera, &pose, &l)
                 && inside(z[0], z[1])
                 && inside(z[2], z[3])
             {
@@ -794,7 +794,7 @@ impl TruthAccumulator {
 /// The camera parameters of the simulator's truth (`/truth/camera`).
 pub fn truth_camera(t: &TruthCamera) -> CameraParams {
     CameraParams {
-        vehicle: calib::Vehicle {
+        vehicle: rig_model::Vehicle {
             odom_scale: t.odom_scale,
             odom_yaw_scale: t.odom_yaw_scale,
             odom_yaw_bias: t.odom_yaw_bias,
@@ -804,7 +804,7 @@ pub fn truth_camera(t: &TruthCamera) -> CameraParams {
         cx: t.cx,
         cy: t.cy,
         baseline: t.baseline,
-        mount: calib::camera::Mount {
+        mount: rig_model::camera::Mount {
             x: t.mount_x,
             y: t.mount_y,
             z: t.mount_z,
@@ -820,7 +820,7 @@ fn pose_nees(pose: &Pose2, cov: &nalgebra::Matrix3<f64>, t: &TruthPose) -> Optio
     let e = nalgebra::Vector3::new(
         pose.x - t.x,
         pose.y - t.y,
-        calib::camera::wrap_angle(pose.theta - t.theta),
+        rig_model::camera::wrap_angle(pose.theta - t.theta),
     );
     let v = e.dot(&(cov.try_inverse()? * e));
     v.is_finite().then_some(v)
@@ -835,7 +835,7 @@ fn state_nees(ekf: &vslam_ekf::Ekf, pose: &TruthPose, truth: &TruthStream) -> Op
     let mut err: Vec<f64> = vec![
         x[0] - pose.x,
         x[1] - pose.y,
-        calib::camera::wrap_angle(x[2] - pose.theta),
+        rig_model::camera::wrap_angle(x[2] - pose.theta),
     ];
     for l in ekf.landmarks() {
         let i = ekf.landmark_state_index(l.id)?;

@@ -983,7 +983,7 @@ fn frame_info_json(frame: &FrameEstimate) -> Value {
 /// message reference (field names, types, enum values); the viewer recognises them by name.
 /// Like Foxglove's, they inline every sub-schema (Foxglove resolves no `$ref`).
 mod schema {
-    use calib::camera::Param;
+    use rig_model::camera::Param;
     use serde_json::{Map, Value, json};
 
     fn number(description: &str) -> Value {

@@ -15,8 +15,8 @@ use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
 use std::path::{Path, PathBuf};
 
-use calib::odometry::OdomSample;
 use fpga_link::{Decoder, Event};
+use rig_model::odometry::OdomSample;
 use track::Pixel;
 use vehicle_log::{LogReader, Record, TruthCamera, TruthLandmark, TruthPose};
 

@@ -3,7 +3,7 @@
 //! carries simulator truth, the errors. The writers (`output`) turn it into `EST.mcap`,
 //! `SUMMARY.json` and `TRAJ.csv` (vehicle-interfaces.md section 5).
 
-use calib::camera::Param;
+use rig_model::camera::Param;
 
 use crate::Counts;
 
@@ -41,8 +41,8 @@ impl ParamEstimate {
     /// Every parameter of C with its 1-sigma from a covariance in [`Param::ALL`] order (0 for
     /// a parameter held fixed; NaN stays NaN), [`Param::ALL`] order.
     pub fn all(
-        camera: &calib::CameraParams,
-        covariance: &nalgebra::SMatrix<f64, { calib::N_PARAMS }, { calib::N_PARAMS }>,
+        camera: &rig_model::CameraParams,
+        covariance: &nalgebra::SMatrix<f64, { rig_model::N_PARAMS }, { rig_model::N_PARAMS }>,
     ) -> Vec<Self> {
         Param::ALL
             .iter()

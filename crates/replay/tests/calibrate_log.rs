@@ -4,9 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use calib::Param;
-use calib::selfcal::{SolveStatus, calibrate};
 use replay::{Error, Options, RigSource, calibrate_log};
+use rig_model::Param;
+use selfcal::solver::{SolveStatus, calibrate};
 use track::PairSettings;
 use vehicle_log::{Record, TruthCamera};
 
@@ -76,7 +76,7 @@ fn paper_calibration_log_gives_f_and_baseline() {
 #[test]
 fn a_given_rig_file_is_used_as_the_log_rig_would_be() {
     let path = fixture("paper-calibration.mcap");
-    let rig = calib::Rig::load(&fixture("paper-calibration.rig.toml")).unwrap();
+    let rig = rig_model::Rig::load(&fixture("paper-calibration.rig.toml")).unwrap();
     let from_log = calibrate_log(&path, None, &Options::default()).unwrap();
     let given = calibrate_log(&path, Some(rig.clone()), &Options::default()).unwrap();
     assert_eq!(given.rig_source, RigSource::Given);
@@ -175,7 +175,7 @@ fn a_log_with_link_faults_is_decoded_and_counted() {
     let cal = &out.calibration;
     let (b, sb) = (cal.camera.baseline, cal.sigma(Param::Baseline));
     let by_lamp = calibrate(
-        &sim::phase1::frame_pairs_by_lamp(&run, 10),
+        &eval::phase1::frame_pairs_by_lamp(&run, 10),
         &run.rig,
         &run.rig.nominal,
         &options.solver,
@@ -314,7 +314,7 @@ fn a_log_without_a_usable_rig_needs_one_given() {
 #[test]
 fn a_log_without_frames_says_so() {
     let path = scratch(&format!("odom-only-{}.mcap", std::process::id()));
-    let rig = calib::Rig::load(&fixture("paper-calibration.rig.toml")).unwrap();
+    let rig = rig_model::Rig::load(&fixture("paper-calibration.rig.toml")).unwrap();
     let mut w = vehicle_log::LogWriter::create(&path).unwrap();
     for k in 0..100 {
         w.odom(&vehicle_log::OdomSample {

@@ -7,9 +7,9 @@
 
 use std::path::Path;
 
-use calib::lens::{Lens, LensModel, StereoLens};
 use nalgebra::{Matrix3, Rotation3, Vector2};
 use replay::{LogInput, NavSettings, Navigator, read_vehicle_log};
+use rig_model::lens::{Lens, LensModel, StereoLens};
 use track::Pixel;
 
 fn experiment() -> LogInput {
@@ -146,7 +146,7 @@ fn a_log_through_real_radtan_lenses_maps() {
         let b = t
             .camera
             .iter()
-            .find(|(p, _)| *p == calib::Param::Baseline)
+            .find(|(p, _)| *p == rig_model::Param::Baseline)
             .unwrap()
             .1;
         let d = format!("seed {seed}: {t:?}");

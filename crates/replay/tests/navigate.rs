@@ -6,8 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use calib::Param;
 use replay::{NavSettings, Replay, replay_log};
+use rig_model::Param;
 
 fn log(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

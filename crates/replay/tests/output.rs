@@ -8,7 +8,6 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use calib::Param;
 use mcap::records::Record;
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
@@ -16,6 +15,7 @@ use replay::{
     CameraSample, Counts, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
     Phase, Replay, TruthErrors, summary_json, write_estimates, write_summary, write_trajectory,
 };
+use rig_model::Param;
 use serde_json::Value;
 
 const FOXGLOVE_SCHEMAS: &str = concat!(

@@ -6,8 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use calib::Param;
 use replay::{NavSettings, Replay, replay_log};
+use rig_model::Param;
 
 fn euroc() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/euroc-v101-static");
@@ -21,7 +21,7 @@ fn euroc() -> Option<PathBuf> {
 
 fn replay(dir: &Path, settings: &NavSettings) -> Replay {
     let text = std::fs::read_to_string(dir.join("rig.toml")).unwrap();
-    let rig = calib::config::Rig::from_toml_str(&text, "rig.toml").unwrap();
+    let rig = rig_model::config::Rig::from_toml_str(&text, "rig.toml").unwrap();
     replay_log(dir.join("log.mcap"), Some(rig), settings, &mut |_, _| {}).unwrap()
 }
 

@@ -237,7 +237,7 @@ fn a_log_without_a_rig_is_refused_unless_one_is_given() {
     w.finish().unwrap();
     let err = Replayer::open(&path, None, &NavSettings::default()).unwrap_err();
     assert!(err.to_string().contains("no rig"), "{err}");
-    let rig = calib::Rig::from_json_str(&rig_text.unwrap(), "rig").unwrap();
+    let rig = rig_model::Rig::from_json_str(&rig_text.unwrap(), "rig").unwrap();
     let r = replay_log(&path, Some(rig), &NavSettings::default(), &mut |_, _| {}).unwrap();
     assert!(r.frames.len() > 900, "{}", r.frames.len());
 }

@@ -8,8 +8,8 @@
 
 use std::path::Path;
 
-use calib::Param;
 use replay::NavSettings;
+use rig_model::Param;
 
 fn scenario(name: &str) -> sim::Scenario {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -25,7 +25,7 @@ fn a_forklift_with_odometry_errors_and_a_clock_offset_is_calibrated() {
 
 /// The board's clock behind the odometry's: frames exposed after their stamps, the first one
 /// before the odometry's first sample (the first interval once had no odometry, and the map
-/// was lost: nav::ODOMETRY_LOOKAHEAD_US, calib::odometry::BACKWARD_HOLD_US).
+/// was lost: nav::ODOMETRY_LOOKAHEAD_US, rig_model::odometry::BACKWARD_HOLD_US).
 #[test]
 fn a_clock_offset_of_the_other_sign_is_calibrated_too() {
     let mut sc = scenario("aisle-vehicle.toml");

@@ -47,7 +47,7 @@ fn bench(c: &mut Criterion) {
         scenario.spec.render,
         run.landmarks.clone(),
     );
-    let poses: Vec<calib::Pose2> = run.frames.iter().step_by(37).map(|f| f.pose).collect();
+    let poses: Vec<rig_model::Pose2> = run.frames.iter().step_by(37).map(|f| f.pose).collect();
     let mut k = 0;
     group.bench_function("rendered_frame", |b| {
         b.iter(|| {

@@ -41,7 +41,7 @@ fn main() -> ExitCode {
         let mean = counts.iter().sum::<usize>() as f64 / n as f64;
         let below = |k: usize| counts.iter().filter(|&&c| c < k).count();
         let mut length = 0.0;
-        let mut prev: Option<calib::Pose2> = None;
+        let mut prev: Option<rig_model::Pose2> = None;
         for f in &run.frames {
             if let Some(p) = prev {
                 length += (f.pose.x - p.x).hypot(f.pose.y - p.y);

@@ -45,7 +45,7 @@ pub enum Error {
     },
     /// The scenario's nominal rig file is unusable (the message names that file).
     #[error(transparent)]
-    Rig(#[from] calib::RigFileError),
+    Rig(#[from] rig_model::RigFileError),
     /// The board's encoder refused a frame (cannot happen for registers that validate).
     #[error("encoding frame {frame}: {source}")]
     Encode {

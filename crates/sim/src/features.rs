@@ -1,16 +1,16 @@
 //! What the board sends for one stereo frame, and the fast mode that makes it without images.
 //!
-//! Fast mode projects each lamp with [`calib::project`] and the true camera parameters, keeps
+//! Fast mode projects each lamp with [`rig_model::project`] and the true camera parameters, keeps
 //! those in front of the cameras and inside the detector's candidate area, adds Gaussian pixel
 //! noise, adds clutter, quantises to Q12.4 (`x_q4 = round(16 u)`), gives each a plausible
 //! response, applies the board's 3x3 non-maximum suppression between features, orders them
 //! as the board does and applies the `MAX_FEATURES` cap.
 
-use calib::{CameraParams, Pose2};
 use harris_core::{CANDIDATE_BORDER, Feature, Q4_SHIFT, Registers};
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, RngExt};
 use rand_distr::{Distribution, Poisson, StandardNormal};
+use rig_model::{CameraParams, Pose2};
 
 use crate::scenario::{Clutter, NoiseSpec};
 use crate::world::Lamp;
@@ -134,7 +134,7 @@ pub fn in_candidate_area(u: f64, v: f64, width: usize, height: usize) -> bool {
 }
 
 /// The lamps seen from `pose`: in front of both cameras and inside the candidate area of at
-/// least one, with their exact projections by [`calib::project`].
+/// least one, with their exact projections by [`rig_model::project`].
 pub fn lamp_views(
     c: &CameraParams,
     pose: &Pose2,
@@ -159,7 +159,7 @@ pub fn lamp_views(
         if !(y >= v_lo && y <= v_hi) || (x_l < u_lo || x_l > u_hi) && (x_r < u_lo || x_r > u_hi) {
             continue;
         }
-        let Ok(m) = calib::project(c, pose, &lamp.position) else {
+        let Ok(m) = rig_model::project(c, pose, &lamp.position) else {
             continue;
         };
         let in_left = in_candidate_area(m[0], m[1], regs.width, regs.height);
@@ -203,7 +203,7 @@ pub(crate) fn fast_frame(
     clutter: &Clutter,
     lamp_response: f64,
     regs: &Registers,
-    lens: Option<(&calib::lens::StereoLens, &CameraParams)>,
+    lens: Option<(&rig_model::lens::StereoLens, &CameraParams)>,
     rng: &mut impl Rng,
 ) -> (ImageFeatures, ImageFeatures) {
     let raw = |side: usize, u: f64, v: f64| -> Option<(f64, f64)> {

@@ -35,7 +35,6 @@ mod error;
 pub mod features;
 pub mod link;
 pub mod motion;
-pub mod phase1;
 pub mod render;
 mod rng;
 pub mod run;

@@ -7,9 +7,9 @@
 //! [`integrate`] gives the true trajectory exactly (it *is* the true trajectory), and the
 //! segments' lengths and angles come out exact.
 
-use calib::Pose2;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
+use rig_model::Pose2;
 
 use crate::scenario::{PathSpec, Segment, SegmentKind};
 

@@ -9,10 +9,10 @@
 //! 1/16 pixel. The roof is a plane seen through each pixel's ray, with anti-aliased beams.
 //! The sensor adds shot noise and read noise and rounds to 8 bits.
 
-use calib::{CameraParams, Pose2};
 use harris_core::Registers;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
+use rig_model::{CameraParams, Pose2};
 
 use crate::features::RigFromWorld;
 use crate::scenario::{Beams, Render};
@@ -515,7 +515,7 @@ mod tests {
             cx: 376.0,
             cy: 240.0,
             baseline: 0.12,
-            mount: calib::Mount::default(),
+            mount: rig_model::Mount::default(),
         };
         Renderer::new(camera, &Registers::default(), Render::default(), Vec::new())
     }

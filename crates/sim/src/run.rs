@@ -1,12 +1,13 @@
 //! A simulated run: odometry, stereo frames with their features, the board's packets and the
 //! chunks the host receives, and the ground truth.
 
+use std::collections::HashMap;
 use std::io::{Seek, Write};
 use std::path::Path;
 
-use calib::{CameraParams, Param, Pose2, Rig};
 use fpga_link::Encoder;
 use harris_core::Registers;
+use rig_model::{CameraParams, Measurement, Param, Pose2, Rig};
 use vehicle_log::{LogWriter, TruthCamera, TruthLandmark, TruthPose};
 
 use crate::error::{Error, Result};
@@ -54,6 +55,32 @@ pub struct FrameTruth {
     pub left: ImageFeatures,
     /// The right camera's features, as sent.
     pub right: ImageFeatures,
+}
+
+impl FrameTruth {
+    /// `(uL, vL, uR, vR)` of every lamp seen in both images of this frame, by lamp id: the
+    /// simulator's own labelling of its features, for judging estimators apart from
+    /// association.
+    pub fn lamp_measurements(&self) -> HashMap<u32, Measurement> {
+        let right: HashMap<u32, (u16, u16)> = self
+            .right
+            .features
+            .iter()
+            .filter_map(|f| Some((f.lamp?, (f.x_q4, f.y_q4))))
+            .collect();
+        let q = |v: u16| f64::from(v) / 16.0;
+        self.left
+            .features
+            .iter()
+            .filter_map(|l| {
+                let (rx, ry) = right.get(&l.lamp?)?;
+                Some((
+                    l.lamp?,
+                    Measurement::new(q(l.x_q4), q(l.y_q4), q(*rx), q(*ry)),
+                ))
+            })
+            .collect()
+    }
 }
 
 /// Everything a run produced, as plain data.
@@ -344,19 +371,6 @@ pub fn truth_camera(c: &CameraParams) -> TruthCamera {
 }
 
 impl SimRun {
-    /// The logged (noisy) odometry as the estimators take it (`calib::odometry::OdomSample`).
-    pub fn odometry_samples(&self) -> Vec<calib::odometry::OdomSample> {
-        self.odometry
-            .iter()
-            .map(|s| calib::odometry::OdomSample {
-                t_us: s.t_us,
-                vx: s.vx,
-                vy: s.vy,
-                vtheta: s.vtheta,
-            })
-            .collect()
-    }
-
     /// The byte stream as received: the chunks concatenated in arrival order.
     pub fn stream_bytes(&self) -> Vec<u8> {
         self.chunks

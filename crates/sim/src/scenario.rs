@@ -10,8 +10,8 @@
 
 use std::path::{Path, PathBuf};
 
-use calib::{CameraParams, Mount, Rig};
 use harris_core::Registers;
+use rig_model::{CameraParams, Mount, Rig};
 use serde::Deserialize;
 
 use crate::error::{Error, Result};
@@ -670,7 +670,7 @@ impl Scenario {
     pub fn true_camera(&self) -> CameraParams {
         let n = &self.spec.noise;
         CameraParams {
-            vehicle: calib::Vehicle {
+            vehicle: rig_model::Vehicle {
                 odom_scale: 1.0 + n.velocity_scale_error,
                 odom_yaw_scale: 1.0 + n.yaw_rate_scale_error,
                 odom_yaw_bias: n.yaw_rate_bias_radps,

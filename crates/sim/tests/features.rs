@@ -3,7 +3,7 @@
 
 mod common;
 
-use calib::Pose2;
+use rig_model::Pose2;
 use sim::Mode;
 
 #[test]
@@ -36,7 +36,7 @@ fn fast_features_are_the_projections_within_quantisation() {
                 for feat in &feats.features {
                     let id = feat.lamp.expect("no clutter with clutter off");
                     let lamp = run.landmarks[id as usize].position;
-                    let m = calib::project(&c, &f.pose, &lamp).unwrap();
+                    let m = rig_model::project(&c, &f.pose, &lamp).unwrap();
                     let (u, v) = (m[2 * side], m[2 * side + 1]);
                     let (du, dv) = (
                         f64::from(feat.x_q4) / 16.0 - u,
@@ -103,7 +103,7 @@ fn pixel_noise_has_the_configured_spread() {
     for f in &run.frames {
         for feat in &f.left.features {
             let lamp = run.landmarks[feat.lamp.unwrap() as usize].position;
-            let m = calib::project(&c, &f.pose, &lamp).unwrap();
+            let m = rig_model::project(&c, &f.pose, &lamp).unwrap();
             let d = f64::from(feat.x_q4) / 16.0 - m[0];
             n += 1.0;
             sum += d;

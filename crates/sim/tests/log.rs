@@ -52,7 +52,7 @@ fn log_reads_back_as_simulated() {
     assert_eq!(camera, Some(sim::run::truth_camera(&run.camera)));
     assert_eq!(landmarks, Some(run.truth_landmarks()));
     // The nominal rig, not the truth.
-    let rig = calib::Rig::from_json_str(&rig.unwrap(), "/rig").unwrap();
+    let rig = rig_model::Rig::from_json_str(&rig.unwrap(), "/rig").unwrap();
     assert_eq!(rig, s.rig);
     assert_ne!(rig.nominal.baseline, run.camera.baseline);
     std::fs::remove_dir_all(&dir).ok();

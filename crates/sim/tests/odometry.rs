@@ -3,7 +3,7 @@
 
 mod common;
 
-use calib::Pose2;
+use rig_model::Pose2;
 use sim::OdomSample;
 
 /// An integrator independent of the simulator's closed form: midpoint steps of at most

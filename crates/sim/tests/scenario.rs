@@ -59,7 +59,7 @@ fn committed_scenarios_are_honest_to_the_paper() {
                 "{name}: {p} off by {error}, prior {sigma}"
             );
         }
-        for p in calib::Param::ALL {
+        for p in rig_model::Param::ALL {
             if !s.rig.estimate.contains(&p) {
                 assert!(
                     (s.rig.nominal.get(p) - c.get(p)).abs() < 1e-12,

@@ -2,8 +2,8 @@
 
 use alloc::vec::Vec;
 
-use calib::Measurement;
-use calib::odometry::OdomSample;
+use rig_model::Measurement;
+use rig_model::odometry::OdomSample;
 
 use crate::error::SettingsError;
 use crate::model::Model;
@@ -127,10 +127,10 @@ mod tests {
     use super::*;
     use crate::model::tests::rig;
     use alloc::vec;
-    use calib::camera::Pose2;
-    use calib::odometry::integrate;
-    use calib::project;
     use nalgebra::Vector3;
+    use rig_model::camera::Pose2;
+    use rig_model::odometry::integrate;
+    use rig_model::project;
 
     #[test]
     fn lamps_seen_from_a_turning_robot_keep_their_tracks() {

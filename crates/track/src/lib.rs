@@ -7,7 +7,7 @@
 //!    lamp when they lie on the same row (within a gate set by the pixel noise) at a positive
 //!    disparity that puts the lamp between a nearest and a farthest depth (`d = f B / z`).
 //!    Matches are one-to-one and mutual; a feature with two nearly equally good partners is
-//!    dropped, not guessed. Output: [`calib::Measurement`]s `(uL, vL, uR, vR)` in pixels.
+//!    dropped, not guessed. Output: [`rig_model::Measurement`]s `(uL, vL, uR, vR)` in pixels.
 //! 2. [`tracker`]: frame-to-frame tracking with persistent, never reused [`TrackId`]s. Each
 //!    track's last measurement is triangulated, moved by the odometry motion since it was
 //!    seen, and projected into the new frame; measurements are gated by the Mahalanobis
@@ -15,7 +15,7 @@
 //!    parameters' uncertainty, all propagated through the rig model's Jacobians) and assigned
 //!    one-to-one by increasing distance, with ambiguity rejection. A track is *confirmed*
 //!    after a few consecutive hits, so isolated clutter never reaches the estimators.
-//! 3. [`pairs`]: phase 1's frame pairs ([`calib::selfcal::FramePair`]): two frames `stride`
+//! 3. [`pairs`]: phase 1's frame pairs ([`rig_model::handover::FramePair`]): two frames `stride`
 //!    frames apart ([`PairingScheme::Disjoint`] or [`PairingScheme::Interleaved`]), the
 //!    odometry integrated between their timestamps, and the confirmed tracks seen in both.
 //!

@@ -1,9 +1,9 @@
 //! What the association assumes about the sensors: the camera parameters it triangulates and
 //! projects with, how uncertain they are, and the noise of pixels and odometry.
 
-use calib::camera::{CameraParams, N_PARAMS, Param};
-use calib::config::{Noise, Rig};
 use nalgebra::SMatrix;
+use rig_model::camera::{CameraParams, N_PARAMS, Param};
+use rig_model::config::{Noise, Rig};
 
 /// Covariance of the ten camera parameters, in [`Param::ALL`] order.
 pub type CameraCovariance = SMatrix<f64, N_PARAMS, N_PARAMS>;
@@ -79,7 +79,7 @@ impl Model {
 pub(crate) mod tests {
     use super::*;
     use alloc::vec;
-    use calib::camera::Mount;
+    use rig_model::camera::Mount;
 
     pub(crate) fn rig() -> Rig {
         let mut prior = [None; N_PARAMS];

@@ -1,10 +1,10 @@
 //! A window of odometry samples fed in time order, integrated between two instants with
-//! [`calib::odometry::integrate`] (vehicle-interfaces.md section 2: each sample held until
+//! [`rig_model::odometry::integrate`] (vehicle-interfaces.md section 2: each sample held until
 //! the next).
 
 use alloc::vec::Vec;
 
-use calib::odometry::{Motion, OdomSample, integrate};
+use rig_model::odometry::{Motion, OdomSample, integrate};
 
 /// Odometry samples kept for integration between frames.
 ///

@@ -1,7 +1,7 @@
 //! Phase 1's frame pairs from tracked frames and odometry.
 //!
 //! Phase 1 compares each landmark triangulated at two instants with the odometry motion
-//! between them (eq. (1), [`calib::selfcal`]). A pair's two frames are `stride` frames apart,
+//! between them (eq. (1), `selfcal::solver`). A pair's two frames are `stride` frames apart,
 //! counted in frames pushed (a frame lost on the link shifts the count): far enough for the
 //! motion to say something, near enough for the landmarks to stay in view. Two schemes:
 //!
@@ -16,7 +16,7 @@
 //! A landmark pair is a track seen in both frames and confirmed by the second (a track
 //! tentative at the first frame and confirmed since is the same lamp). A track id appearing
 //! twice in one frame is ignored there, as are NaN or infinite measurements. The motion is
-//! [`calib::odometry::integrate`]d between the two frames' timestamps; a pair whose
+//! [`rig_model::odometry::integrate`]d between the two frames' timestamps; a pair whose
 //! odometry does not cover the interval, or with fewer than `min_landmarks` landmarks, is not
 //! emitted (and counted).
 //!
@@ -27,9 +27,9 @@
 use alloc::collections::VecDeque;
 use alloc::vec::Vec;
 
-use calib::Measurement;
-use calib::odometry::OdomSample;
-use calib::selfcal::{FramePair, LandmarkPair};
+use rig_model::Measurement;
+use rig_model::handover::{FramePair, LandmarkPair};
+use rig_model::odometry::OdomSample;
 
 use crate::error::{SettingsError, check_count};
 use crate::odometry::OdometryBuffer;
@@ -276,7 +276,7 @@ mod tests {
     use super::*;
     use crate::tracker::Observation;
     use alloc::vec;
-    use calib::odometry::integrate;
+    use rig_model::odometry::integrate;
 
     fn obs(id: u64, x: f64, confirmed: bool) -> Observation {
         Observation {

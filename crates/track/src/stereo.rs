@@ -24,7 +24,7 @@
 
 use alloc::vec::Vec;
 
-use calib::Measurement;
+use rig_model::Measurement;
 
 use crate::error::{SettingsError, check_real};
 use crate::model::Model;

@@ -4,8 +4,8 @@
 //! frame (composed frame by frame, so a track that missed frames is predicted across them).
 //! `z0` is triangulated with the model's camera parameters into the robot frame of its
 //! instant, the robot is moved by the motion (`(dx, dy, dtheta)`, the new pose in that frame),
-//! and the point is projected: `z_hat = h(C, motion, L(C, z0))` ([`calib::rig::triangulate`],
-//! [`calib::rig::project_with_jacobians`]).
+//! and the point is projected: `z_hat = h(C, motion, L(C, z0))` ([`rig_model::rig::triangulate`],
+//! [`rig_model::rig::project_with_jacobians`]).
 //!
 //! **Gate (Mahalanobis).** The innovation `z - z_hat` is judged against its covariance
 //! `S = A (s^2 I) A^T + B Q B^T + G P_C G^T + (s^2 + e^2) I`, the rig model's Jacobians
@@ -48,11 +48,11 @@
 
 use alloc::vec::Vec;
 
-use calib::camera::Pose2;
-use calib::config::Noise;
-use calib::odometry::Motion;
-use calib::rig::{Measurement, RigError, project_with_jacobians, triangulate};
 use nalgebra::{Cholesky, Matrix3, Matrix4, U4};
+use rig_model::camera::Pose2;
+use rig_model::config::Noise;
+use rig_model::odometry::Motion;
+use rig_model::rig::{Measurement, RigError, project_with_jacobians, triangulate};
 
 use crate::error::{SettingsError, check_count, check_real};
 use crate::model::Model;
@@ -662,8 +662,8 @@ mod tests {
     use super::*;
     use crate::model::tests::rig;
     use alloc::vec;
-    use calib::project;
     use nalgebra::Vector3;
+    use rig_model::project;
 
     /// Measurements of world points from a pose, with the model's own camera.
     fn seen(model: &Model, pose: &Pose2, points: &[Vector3<f64>]) -> Vec<Measurement> {

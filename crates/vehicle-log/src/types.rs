@@ -5,18 +5,9 @@ use serde::{Deserialize, Serialize};
 use crate::damage::LostSpan;
 
 /// One odometry sample on `/odom` (vehicle-interfaces.md section 2): robot-frame velocities,
-/// each held constant from `t_us` until the next sample.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct OdomSample {
-    /// Timestamp, microseconds, on the clock of the board's packet timestamps.
-    pub t_us: u64,
-    /// Velocity along robot x (forward), m/s.
-    pub vx: f64,
-    /// Velocity along robot y (left), m/s.
-    pub vy: f64,
-    /// Yaw rate about robot z (up), rad/s.
-    pub vtheta: f64,
-}
+/// each held constant from `t_us` until the next sample. The rig model's type, so that what
+/// is read from a log goes into the estimators as it is.
+pub use rig_model::odometry::OdomSample;
 
 /// Simulator truth on `/truth/pose`: the robot's planar pose in the world frame at one
 /// stereo frame.

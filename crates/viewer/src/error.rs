@@ -19,7 +19,7 @@ pub enum Error {
     Estimates(#[from] replay::EstimatesError),
     /// The log's `/rig` message is not a usable rig.
     #[error(transparent)]
-    Rig(#[from] calib::RigFileError),
+    Rig(#[from] rig_model::RigFileError),
     /// An MCAP file that is neither a vehicle log nor an estimates file.
     #[error(
         "{} is neither a vehicle log (/fpga/features, /odom) nor an estimates file of stereonav replay (/est/frame) (its topics: {}){}",

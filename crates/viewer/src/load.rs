@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
-use calib::camera::CameraParams;
-use calib::config::Rig;
 use replay::NavSettings;
+use rig_model::camera::CameraParams;
+use rig_model::config::Rig;
 use vehicle_log::Record;
 
 use crate::Error;

@@ -9,9 +9,9 @@ use std::collections::VecDeque;
 use std::ops::Range;
 use std::path::PathBuf;
 
-use calib::camera::{CameraParams, Param, Pose2};
 use nalgebra::Vector3;
 use replay::{FrameEstimate, LandmarkEstimate, Phase, Replay};
+use rig_model::camera::{CameraParams, Param, Pose2};
 
 /// A feature is marked as an observation of a landmark when it lies within this distance of
 /// the landmark's projection at the frame's estimated pose and camera, pixels. The association
@@ -561,7 +561,7 @@ impl Model {
                     cx: 0.0,
                     cy: 0.0,
                     baseline: 0.0,
-                    mount: calib::camera::Mount::default(),
+                    mount: rig_model::camera::Mount::default(),
                 });
                 for e in &s.params {
                     c.set(e.param, e.value);
@@ -635,7 +635,7 @@ impl Model {
             let Some(p) = self.landmark_position(map, id) else {
                 continue;
             };
-            let Ok(z) = calib::project(&camera, &pose, &Vector3::from(p)) else {
+            let Ok(z) = rig_model::project(&camera, &pose, &Vector3::from(p)) else {
                 continue;
             };
             let observed = frame.observed.contains(&id);
@@ -722,8 +722,8 @@ fn associate(features: &mut [FeatureMark], projections: &[Projection]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use calib::camera::Mount;
     use replay::{CameraSample, Counts, MapSnapshot, ParamEstimate};
+    use rig_model::camera::Mount;
 
     fn camera(pitch: f64) -> CameraParams {
         CameraParams {
@@ -811,7 +811,7 @@ mod tests {
             let mut left = vec![[10.0, 10.0]];
             let mut right = vec![[700.0, 400.0]];
             for l in &lamps {
-                let z = calib::project(&c, &pose, &Vector3::from(l.position)).unwrap();
+                let z = rig_model::project(&c, &pose, &Vector3::from(l.position)).unwrap();
                 left.push([z[0] as f32 + 0.5, z[1] as f32]);
                 right.push([z[2] as f32, z[3] as f32 - 0.5]);
             }

@@ -94,7 +94,7 @@ pub struct Regions {
 /// A parameter's series, ready for the plots.
 #[derive(Debug, Clone)]
 struct ParamPlot {
-    param: calib::camera::Param,
+    param: rig_model::camera::Param,
     unit: &'static str,
     /// The 3-sigma band's edges.
     lower: Series,

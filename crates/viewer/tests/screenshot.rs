@@ -27,7 +27,7 @@ fn scratch(name: &str) -> PathBuf {
 
 fn paper_experiment() -> viewer::Model {
     let options = LoadOptions {
-        rig: Some(calib::Rig::load(&fixture("paper-experiment.rig.toml")).unwrap()),
+        rig: Some(rig_model::Rig::load(&fixture("paper-experiment.rig.toml")).unwrap()),
         settings: NavSettings {
             skip_phase1: true,
             ..NavSettings::default()

@@ -7,11 +7,11 @@
 
 use std::hint::black_box;
 
-use calib::camera::{CameraParams, Mount, N_PARAMS, Param, Pose2};
-use calib::config::{Noise, Rig};
-use calib::{Measurement, project};
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
+use rig_model::camera::{CameraParams, Mount, N_PARAMS, Param, Pose2};
+use rig_model::config::{Noise, Rig};
+use rig_model::{Measurement, project};
 use vslam_ekf::{CovarianceUpdate, Ekf, LandmarkId, Settings};
 
 const LAMPS: usize = 500;

@@ -19,8 +19,8 @@
 use alloc::collections::{BTreeMap, BTreeSet};
 use alloc::vec::Vec;
 
-use calib::Measurement;
 use nalgebra::{Matrix3, Vector3};
+use rig_model::Measurement;
 
 use crate::chi2::chi2_quantile;
 use crate::error::Error;
@@ -382,7 +382,7 @@ impl Candidates {
         let pose = ekf.pose();
         let sigma = ekf.noise().pixel;
         for (track, z) in unbound {
-            let Ok(tri) = calib::triangulate(&camera, &z) else {
+            let Ok(tri) = rig_model::triangulate(&camera, &z) else {
                 self.pending.remove(&track);
                 continue;
             };

@@ -2,7 +2,7 @@
 //! covariance and map exactly as they were; only the health counts updates refused for lost
 //! positive definiteness.
 
-use calib::{Param, RigError};
+use rig_model::{Param, RigError};
 
 use crate::LandmarkId;
 

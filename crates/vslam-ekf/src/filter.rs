@@ -2,13 +2,13 @@
 
 use alloc::vec::Vec;
 
-use calib::camera::{Param, wrap_angle};
-use calib::odometry::OdomSample;
-use calib::rig::Jac4x3;
-use calib::selfcal::Handover;
-use calib::smoother::{BatchHandover, JointEstimate};
-use calib::{CameraParams, Measurement, N_PARAMS, Noise, Pose2, Rig, project_with_jacobians};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, SMatrix, Vector3, Vector4};
+use rig_model::camera::{Param, wrap_angle};
+use rig_model::handover::Handover;
+use rig_model::handover::{BatchHandover, JointEstimate};
+use rig_model::odometry::OdomSample;
+use rig_model::rig::Jac4x3;
+use rig_model::{CameraParams, Measurement, N_PARAMS, Noise, Pose2, Rig, project_with_jacobians};
 
 use crate::chi2::chi2_quantile;
 use crate::error::Error;
@@ -379,7 +379,7 @@ impl Ekf {
         Self::new(rig, &CameraStart::from_handover(handover), settings)
     }
 
-    /// A filter starting from phase 1's batch ([`calib::smoother::BatchHandover`]): the last
+    /// A filter starting from phase 1's batch ([`rig_model::handover::BatchHandover`]): the last
     /// frame's pose, every landmark and the estimated camera parameters with their joint
     /// covariance, so that the frames of phase 1 are in the map. Returns the filter and the
     /// landmarks' ids in the hand-over's order.
@@ -465,7 +465,7 @@ impl Ekf {
     }
 
     /// Re-seeds the filter with a joint estimate of the fixed-lag smoother (phase 2's batch,
-    /// [`calib::smoother::Smoother::start_mapping`]): the pose, every landmark the map holds
+    /// [`selfcal::smoother::Smoother::start_mapping`]): the pose, every landmark the map holds
     /// (`index(id)` gives its place in the batch) and the estimated camera parameters, with
     /// their joint covariance. The landmarks' ids and counters stay. Fails, changing nothing,
     /// when a landmark or parameter is missing from the estimate or a value is not finite.
@@ -537,7 +537,7 @@ impl Ekf {
 
     /// The filter's joint estimate in the batch's layout (`[pose, estimated C, landmarks]`,
     /// landmarks in map order), with the landmark ids in that order: what the fixed-lag
-    /// smoother is (re)started from ([`calib::smoother::Smoother::restart_mapping`]).
+    /// smoother is (re)started from (`selfcal::smoother::Smoother::restart_mapping`).
     pub fn joint(&self, t_us: u64) -> (JointEstimate, Vec<LandmarkId>) {
         let nl = self.landmarks.len();
         let m = self.estimated.len();
@@ -845,7 +845,7 @@ impl Ekf {
             .map(|(k, p)| {
                 (
                     c0 + k,
-                    rot * vehicle_jacobian.column(p.index() - calib::N_CAMERA),
+                    rot * vehicle_jacobian.column(p.index() - rig_model::N_CAMERA),
                 )
             })
             .filter(|(_, col)| col.iter().any(|v| *v != 0.0))
@@ -1021,7 +1021,7 @@ impl Ekf {
             .filter_map(|(s, slot)| {
                 let li = POSE_DIM + LANDMARK_DIM * s;
                 let l = self.x.fixed_rows::<3>(li).into_owned();
-                let z = calib::project(&camera, &pose, &l).ok()?;
+                let z = rig_model::project(&camera, &pose, &l).ok()?;
                 (inside(z[0], z[1]) && inside(z[2], z[3])).then_some((slot.id, z))
             })
             .collect()
@@ -1401,7 +1401,7 @@ impl Ekf {
         let camera = self.camera();
         let pose = self.pose();
         let tri =
-            calib::triangulate(&camera, z).map_err(|source| Error::Triangulation { source })?;
+            rig_model::triangulate(&camera, z).map_err(|source| Error::Triangulation { source })?;
         let position = tri.p_in_world(&camera, &pose);
         if let Some(&value) = position.iter().find(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
@@ -1543,7 +1543,7 @@ impl Ekf {
 #[allow(clippy::unwrap_used, clippy::expect_used)]
 mod tests {
     use super::*;
-    use calib::camera::Mount;
+    use rig_model::camera::Mount;
 
     fn rig() -> Rig {
         let mut prior = [None; N_PARAMS];
@@ -1579,7 +1579,7 @@ mod tests {
         let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
         let pose = Pose2::default();
         let points = [Vector3::new(0.5, 0.2, 3.0), Vector3::new(-0.3, -0.4, 3.2)];
-        let z = points.map(|p| calib::project(&rig.nominal, &pose, &p).unwrap());
+        let z = points.map(|p| rig_model::project(&rig.nominal, &pose, &p).unwrap());
         let ids = z.map(|z| ekf.add_landmark(&z).unwrap());
         ekf.predict(0.1, 0.0, 0.05, 0.1).unwrap();
         (ekf, [(ids[0], z[0]), (ids[1], z[1])])
@@ -1632,7 +1632,7 @@ mod tests {
         let rig = rig();
         let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
         let p = Vector3::new(0.5, 0.2, 3.0);
-        let z = calib::project(&rig.nominal, &Pose2::default(), &p).unwrap();
+        let z = rig_model::project(&rig.nominal, &Pose2::default(), &p).unwrap();
         let id = ekf.add_landmark(&z).unwrap();
         let report = ekf.update(&[(id, z)]).unwrap();
         assert_eq!(report.accepted.len(), 1);

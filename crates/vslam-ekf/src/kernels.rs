@@ -17,7 +17,7 @@ pub(crate) const LANES: usize = 8;
 pub(crate) const MAX_PADDED_RANK: usize = 8;
 
 /// Most states one observation involves: pose, one landmark, every camera parameter.
-pub(crate) const MAX_INVOLVED: usize = 3 + 3 + calib::N_PARAMS;
+pub(crate) const MAX_INVOLVED: usize = 3 + 3 + rig_model::N_PARAMS;
 
 /// One observation's linearisation: the non-zero columns of its four rows of `H` (pose, its
 /// landmark, the estimated camera parameters) and its innovation.

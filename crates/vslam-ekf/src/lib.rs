@@ -1,5 +1,5 @@
 //! Phase 2 of the method: EKF SLAM with the camera parameters in the state (eq. 3-8 of the
-//! paper), after phase 1 (`calib::selfcal`) has handed over a calibrated camera, or from the
+//! paper), after phase 1 (`selfcal::solver`) has handed over a calibrated camera, or from the
 //! rig's priors when phase 1 is skipped.
 //!
 //! # State layout
@@ -27,7 +27,7 @@
 //! # Prediction (eq. 3-4)
 //!
 //! The odometry velocities held over each sample's period move the pose along an exact arc,
-//! as `calib::odometry` integrates them; [`Ekf::predict_odometry`] composes the pieces between
+//! as `rig_model::odometry` integrates them; [`Ekf::predict_odometry`] composes the pieces between
 //! two frames into one motion with its covariance ([`Increment`]) and applies it once. The
 //! noise is phase 1's: white velocity noise per sample, held with it, so the motion's
 //! covariance is `G diag(sv^2, sv^2, sw^2) G^T` with `G` the exact arc Jacobian with respect
@@ -101,7 +101,7 @@
 //!
 //! A new landmark is the stereo triangulation of one measurement at the current pose and camera,
 //! `L = g(pose, z, C)`, linearised jointly in all three: with `Gp`, `Gc` and `Gz` the Jacobians
-//! of `g` (from `calib::rig::Triangulation`; `Gc` restricted to the estimated parameters),
+//! of `g` (from `rig_model::rig::Triangulation`; `Gc` restricted to the estimated parameters),
 //! `P_LL = G P_qq G^T + Gz R Gz^T` with `G = [Gp, Gc]` over the pose and camera states, and
 //! `P_Lx = G P_qx` for every existing state. The cross terms matter: a landmark triangulated
 //! with a baseline that is 3 % off is 3 % off in the same direction as every other landmark

@@ -1,7 +1,7 @@
 //! The prediction's motion model (eq. 3-4): the planar arc of constant robot-frame velocities
 //! (vehicle-interfaces.md section 2), its Jacobians, and its noise.
 //!
-//! Noise model, the one phase 1 uses (`calib::selfcal`): each odometry sample's velocities
+//! Noise model, the one phase 1 uses (`selfcal::solver`): each odometry sample's velocities
 //! carry white noise (`velocity` m/s on `vx` and `vy`, `yaw_rate` rad/s on `vtheta`) that is
 //! *held* with the sample, so one sample held for `dt` contributes `G diag(sv^2, sv^2, sw^2) G^T`
 //! with `G` the exact Jacobian of the arc with respect to the velocities; for short steps
@@ -27,9 +27,9 @@
 //! by 0.1 to 1.2 m); 0.2 gives 18 of 24 within 3 mm. A gap that spans a reversal still needs
 //! the relocalisation of the map issue.
 
-use calib::odometry::{Motion, OdomSample, constant_velocity_motion};
-use calib::{Noise, Pose2};
 use nalgebra::Matrix3;
+use rig_model::odometry::{Motion, OdomSample, constant_velocity_motion};
+use rig_model::{Noise, Pose2};
 
 use crate::error::Error;
 
@@ -214,7 +214,7 @@ impl Increment {
     }
 
     /// The odometry samples (sorted by time) integrated from `t0_us` to `t1_us`, each held from
-    /// its timestamp until the next, exactly as [`calib::odometry::integrate`] does, with the
+    /// its timestamp until the next, exactly as [`rig_model::odometry::integrate`] does, with the
     /// covariance of every held piece propagated.
     pub fn from_odometry(
         samples: &[OdomSample],
@@ -227,11 +227,12 @@ impl Increment {
         }
         check_noise(noise)?;
         // The last sample at or before t0 (or the first, held back a little:
-        // calib::odometry::BACKWARD_HOLD_US).
-        let (start, _) = calib::odometry::start_of(samples, t0_us).ok_or(Error::NoOdometry {
-            t0_us,
-            first_us: samples.first().map(|s| s.t_us),
-        })?;
+        // rig_model::odometry::BACKWARD_HOLD_US).
+        let (start, _) =
+            rig_model::odometry::start_of(samples, t0_us).ok_or(Error::NoOdometry {
+                t0_us,
+                first_us: samples.first().map(|s| s.t_us),
+            })?;
         let mut total = Self::default();
         let mut t = t0_us;
         for (i, s) in samples.iter().enumerate().skip(start) {
@@ -291,14 +292,14 @@ impl Increment {
     /// interval `t - time_offset`, with the true velocities of `V`. Returns the increment (its
     /// covariance that of the true motion: the reported velocities' noise through `V`), the
     /// covariance in the reported odometry's units (what the batch weighs its residual with,
-    /// [`calib::odometry::OdometryFactor`]), and, with `jacobian`, `d motion / dV` at `v`
-    /// ([`calib::Param::VEHICLE`] order; zero without).
+    /// [`rig_model::odometry::OdometryFactor`]), and, with `jacobian`, `d motion / dV` at `v`
+    /// ([`rig_model::Param::VEHICLE`] order; zero without).
     pub fn from_odometry_vehicle(
         samples: &[OdomSample],
         t0_us: u64,
         t1_us: u64,
         noise: &Noise,
-        v: &calib::Vehicle,
+        v: &rig_model::Vehicle,
         jacobian: bool,
     ) -> Result<(Self, Matrix3<f64>, nalgebra::Matrix3x4<f64>), Error> {
         if v.is_nominal() && !jacobian {
@@ -333,7 +334,7 @@ impl Increment {
         ));
         inc.covariance = d_inv * reported * d_inv;
         let j = if jacobian {
-            calib::odometry::vehicle_jacobian(samples, t0_us, t1_us, v)
+            rig_model::odometry::vehicle_jacobian(samples, t0_us, t1_us, v)
                 .unwrap_or_else(nalgebra::Matrix3x4::zeros)
         } else {
             nalgebra::Matrix3x4::zeros()

@@ -5,11 +5,11 @@
 
 mod common;
 
-use calib::camera::{CameraParams, Mount, Param, Pose2};
-use calib::odometry::constant_velocity_motion;
-use calib::{Measurement, project};
 use common::*;
 use nalgebra::Vector3;
+use rig_model::camera::{CameraParams, Mount, Param, Pose2};
+use rig_model::odometry::constant_velocity_motion;
+use rig_model::{Measurement, project};
 use vslam_ekf::{CandidateSettings, Candidates, Ekf, Error, LandmarkId, Settings};
 
 /// An upward camera, baseline estimated, driving forward at 0.25 m/s, 20 Hz frames.

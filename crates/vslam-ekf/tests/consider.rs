@@ -5,10 +5,10 @@
 
 mod common;
 
-use calib::Measurement;
-use calib::project;
 use common::*;
 use nalgebra::{DMatrix, DVector};
+use rig_model::Measurement;
+use rig_model::project;
 use vslam_ekf::{CameraUpdate, Ekf, LandmarkId, Settings};
 
 fn consider() -> Settings {

@@ -6,11 +6,11 @@
 
 mod common;
 
-use calib::camera::{Param, Pose2};
-use calib::odometry::{OdomSample, constant_velocity_motion, integrate};
-use calib::{project, triangulate};
 use common::*;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use rig_model::camera::{Param, Pose2};
+use rig_model::odometry::{OdomSample, constant_velocity_motion, integrate};
+use rig_model::{project, triangulate};
 use vslam_ekf::{Ekf, Increment, Settings};
 
 /// Central-difference step for state component `i`, relative to its magnitude.
@@ -189,7 +189,7 @@ fn new_landmark_covariance_matches_the_dense_augmented_jacobian() {
         let point = random_point_in_view(&mut rng, &s.truth, &s.pose);
         let z = noisy(&mut rng, &project(&s.truth, &s.pose, &point).unwrap(), 0.3);
         // g(x, z): triangulate with the state's camera at the state's pose.
-        let g = |x: &DVector<f64>, z: &calib::Measurement| {
+        let g = |x: &DVector<f64>, z: &rig_model::Measurement| {
             let c = camera_of_state(x, &estimate, &base);
             let pose = Pose2::new(x[0], x[1], x[2]);
             triangulate(&c, z).unwrap().p_in_world(&c, &pose)

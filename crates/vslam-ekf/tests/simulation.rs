@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use calib::Param;
+use rig_model::Param;
 use vslam_ekf::{CandidateSettings, Candidates, Ekf, Settings};
 
 fn scenario(name: &str) -> sim::Scenario {
@@ -25,7 +25,7 @@ struct Outcome {
 
 fn run_filter(sc: &sim::Scenario) -> Outcome {
     let run = sim::simulate(sc, sim::Mode::Fast).unwrap();
-    let odometry = run.odometry_samples();
+    let odometry = run.odometry.clone();
     let mut ekf = Ekf::from_prior(&run.rig, Settings::default()).unwrap();
     let mut candidates = Candidates::new(CandidateSettings::default()).unwrap();
     let mut last_t = None;
@@ -35,7 +35,8 @@ fn run_filter(sc: &sim::Scenario) -> Outcome {
             ekf.predict_odometry(&odometry, t0, frame.t_us).unwrap();
         }
         last_t = Some(frame.t_us);
-        let mut meas: Vec<(u64, calib::Measurement)> = sim::phase1::lamp_measurements(frame)
+        let mut meas: Vec<(u64, rig_model::Measurement)> = frame
+            .lamp_measurements()
             .into_iter()
             .map(|(lamp, z)| (u64::from(lamp), z))
             .collect();

@@ -4,11 +4,11 @@
 
 mod common;
 
-use calib::camera::Pose2;
-use calib::{Measurement, project};
 use common::*;
 use nalgebra::{DMatrix, Matrix3, Vector4};
 use proptest::prelude::*;
+use rig_model::camera::Pose2;
+use rig_model::{Measurement, project};
 use vslam_ekf::{CovarianceUpdate, Ekf, Error, LandmarkId, Settings};
 
 fn settings(form: CovarianceUpdate) -> Settings {
@@ -152,7 +152,8 @@ fn random_run(seed: u64, form: CovarianceUpdate, steps: usize) {
     let mut rng = rng(seed ^ 0xabc);
     for step in 0..steps {
         let vtheta = uniform(&mut rng, -0.3, 0.3);
-        s.pose = calib::odometry::constant_velocity_motion(0.05, 0.0, vtheta, 0.05).apply(&s.pose);
+        s.pose =
+            rig_model::odometry::constant_velocity_motion(0.05, 0.0, vtheta, 0.05).apply(&s.pose);
         s.ekf
             .predict(
                 0.05 + 0.02 * normal(&mut rng),
@@ -296,7 +297,7 @@ fn bad_input_is_refused_without_changing_anything() {
 fn bad_construction_is_refused() {
     let mut rng = rng(1);
     let truth = random_camera(&mut rng);
-    let good = rig(truth, &[calib::Param::Baseline]);
+    let good = rig(truth, &[rig_model::Param::Baseline]);
     let mut r = good.clone();
     r.noise.pixel = 0.0;
     assert!(matches!(
@@ -310,15 +311,15 @@ fn bad_construction_is_refused() {
     r.noise.velocity = f64::NAN;
     assert!(Ekf::from_prior(&r, Settings::default()).is_err());
     let mut r = good.clone();
-    r.prior = [None; calib::N_PARAMS];
+    r.prior = [None; rig_model::N_PARAMS];
     assert_eq!(
         Ekf::from_prior(&r, Settings::default()).unwrap_err(),
         Error::MissingPrior {
-            param: calib::Param::Baseline
+            param: rig_model::Param::Baseline
         }
     );
     let mut r = good.clone();
-    r.estimate = vec![calib::Param::Baseline, calib::Param::Baseline];
+    r.estimate = vec![rig_model::Param::Baseline, rig_model::Param::Baseline];
     assert!(matches!(
         Ekf::from_prior(&r, Settings::default()),
         Err(Error::DuplicateEstimate { .. })

@@ -6,9 +6,9 @@
 
 mod common;
 
-use calib::Param;
-use calib::odometry::Motion;
 use nalgebra::{DMatrix, Matrix3, Matrix3x4};
+use rig_model::Param;
+use rig_model::odometry::Motion;
 use vslam_ekf::{Ekf, Increment, Settings};
 
 #[test]
@@ -63,7 +63,7 @@ fn prediction_carries_the_vehicle_parameters_uncertainty_into_the_pose() {
         let rot = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
         for p in estimate.iter().filter(|p| p.is_vehicle()) {
             let col = ekf.camera_state_index(*p).unwrap();
-            let g = rot * jv.column(p.index() - calib::N_CAMERA);
+            let g = rot * jv.column(p.index() - rig_model::N_CAMERA);
             for r in 0..3 {
                 f[(r, col)] = g[r];
             }

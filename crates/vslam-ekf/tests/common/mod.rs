@@ -3,13 +3,13 @@
 //! documented layout (independent of the filter's own code), and a dense textbook EKF.
 #![allow(dead_code, unreachable_pub)]
 
-use calib::camera::{CameraParams, Mount, N_PARAMS, Param, Pose2};
-use calib::config::{Noise, Rig};
-use calib::{Measurement, project};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector4};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
+use rig_model::camera::{CameraParams, Mount, N_PARAMS, Param, Pose2};
+use rig_model::config::{Noise, Rig};
+use rig_model::{Measurement, project};
 use vslam_ekf::{CameraCovariance, CameraStart, Ekf, LandmarkId, Settings};
 
 pub type TestRng = ChaCha8Rng;
@@ -212,7 +212,7 @@ pub fn setup(seed: u64, estimated: usize, landmarks: usize, settings: Settings) 
 /// Moves the true pose and predicts the filter with the odometry (noiseless truth), then
 /// updates with every landmark still in view.
 pub fn drive(s: &mut Setup, rng: &mut TestRng, vx: f64, vtheta: f64, dt: f64) {
-    let m = calib::odometry::constant_velocity_motion(vx, 0.0, vtheta, dt);
+    let m = rig_model::odometry::constant_velocity_motion(vx, 0.0, vtheta, dt);
     s.pose = m.apply(&s.pose);
     s.ekf.predict(vx, 0.0, vtheta, dt).expect("predicts");
     let batch: Vec<(LandmarkId, Measurement)> = s

@@ -7,10 +7,10 @@
 
 mod common;
 
-use calib::{CameraParams, Measurement, Mount, N_PARAMS, Param, Pose2, project, triangulate};
 use common::{Rng, assert_covariance_matches, case_strategy, landmark_at, sample_covariance};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use proptest::prelude::*;
+use rig_model::{CameraParams, Measurement, Mount, N_PARAMS, Param, Pose2, project, triangulate};
 
 const SAMPLES: usize = 20_000;
 const SIGMA_PX: f64 = 0.3;

@@ -8,9 +8,9 @@
 
 use std::hint::black_box;
 
-use calib::lens::{Lens, LensModel};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Matrix3, Rotation3, Vector2};
+use rig_model::lens::{Lens, LensModel};
 
 fn lenses() -> [(&'static str, Lens); 2] {
     let rot = Rotation3::from_euler_angles(0.004, -0.012, 0.001).into_inner();

@@ -177,7 +177,7 @@ pub struct Mount {
 
 impl Mount {
     /// The head is tilted (pitch or roll beyond 0.05 rad): what makes `f` observable from
-    /// planar motion (`crate::selfcal::structural_trap`).
+    /// planar motion (`selfcal::solver::structural_trap`).
     pub fn is_tilted(&self) -> bool {
         libm::fabs(self.pitch) > 0.05 || libm::fabs(self.roll) > 0.05
     }

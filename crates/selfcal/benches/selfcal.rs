@@ -2,17 +2,17 @@
 //!
 //! `cargo bench -p calib --bench selfcal`
 
-use calib::camera::Param;
-use calib::config::Rig;
-use calib::selfcal::{SolverSettings, calibrate};
 use criterion::{Criterion, criterion_group, criterion_main};
+use rig_model::camera::Param;
+use rig_model::config::Rig;
+use selfcal::solver::{SolverSettings, calibrate};
 
 #[path = "../tests/common/mod.rs"]
 mod common;
 
 /// The synthetic data of the phase-1 tests: tilted head, turns, nominal f and baseline off by
 /// a few percent, 200 frame pairs of five lamps.
-fn data() -> (Rig, Vec<calib::selfcal::FramePair>) {
+fn data() -> (Rig, Vec<rig_model::handover::FramePair>) {
     let truth = common::synthetic::true_camera(0.3);
     let mut nominal = truth;
     nominal.f = 680.0;

@@ -4,11 +4,11 @@
 
 mod common;
 
-use calib::rig::project_rig_point;
-use calib::{point_in_rig, project, project_with_jacobians, triangulate};
 use common::{camera_strategy, case_strategy};
 use nalgebra::Vector3;
 use proptest::prelude::*;
+use rig_model::rig::project_rig_point;
+use rig_model::{point_in_rig, project, project_with_jacobians, triangulate};
 
 fn close(a: &Vector3<f64>, b: &Vector3<f64>, rel: f64) -> bool {
     (a - b).norm() <= rel * b.norm().max(1.0)
@@ -59,7 +59,7 @@ proptest! {
         disparity in 0.5..120.0f64,
         v in 0.0..480.0f64,
     ) {
-        let z = calib::Measurement::new(ul, v, ul - disparity, v);
+        let z = rig_model::Measurement::new(ul, v, ul - disparity, v);
         let p = triangulate(&c, &z).unwrap().p_in_rig;
         let again = project_rig_point(&c, &p).unwrap();
         prop_assert!((again - z).norm() <= 1e-9 * z.norm(), "{z:?} -> {p:?} -> {again:?}");

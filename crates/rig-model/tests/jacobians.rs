@@ -6,12 +6,12 @@
 
 mod common;
 
-use calib::{
-    CameraParams, Measurement, Param, Pose2, project, project_with_jacobians, triangulate,
-};
 use common::{Case, case_strategy, central, check_column};
 use nalgebra::Vector3;
 use proptest::prelude::*;
+use rig_model::{
+    CameraParams, Measurement, Param, Pose2, project, project_with_jacobians, triangulate,
+};
 
 /// The measurements of `landmark`, panicking only if a test case left the field of view (the
 /// strategy keeps it inside, and the steps are tiny).

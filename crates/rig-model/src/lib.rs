@@ -1,4 +1,4 @@
-//! The stereo rig model and phase 1 of the method: self-calibration.
+//! The stereo rig model that every part of the method shares.
 //!
 //! * [`camera`]: the camera parameters `C` (`f, cx, cy, baseline, mount_x .. mount_yaw`) and
 //!   the planar robot pose (vehicle-interfaces.md section 1).
@@ -9,6 +9,12 @@
 //!   noise; [`rig_file`] (feature `std`) reads and writes it as TOML (section 3) and JSON.
 //! * [`lens`]: real lenses (section 1.1); [`stereo_rectify`]: a raw stereo calibration
 //!   rectified as OpenCV's `stereoRectify` does (section 5, `stereonav rig import`).
+//! * [`odometry`]: odometry samples and their integration into motion (section 2).
+//! * [`handover`] (feature `alloc`): what the phases hand each other (frame pairs, phase 1's
+//!   calibration and map).
+//!
+//! Phase 1's solvers live in the `selfcal` crate, phase 2's filter in `vslam-ekf`; both build
+//! on this one and on nothing of each other.
 //!
 //! Builds without `std` (with `alloc`; nalgebra with `libm`) so that firmware can link it.
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -21,15 +27,13 @@ extern crate alloc;
 pub mod camera;
 #[cfg(feature = "alloc")]
 pub mod config;
+#[cfg(feature = "alloc")]
+pub mod handover;
 pub mod lens;
 pub mod odometry;
 pub mod rig;
 #[cfg(feature = "std")]
 pub mod rig_file;
-#[cfg(feature = "alloc")]
-pub mod selfcal;
-#[cfg(feature = "alloc")]
-pub mod smoother;
 pub mod stereo_rectify;
 
 pub use camera::{CameraParams, Mount, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, Vehicle};

@@ -312,7 +312,7 @@ impl Triangulation {
 
 /// Whether [`triangulate`] accepts `c`: `f` and the baseline positive and finite, the principal
 /// point finite.
-pub(crate) fn check_triangulation_camera(c: &CameraParams) -> Result<(), RigError> {
+pub fn check_triangulation_camera(c: &CameraParams) -> Result<(), RigError> {
     check_camera(c)?;
     if !(c.cx.is_finite() && c.cy.is_finite()) {
         return Err(RigError::NonFinite {
@@ -387,19 +387,19 @@ pub fn triangulate(c: &CameraParams, z: &Measurement) -> Result<Triangulation, R
 /// trial `C`, reduces them once per solve and triangulates with multiplications only. The
 /// point is [`triangulate`]'s up to rounding (a unit test checks that they agree).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct ReducedMeasurement {
+pub struct ReducedMeasurement {
     /// `(uL + uR) / 2`, pixels.
-    pub(crate) u_mean_px: f64,
+    pub u_mean_px: f64,
     /// `(vL + vR) / 2`, pixels.
-    pub(crate) v_mean_px: f64,
+    pub v_mean_px: f64,
     /// `1 / (uL - uR)`, per pixel, positive.
-    pub(crate) inv_disparity: f64,
+    pub inv_disparity: f64,
 }
 
 impl ReducedMeasurement {
     /// The reduction of `(uL, vL, uR, vR)`, with [`triangulate`]'s errors for a non-finite row
     /// or a disparity that is not positive.
-    pub(crate) fn new(z: &Measurement) -> Result<Self, RigError> {
+    pub fn new(z: &Measurement) -> Result<Self, RigError> {
         let d = checked_disparity(z)?;
         Ok(Self {
             u_mean_px: (z[0] + z[2]) / 2.0,
@@ -409,13 +409,13 @@ impl ReducedMeasurement {
     }
 
     /// `B / d`: metres in the rig frame per pixel of the mean image position (and `zs / f`).
-    pub(crate) fn scale(&self, c: &CameraParams) -> f64 {
+    pub fn scale(&self, c: &CameraParams) -> f64 {
         c.baseline * self.inv_disparity
     }
 
     /// The point in the rig frame, `(B / d) (u_mean - cx, v_mean - cy, f)`. Does not check
     /// `c`: callers check it once with [`check_triangulation_camera`].
-    pub(crate) fn point_in_rig(&self, c: &CameraParams) -> Vector3<f64> {
+    pub fn point_in_rig(&self, c: &CameraParams) -> Vector3<f64> {
         Vector3::new(self.u_mean_px - c.cx, self.v_mean_px - c.cy, c.f) * self.scale(c)
     }
 }

@@ -1,13 +1,13 @@
 //! Phase 1 on a simulated scenario over several seeds, associating features by the simulator's
 //! lamp ids (the navigator's association is not in this experiment):
-//! `cargo run --release -p sim --example phase1_accuracy -- fixtures/scenarios/paper-calibration.toml 20 [STRIDE] [disjoint|interleaved]`.
+//! `cargo run --release -p eval --example phase1_accuracy -- fixtures/scenarios/paper-calibration.toml 20 [STRIDE] [disjoint|interleaved]`.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::path::Path;
 use std::process::ExitCode;
 
-use calib::Param;
-use calib::selfcal::{SolverSettings, calibrate};
+use rig_model::Param;
+use selfcal::solver::{SolverSettings, calibrate};
 
 fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);
@@ -46,7 +46,7 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
-        let pairs = sim::phase1::frame_pairs_by_lamp_with(&run, scheme, stride);
+        let pairs = eval::phase1::frame_pairs_by_lamp_with(&run, scheme, stride);
         let start = std::time::Instant::now();
         let cal = calibrate(
             &pairs,

@@ -20,12 +20,12 @@
 use alloc::vec::Vec;
 use core::ops::Range;
 
-use nalgebra::{DMatrix, Matrix3, SMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix3, Vector3};
 
-use crate::camera::{CameraParams, N_PARAMS, Param, ParamVector, rot_z};
-use crate::config::Rig;
-use crate::odometry::Motion;
-use crate::rig::{Measurement, ReducedMeasurement, RigError, check_triangulation_camera};
+use rig_model::camera::{CameraParams, N_PARAMS, Param, ParamVector, rot_z};
+use rig_model::config::Rig;
+use rig_model::handover::{FramePair, Handover, Mat10, ObservabilityReport, ParamObservability};
+use rig_model::rig::{ReducedMeasurement, RigError, check_triangulation_camera};
 
 fn sq(x: f64) -> f64 {
     x * x
@@ -33,31 +33,6 @@ fn sq(x: f64) -> f64 {
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// Normal-equation matrices over all ten parameters.
-/// A 10x10 matrix over the camera parameters, [`Param::ALL`] order.
-pub type Mat10 = SMatrix<f64, N_PARAMS, N_PARAMS>;
-
-/// One landmark seen at both instants of a frame pair.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LandmarkPair {
-    /// `(uL, vL, uR, vR)` at the first instant.
-    pub first: Measurement,
-    /// `(uL, vL, uR, vR)` at the second instant.
-    pub second: Measurement,
-}
-
-/// Two stereo frames close in time, the odometry motion between them, and the landmarks
-/// associated across them.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FramePair {
-    /// Timestamp of the second frame, microseconds (for histories).
-    pub t_us: u64,
-    /// Motion from the first frame to the second, in the first frame's robot frame.
-    pub motion: Motion,
-    /// The landmarks seen in both.
-    pub landmarks: Vec<LandmarkPair>,
 }
 
 /// Settings of the solver.
@@ -82,44 +57,6 @@ impl Default for SolverSettings {
             step_tolerance: 1e-2,
             observable_ratio: 0.5,
         }
-    }
-}
-
-/// How well one estimated parameter is constrained.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ParamObservability {
-    /// The parameter.
-    pub param: Param,
-    /// Its prior sigma (rig file).
-    pub prior_sigma: f64,
-    /// Its sigma from the data alone (infinite when the data say nothing).
-    pub data_sigma: f64,
-    /// Its sigma from data and prior together.
-    pub posterior_sigma: f64,
-    /// Whether the data constrain it (`posterior_sigma <= observable_ratio * prior_sigma`).
-    pub observable: bool,
-    /// Why not, when it is not.
-    pub reason: Option<&'static str>,
-    /// Not observable because of a known trap of the rig and the path (upward head, planar
-    /// motion, straight path), rather than for lack of data so far.
-    pub structural: bool,
-}
-
-/// The observability analysis of the estimated parameters.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct ObservabilityReport {
-    /// One entry per estimated parameter.
-    pub params: Vec<ParamObservability>,
-    /// Largest absolute correlation between two estimated, observable parameters, and which.
-    pub max_correlation: Option<(Param, Param, f64)>,
-    /// Eigenvalues of the data's information matrix in prior-sigma units, ascending.
-    pub information_eigenvalues: Vec<f64>,
-}
-
-impl ObservabilityReport {
-    /// The parameters the data cannot give.
-    pub fn unobservable(&self) -> impl Iterator<Item = &ParamObservability> {
-        self.params.iter().filter(|p| !p.observable)
     }
 }
 
@@ -169,7 +106,7 @@ impl Calibration {
 /// A camera with what every residual needs of it computed once.
 struct Prepared {
     c: CameraParams,
-    /// Whether [`triangulate`](crate::rig::triangulate) accepts `c`; when not, no landmark
+    /// Whether [`triangulate`](rig_model::rig::triangulate) accepts `c`; when not, no landmark
     /// can be triangulated and every pair fails.
     valid: bool,
     robot_from_rig: Matrix3<f64>,
@@ -256,7 +193,7 @@ impl PreparedPair {
 ///
 /// `D_i` is `J J^T sigma^2` summed over both instants, with `J` the robot-frame Jacobian of the
 /// triangulated point with respect to its four pixels. Written out from
-/// [`Triangulation::jac_measurement`](crate::rig::Triangulation::jac_measurement), which is
+/// [`Triangulation::jac_measurement`](rig_model::rig::Triangulation::jac_measurement), which is
 /// `B/d` times rows `(1/2 - xs/B, 0, 1/2 + xs/B, 0)`, `(-ys/B, 1/2, ys/B, 1/2)`,
 /// `(-zs/B, 0, zs/B, 0)`, that product is `(B/d)^2 (diag(1, 1, 0) / 2 + 2 p p^T / B^2)` in
 /// the rig frame; rotated into the robot frame, `diag(1, 1, 0)` becomes `I - a a^T` for the
@@ -932,19 +869,6 @@ impl Default for StableRule {
     }
 }
 
-/// What phase 1 hands to phase 2: the camera parameters with their covariance.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Handover {
-    /// The calibrated camera parameters.
-    pub camera: CameraParams,
-    /// Their covariance (zero rows for parameters not estimated or held at nominal).
-    pub covariance: Mat10,
-    /// Time of the frame at which calibration became stable, microseconds.
-    pub t_us: u64,
-    /// The observability report at hand-over.
-    pub observability: ObservabilityReport,
-}
-
 /// Phase 1 fed frame by frame: collects frame pairs, re-solves every `solve_every` pairs
 /// (warm-started), and decides by [`StableRule`] when the calibration is stable.
 #[derive(Debug, Clone)]
@@ -1053,10 +977,13 @@ mod tests {
     use nalgebra::DMatrix;
 
     use super::*;
-    use crate::camera::{Mount, Pose2};
-    use crate::config::Noise;
-    use crate::odometry::constant_velocity_motion;
-    use crate::rig::{project, triangulate};
+    use rig_model::camera::{Mount, Pose2};
+    use rig_model::handover::LandmarkPair;
+    use rig_model::odometry::Motion;
+    use rig_model::rig::Measurement;
+    use rig_model::config::Noise;
+    use rig_model::odometry::constant_velocity_motion;
+    use rig_model::rig::{project, triangulate};
 
     /// A tilted head with every mount angle and offset non-zero, so that no term of the
     /// closed-form covariance vanishes.

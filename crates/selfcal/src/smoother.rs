@@ -28,11 +28,15 @@ use alloc::vec::Vec;
 
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
-use crate::camera::{CameraParams, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
-use crate::config::Rig;
-use crate::odometry::{Motion, OdometryFactor};
-use crate::rig::{Measurement, project, project_with_jacobians, triangulate};
-use crate::selfcal::{Mat10, ObservabilityReport, ParamObservability, structural_trap};
+use crate::solver::structural_trap;
+use rig_model::camera::{CameraParams, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
+use rig_model::config::Rig;
+use rig_model::handover::{
+    BatchHandover, BatchLandmark, HandoverReason, JointEstimate, Mat10, ObservabilityReport,
+    ParamObservability,
+};
+use rig_model::odometry::{Motion, OdometryFactor};
+use rig_model::rig::{Measurement, project, project_with_jacobians, triangulate};
 
 /// Tuning of the batch.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -188,89 +192,6 @@ impl SmootherSettings {
         }
         Ok(())
     }
-}
-
-/// One landmark of the batch.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BatchLandmark {
-    /// World position, metres.
-    pub position: Vector3<f64>,
-    /// The track that saw it last (the one phase 2 keeps following).
-    pub track: u64,
-    /// Frame index of its first observation.
-    pub first_frame: usize,
-    /// Observations of it used.
-    pub observations: u64,
-}
-
-/// Why the hand-over happened.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum HandoverReason {
-    /// The stable rule fired.
-    Stable,
-    /// The buffer was full: [`SmootherSettings::max_frames`] frames, or a lamp needed a
-    /// landmark beyond [`SmootherSettings::max_landmarks`].
-    BufferFull,
-    /// The caller asked for it (the end of a log).
-    Requested,
-}
-
-/// What phase 1 hands to phase 2: the joint estimate at the last frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BatchHandover {
-    /// Time of the last frame, microseconds.
-    pub t_us: u64,
-    /// Why now.
-    pub reason: HandoverReason,
-    /// The camera parameters (the ones not estimated at nominal).
-    pub camera: CameraParams,
-    /// Their covariance (zero rows for the ones not estimated).
-    pub camera_covariance: Mat10,
-    /// The last frame's pose.
-    pub pose: Pose2,
-    /// The landmarks.
-    pub landmarks: Vec<BatchLandmark>,
-    /// The parameters in [`Self::covariance`], in its order: the rig's estimated ones that the
-    /// data informed. The others are held at their nominal values (the batch was solved again
-    /// without them) and enter phase 2 with their prior.
-    pub estimated: Vec<Param>,
-    /// Joint covariance of `[pose (3), estimated (in that order), landmarks (3 each)]`.
-    pub covariance: DMatrix<f64>,
-    /// Every frame's `(t_us, pose)`: the smoothed trajectory of phase 1.
-    pub trajectory: Vec<(u64, Pose2)>,
-    /// Which parameters the data informed, and why not the others.
-    pub observability: ObservabilityReport,
-}
-
-impl BatchHandover {
-    /// The estimated parameters that the data did not inform (they enter phase 2 with about
-    /// their prior).
-    pub fn uninformed(&self) -> Vec<Param> {
-        self.observability
-            .params
-            .iter()
-            .filter(|p| !p.observable)
-            .map(|p| p.param)
-            .collect()
-    }
-}
-
-/// The joint estimate of the last solve: what phase 2's filter is re-seeded with while the
-/// batch goes on as a fixed-lag smoother.
-#[derive(Debug, Clone, PartialEq)]
-pub struct JointEstimate {
-    /// Time of the frame solved last, microseconds.
-    pub t_us: u64,
-    /// Its pose.
-    pub pose: Pose2,
-    /// The camera parameters.
-    pub camera: CameraParams,
-    /// The parameters in [`Self::covariance`], in its order.
-    pub estimated: Vec<Param>,
-    /// The landmarks, in the batch's order (index = [`Smoother::add_landmark`]'s).
-    pub landmarks: Vec<Vector3<f64>>,
-    /// Joint covariance of `[pose (3), estimated, landmarks (3 each)]`.
-    pub covariance: DMatrix<f64>,
 }
 
 /// What the marginalised frames said: a Gaussian over `[first kept pose, C, landmarks
@@ -432,7 +353,7 @@ fn lens_whitening(rig: &Rig, z: &Measurement) -> Option<nalgebra::Matrix4<f64>> 
     let c = &rig.nominal;
     // Central differences of the closed-form forward map (0.001 px: its curvature is far
     // below the pixel noise at that scale).
-    let jacobian = |l: &crate::lens::Lens, u: f64, v: f64| -> Option<nalgebra::Matrix2<f64>> {
+    let jacobian = |l: &rig_model::lens::Lens, u: f64, v: f64| -> Option<nalgebra::Matrix2<f64>> {
         let h = 1e-3;
         let at =
             |du: f64, dv: f64| l.unrectify(nalgebra::Vector2::new(u + du, v + dv), c.f, c.cx, c.cy);
@@ -453,7 +374,7 @@ fn lens_whitening(rig: &Rig, z: &Measurement) -> Option<nalgebra::Matrix4<f64>> 
 
 /// `D = diag(odom_scale, odom_scale, odom_yaw_scale)`: a true-motion error in the reported
 /// odometry's units (`Frame::odometry_factor`).
-fn to_reported_units(v: &crate::camera::Vehicle) -> Matrix3<f64> {
+fn to_reported_units(v: &rig_model::camera::Vehicle) -> Matrix3<f64> {
     Matrix3::from_diagonal(&Vector3::new(v.odom_scale, v.odom_scale, v.odom_yaw_scale))
 }
 
@@ -1757,8 +1678,8 @@ impl System {
 mod tests {
     use super::*;
 
-    fn rig_with(model: crate::lens::LensModel, fx: f64) -> Rig {
-        let lens = crate::lens::Lens {
+    fn rig_with(model: rig_model::lens::LensModel, fx: f64) -> Rig {
+        let lens = rig_model::lens::Lens {
             model,
             fx,
             fy: fx,
@@ -1776,17 +1697,17 @@ mod tests {
                 cx: 376.0,
                 cy: 240.0,
                 baseline: 0.12,
-                mount: crate::camera::Mount::default(),
-                vehicle: crate::camera::Vehicle::NOMINAL,
+                mount: rig_model::camera::Mount::default(),
+                vehicle: rig_model::camera::Vehicle::NOMINAL,
             },
             estimate: alloc::vec![Param::Baseline],
             prior,
-            noise: crate::config::Noise {
+            noise: rig_model::config::Noise {
                 pixel: 0.3,
                 velocity: 0.02,
                 yaw_rate: 0.01,
             },
-            lens: Some(crate::lens::StereoLens {
+            lens: Some(rig_model::lens::StereoLens {
                 left: lens,
                 right: lens,
             }),
@@ -1799,7 +1720,7 @@ mod tests {
     #[test]
     fn lens_whitening_carries_the_raw_noise() {
         let flat = rig_with(
-            crate::lens::LensModel::PlumbBob {
+            rig_model::lens::LensModel::PlumbBob {
                 k1: 0.0,
                 k2: 0.0,
                 p1: 0.0,
@@ -1815,7 +1736,7 @@ mod tests {
             "{a}"
         );
         let fisheye = rig_with(
-            crate::lens::LensModel::Equidistant {
+            rig_model::lens::LensModel::Equidistant {
                 k1: 0.0,
                 k2: 0.0,
                 k3: 0.0,

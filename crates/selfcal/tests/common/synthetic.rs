@@ -2,11 +2,11 @@
 //! known rig, five lamps, a slow path that turns, noisy stereo measurements and odometry.
 //! Shared by the phase-1 tests and the phase-1 bench.
 
-use calib::camera::{CameraParams, Mount, N_PARAMS, Param, Pose2};
-use calib::config::{Noise, Rig};
-use calib::odometry::{Motion, constant_velocity_motion};
-use calib::selfcal::{FramePair, LandmarkPair};
 use nalgebra::Vector3;
+use rig_model::camera::{CameraParams, Mount, N_PARAMS, Param, Pose2};
+use rig_model::config::{Noise, Rig};
+use rig_model::handover::{FramePair, LandmarkPair};
+use rig_model::odometry::{Motion, constant_velocity_motion};
 
 use super::Rng;
 
@@ -83,7 +83,7 @@ pub fn pairs_with(
     let lamps = lamps();
     let mut pose = Pose2::default();
     let mut out = Vec::new();
-    let mut prev: Option<Vec<Option<calib::Measurement>>> = None;
+    let mut prev: Option<Vec<Option<rig_model::Measurement>>> = None;
     let mut measured = Motion::default();
     for k in 0..frames {
         // Odometry over 50 ms: 5 samples of 10 ms, each with noise.
@@ -99,10 +99,10 @@ pub fn pairs_with(
                 0.01,
             ));
         }
-        let seen: Vec<Option<calib::Measurement>> = lamps
+        let seen: Vec<Option<rig_model::Measurement>> = lamps
             .iter()
             .map(|l| {
-                calib::project(truth, &pose, l)
+                rig_model::project(truth, &pose, l)
                     .ok()
                     .filter(|z| {
                         keep_all

@@ -6,9 +6,10 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use calib::Param;
-use calib::odometry::OdomSample;
-use calib::selfcal::{FramePair, SolverSettings, calibrate};
+use rig_model::Param;
+use rig_model::handover::FramePair;
+use rig_model::odometry::OdomSample;
+use selfcal::solver::{SolverSettings, calibrate};
 use track::{
     FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, PairingScheme, Pixel, TrackId,
 };
@@ -122,7 +123,7 @@ fn associate(run: &sim::SimRun, scheme: PairingScheme, stride: usize) -> Outcome
             rec.confirmed |= o.confirmed;
             out.labels.insert((k, o.track), l);
         }
-        for id in sim::phase1::lamp_measurements(frame).keys() {
+        for id in frame.lamp_measurements().keys() {
             out.lamp_frames.entry(*id).or_default().push(k);
         }
         if let Some(pair) = pb.push_frame(&tracked) {
@@ -277,7 +278,7 @@ fn paper_calibration_association_is_clean() {
     assert_eq!(r.clutter_confirmed, 0, "{r:#?}");
     assert!(r.recall >= 0.99, "{r:#?}");
     // Phase 1 from the tracks as from the lamp ids.
-    let by_lamp = sim::phase1::frame_pairs_by_lamp(&run, 40);
+    let by_lamp = eval::phase1::frame_pairs_by_lamp(&run, 40);
     let n_by_lamp: usize = by_lamp.iter().map(|p| p.landmarks.len()).sum();
     assert!(
         r.landmark_pairs * 100 >= n_by_lamp * 98,

@@ -3,37 +3,11 @@
 //! association (the navigator associates features without that knowledge). The pairing itself
 //! is the navigator's ([`track::PairBuilder`]), so that both pair frames alike.
 
-use std::collections::HashMap;
-
-use calib::Measurement;
-use calib::odometry::OdomSample;
-use calib::selfcal::FramePair;
+use rig_model::Measurement;
+use rig_model::handover::FramePair;
 use track::{Observation, PairBuilder, PairSettings, PairingScheme, TrackId, TrackedFrame};
 
-use crate::run::{FrameTruth, SimRun};
-
-/// `(uL, vL, uR, vR)` of every lamp seen in both images of a frame, by lamp id.
-pub fn lamp_measurements(frame: &FrameTruth) -> HashMap<u32, Measurement> {
-    let right: HashMap<u32, (u16, u16)> = frame
-        .right
-        .features
-        .iter()
-        .filter_map(|f| Some((f.lamp?, (f.x_q4, f.y_q4))))
-        .collect();
-    let q = |v: u16| f64::from(v) / 16.0;
-    frame
-        .left
-        .features
-        .iter()
-        .filter_map(|l| {
-            let (rx, ry) = right.get(&l.lamp?)?;
-            Some((
-                l.lamp?,
-                Measurement::new(q(l.x_q4), q(l.y_q4), q(*rx), q(*ry)),
-            ))
-        })
-        .collect()
-}
+use sim::SimRun;
 
 /// Disjoint frame pairs `stride` frames apart (`(0, stride)`, `(stride + 1, 2 stride + 1)`,
 /// ...), with the logged odometry integrated between them and the lamps seen in both.
@@ -64,14 +38,9 @@ pub fn frame_pairs_by_lamp_with(
     let mut pairs = Vec::new();
     for frame in &run.frames {
         while let Some(s) = odometry.next_if(|s| s.t_us <= frame.t_us) {
-            builder.push_odometry(OdomSample {
-                t_us: s.t_us,
-                vx: s.vx,
-                vy: s.vy,
-                vtheta: s.vtheta,
-            });
+            builder.push_odometry(*s);
         }
-        let mut lamps: Vec<(u32, Measurement)> = lamp_measurements(frame).into_iter().collect();
+        let mut lamps: Vec<(u32, Measurement)> = frame.lamp_measurements().into_iter().collect();
         lamps.sort_by_key(|(id, _)| *id);
         let tracked = TrackedFrame {
             t_us: frame.t_us,

@@ -8,8 +8,10 @@ use nalgebra::{Matrix3, Matrix3x4, Vector3};
 
 use crate::camera::{Pose2, Vehicle};
 
-/// One odometry sample.
+/// One odometry sample: robot-frame velocities held from `t_us` until the next sample (the
+/// one type for it, from the log to the estimators).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct OdomSample {
     /// Timestamp, microseconds, on the board's clock.
     pub t_us: u64,

@@ -1,11 +1,11 @@
-//! Phase 1 (calib::selfcal) on the simulator's paper scenarios, with features associated by
+//! Phase 1 (selfcal::solver) on the simulator's paper scenarios, with features associated by
 //! the simulator's lamp ids (association is tested with the navigator).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::Path;
 
-use calib::Param;
-use calib::selfcal::{SolveStatus, SolverSettings, calibrate};
+use rig_model::Param;
+use selfcal::solver::{SolveStatus, SolverSettings, calibrate};
 
 fn scenario(name: &str) -> sim::Scenario {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -24,7 +24,7 @@ fn paper_calibration_meets_the_targets_over_20_seeds() {
     for seed in 0..20 {
         sc.spec.seed = seed;
         let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-        let pairs = sim::phase1::frame_pairs_by_lamp(&run, 40);
+        let pairs = eval::phase1::frame_pairs_by_lamp(&run, 40);
         let cal = calibrate(
             &pairs,
             &run.rig,
@@ -60,7 +60,7 @@ fn upward_head_on_a_straight_path_reports_the_traps() {
     rig.prior[Param::F.index()] = Some(30.0);
     rig.prior[Param::MountY.index()] = Some(0.05);
     rig.prior[Param::MountZ.index()] = Some(0.05);
-    let pairs = sim::phase1::frame_pairs_by_lamp(&run, 10);
+    let pairs = eval::phase1::frame_pairs_by_lamp(&run, 10);
     let cal = calibrate(&pairs, &rig, &rig.nominal, &SolverSettings::default());
     let report = &cal.observability;
     let reason = |p: Param| {
@@ -101,7 +101,7 @@ fn an_odometry_scale_error_maps_onto_the_baseline() {
     sc.spec.noise.velocity_scale_error = 0.01;
     sc.spec.noise.yaw_rate_bias_radps = 0.002;
     let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-    let pairs = sim::phase1::frame_pairs_by_lamp(&run, 10);
+    let pairs = eval::phase1::frame_pairs_by_lamp(&run, 10);
     let cal = calibrate(
         &pairs,
         &run.rig,

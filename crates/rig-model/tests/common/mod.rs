@@ -3,11 +3,9 @@
 //! Box-Muller) so that Monte Carlo runs need no RNG crate and are identical on every run.
 #![allow(dead_code, unreachable_pub, clippy::unwrap_used, clippy::expect_used)] // test helpers
 
-pub mod synthetic;
-
-use calib::{CameraParams, Measurement, Mount, Pose2};
 use nalgebra::{Matrix3, Vector3};
 use proptest::prelude::*;
+use rig_model::{CameraParams, Measurement, Mount, Pose2};
 
 /// Relative step of the central differences.
 pub const REL_STEP: f64 = 1e-6;

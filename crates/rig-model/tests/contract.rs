@@ -4,13 +4,13 @@
 
 mod common;
 
-use calib::{
-    CameraParams, Measurement, Mount, Param, Pose2, RigError, point_in_rig, project,
-    project_with_jacobians, triangulate,
-};
 use common::{case_strategy, nominal_camera};
 use nalgebra::Vector3;
 use proptest::prelude::*;
+use rig_model::{
+    CameraParams, Measurement, Mount, Param, Pose2, RigError, point_in_rig, project,
+    project_with_jacobians, triangulate,
+};
 use std::f64::consts::FRAC_PI_2;
 
 fn mount(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> CameraParams {
@@ -107,7 +107,7 @@ fn parameter_names_follow_the_contract() {
             "time_offset"
         ]
     );
-    assert_eq!(calib::N_PARAMS, 14);
+    assert_eq!(rig_model::N_PARAMS, 14);
     assert!(Param::CAMERA.iter().all(|p| !p.is_vehicle()));
     assert!(Param::VEHICLE.iter().all(|p| p.is_vehicle()));
     assert_eq!(
@@ -371,13 +371,13 @@ proptest! {
     /// or an error.
     #[test]
     fn nan_and_extreme_inputs_never_panic(
-        cam in proptest::collection::vec(any_f64(), calib::N_PARAMS),
+        cam in proptest::collection::vec(any_f64(), rig_model::N_PARAMS),
         pose in proptest::collection::vec(any_f64(), 3),
         l in proptest::collection::vec(any_f64(), 3),
         z in proptest::collection::vec(any_f64(), 4),
         sigma in any_f64(),
     ) {
-        let c = CameraParams::from_vector(&calib::ParamVector::from_column_slice(&cam));
+        let c = CameraParams::from_vector(&rig_model::ParamVector::from_column_slice(&cam));
         let pose = Pose2::new(pose[0], pose[1], pose[2]);
         let l = Vector3::new(l[0], l[1], l[2]);
         let z = Measurement::from_column_slice(&z);
@@ -390,7 +390,7 @@ proptest! {
                 let _ = tri.covariance_in_robot(&c, sigma);
                 let _ = tri.p_in_world(&c, &pose);
                 let pc = nalgebra::Matrix3::from_element(sigma);
-                let cc = nalgebra::SMatrix::<f64, { calib::N_PARAMS }, { calib::N_PARAMS }>::from_element(sigma);
+                let cc = nalgebra::SMatrix::<f64, { rig_model::N_PARAMS }, { rig_model::N_PARAMS }>::from_element(sigma);
                 let _ = tri.covariance_in_world(&c, &pose, sigma, Some(&pc), Some(&cc));
             }
         }

@@ -8,8 +8,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use calib::{CameraParams, Mount, N_PARAMS, Noise, Param, Rig, RigFileError};
 use proptest::prelude::*;
+use rig_model::{CameraParams, Mount, N_PARAMS, Noise, Param, Rig, RigFileError};
 
 /// Section 3, verbatim.
 const EXAMPLE: &str = r#"[camera]          # nominal values from the datasheet; the truth may differ
@@ -832,7 +832,7 @@ rectification = [0.9999006, -0.01409953, 0.0, 0.01409953, 0.9999006, 0.0, 0.0, 0
 
 #[test]
 fn lens_tables_are_read_and_written() {
-    use calib::lens::LensModel;
+    use rig_model::lens::LensModel;
     let text = render(&example_tables()) + LENSES;
     let rig = Rig::from_toml_str(&text, NAME).unwrap();
     let lens = rig.lens.unwrap();
