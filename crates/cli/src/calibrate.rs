@@ -13,7 +13,7 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use replay::{Counts, LogCalibration, Options, RigSource};
+use replay::{Counts, FramePairSettings, LogCalibration, NavSettings, RigSource};
 use rig_model::handover::{Handover, ObservabilityReport};
 use rig_model::{CameraParams, Param, ParamVector, Rig};
 use selfcal::solver::{Calibration, SolveStatus};
@@ -60,22 +60,26 @@ impl From<Pairing> for PairingScheme {
 }
 
 pub(crate) fn run(args: &Args) -> Result<()> {
-    let defaults = Options::default();
-    let options = Options {
-        pairs: PairSettings {
-            scheme: args.pairing.into(),
-            stride: args.stride,
-            ..defaults.pairs
+    let defaults = FramePairSettings::default();
+    let settings = NavSettings {
+        frame_pairs: FramePairSettings {
+            pairs: PairSettings {
+                scheme: args.pairing.into(),
+                stride: args.stride,
+                ..defaults.pairs
+            },
+            ..defaults
         },
-        ..defaults
+        ..NavSettings::default()
     };
     // Before the log is read: a bad setting should not wait for a long log.
-    options
+    settings
+        .frame_pairs
         .pairs
         .validate()
         .with_context(|| format!("--stride {}", args.stride))?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
-    let result = replay::calibrate_log(&args.log, rig, &options)?;
+    let result = replay::calibrate_log(&args.log, rig, &settings)?;
 
     {
         let mut stderr = io::stderr().lock();

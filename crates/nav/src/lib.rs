@@ -49,6 +49,7 @@ extern crate alloc;
 extern crate std;
 
 mod error;
+mod frame_pairs;
 
 use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
@@ -68,6 +69,7 @@ use vslam_ekf::{
 };
 
 pub use error::Error;
+pub use frame_pairs::{FramePairCalibration, FramePairSettings};
 
 /// Odometry samples the navigator holds at most between two frames (100 s at 100 Hz): a live
 /// stream with odometry and no frames does not grow it without bound.
@@ -86,9 +88,23 @@ pub const ODOMETRY_LOOKAHEAD_US: u64 = 250_000;
 /// start back by this much (vehicle-interfaces.md 1.2).
 const ODOMETRY_MARGIN_US: u64 = 200_000;
 
+/// What the navigator runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum NavMode {
+    /// The method: phase 1 by the batch over every frame, the switch, phase 2.
+    #[default]
+    Navigate,
+    /// Phase 1 only, by the paper's frame pairs ([`FramePairCalibration`], with
+    /// [`NavSettings::frame_pairs`]): no batch, no switch, no phase 2; the pose is dead
+    /// reckoning. `stereonav calibrate` (`replay::calibrate_log`).
+    CalibrateFramePairs,
+}
+
 /// The navigator's tuning.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NavSettings {
+    /// What runs: the method, or phase 1 alone by frame pairs.
+    pub mode: NavMode,
     /// Stereo matching and tracking.
     pub front_end: FrontEndSettings,
     /// Phase 1, the batch over every frame (and when it counts as stable: the switch).
@@ -117,12 +133,15 @@ pub struct NavSettings {
     /// Distance the odometry must have travelled (counting only its significant motion)
     /// before the camera parameters are refined in phase 2, metres.
     pub min_translation_m: f64,
+    /// The frame pairs of [`NavMode::CalibrateFramePairs`] (unused otherwise).
+    pub frame_pairs: FramePairSettings,
 }
 
 impl Default for NavSettings {
     /// The crates' defaults; phase 1 not skipped.
     fn default() -> Self {
         Self {
+            mode: NavMode::Navigate,
             front_end: FrontEndSettings::default(),
             phase1: SmootherSettings::default(),
             ekf: Settings::default(),
@@ -132,6 +151,7 @@ impl Default for NavSettings {
             smooth_phase2: true,
             hold_unexcited: true,
             min_translation_m: 0.05,
+            frame_pairs: FramePairSettings::default(),
         }
     }
 }
@@ -232,6 +252,8 @@ pub struct Navigator {
     stats: NavStats,
     /// Map landmark -> its index in the smoother, while the smoother runs in phase 2.
     smoothed: BTreeMap<LandmarkId, usize>,
+    /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
+    frame_pairs: Option<FramePairCalibration>,
 }
 
 impl Navigator {
@@ -254,11 +276,27 @@ impl Navigator {
         }
         let front_end = FrontEnd::new(Model::from_rig(&rig), settings.front_end)?;
         let candidates = Candidates::new(settings.candidates)?;
+        let frame_pairs = match settings.mode {
+            NavMode::Navigate => None,
+            NavMode::CalibrateFramePairs => {
+                if settings.skip_phase1 {
+                    return Err(Error::Settings {
+                        name: "skip_phase1",
+                        value: 1.0,
+                        expected: "off in the calibration-only mode (it has only phase 1)",
+                    });
+                }
+                Some(FramePairCalibration::new(&rig, &settings.frame_pairs)?)
+            }
+        };
         let ekf = if settings.skip_phase1 {
             Some(Ekf::from_prior(&rig, settings.ekf)?)
         } else {
-            // Checks the filter's settings and the rig now, not at the switch.
-            Ekf::from_prior(&rig, settings.ekf)?;
+            // Checks the filter's settings and the rig now, not at the switch (there is none
+            // in the calibration-only mode).
+            if frame_pairs.is_none() {
+                Ekf::from_prior(&rig, settings.ekf)?;
+            }
             None
         };
         let smoother = Smoother::new(rig.clone(), settings.phase1);
@@ -279,6 +317,7 @@ impl Navigator {
             match_gate: chi2_quantile(p, 4.0),
             stats: NavStats::default(),
             smoothed: BTreeMap::new(),
+            frame_pairs,
         };
         Ok(navigator)
     }
@@ -328,6 +367,11 @@ impl Navigator {
         &self.smoother
     }
 
+    /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
+    pub fn frame_pairs(&self) -> Option<&FramePairCalibration> {
+        self.frame_pairs.as_ref()
+    }
+
     /// The hand-over to phase 2 (camera parameters and covariance), once it happened: the
     /// camera part of [`Self::batch_handover`].
     pub fn handover(&self) -> Option<Handover> {
@@ -364,6 +408,9 @@ impl Navigator {
     /// In phase 2 with the smoother running, the smoother solves once more over the frames
     /// since its last solve and the filter takes its estimate (the final map is the batch's).
     pub fn finish(&mut self) -> Result<bool, Error> {
+        if self.frame_pairs.is_some() {
+            return Ok(false);
+        }
         if self.ekf.is_some() || self.settings.skip_phase1 {
             if self.smoother.is_mapping() && self.smoother.flush() {
                 self.reseed();
@@ -603,6 +650,9 @@ impl Navigator {
         }
         self.last_odometry_t = Some(sample.t_us);
         self.front_end.push_odometry(sample);
+        if let Some(pairs) = &mut self.frame_pairs {
+            pairs.push_odometry(sample);
+        }
         if self.odometry.len() >= MAX_ODOMETRY_BUFFER {
             // No frame for a long time: the oldest samples go (a frame after the gap finds no
             // odometry back to the frame before and holds the pose, counted).
@@ -733,6 +783,10 @@ impl Navigator {
             None => (left, right),
         };
         let tracked = self.front_end.push_frame(t_us, left, right);
+        if let Some(pairs) = &mut self.frame_pairs {
+            pairs.push_frame(&tracked);
+            return Ok(outcome);
+        }
         if self.ekf.is_none() {
             // The frame's motion goes to phase 1's batch; phase 2 takes it only from the next
             // frame on (the frame of the switch is the batch's last).

@@ -536,31 +536,17 @@ fn pairs_by_id(
         }
         frame.insert(id, (row, Measurement::from(*z)));
     }
-    let frames: Vec<_> = frames.into_iter().collect();
-    let stride = stride.max(1);
-    Ok(frames
-        .windows(stride + 1)
-        .step_by(stride + 1)
-        .filter_map(|w| {
-            let ((t0, first), (t1, second)) = (w.first()?, w.last()?);
-            let motion = integrate(odometry, *t0, *t1)?;
-            let landmarks = first
-                .iter()
-                .filter_map(|(id, (_, z0))| {
-                    let (_, z1) = second.get(id)?;
-                    Some(LandmarkPair {
-                        first: *z0,
-                        second: *z1,
-                    })
-                })
-                .collect();
-            Some(FramePair {
-                t_us: *t1,
-                motion,
-                landmarks,
-            })
-        })
-        .collect())
+    // The navigator's pairing (track::labelled_pairs), the ids standing in for its tracks.
+    let frames = frames.into_iter().map(|(t, lamps)| {
+        let lamps = lamps.into_iter().map(|(id, (_, z))| (id, z)).collect();
+        (t, lamps)
+    });
+    Ok(track::labelled_pairs(
+        frames,
+        odometry,
+        PairingScheme::Disjoint,
+        stride,
+    ))
 }
 
 /// [`SolverSettings`] from the keyword values, each checked.
@@ -1029,18 +1015,20 @@ pub(crate) fn calibrate_log(
                 expected: "at least 1",
             });
         }
-        let options = replay::Options {
-            pairs: pair_settings(stride, pairing)?,
-            solver: solver_settings(settings)?,
-            stable: stable_rule(rule)?,
-            solve_every,
-            ..replay::Options::default()
+        let settings = replay::NavSettings {
+            frame_pairs: replay::FramePairSettings {
+                pairs: pair_settings(stride, pairing)?,
+                solver: solver_settings(settings)?,
+                stable: stable_rule(rule)?,
+                solve_every,
+            },
+            ..replay::NavSettings::default()
         };
-        Ok((rig, options))
+        Ok((rig, settings))
     };
-    let (rig, options) = checked().map_err(|e| e.into_pyerr(py))?;
+    let (rig, settings) = checked().map_err(|e| e.into_pyerr(py))?;
     let result = py
-        .detach(|| replay::calibrate_log(&log_path, rig, &options))
+        .detach(|| replay::calibrate_log(&log_path, rig, &settings))
         .map_err(|e| replay_error(py, &e))?;
     Ok(LogCalibrationResult { result })
 }
@@ -1380,7 +1368,7 @@ mod tests {
         Python::initialize();
         Python::attach(|py| {
             let path = std::env::temp_dir().join("stereonav-py-no-such-log.mcap");
-            let err = replay::calibrate_log(&path, None, &replay::Options::default())
+            let err = replay::calibrate_log(&path, None, &replay::NavSettings::default())
                 .expect_err("missing");
             let py_err = replay_error(py, &err);
             assert!(py_err.to_string().contains("no-such-log.mcap"), "{py_err}");

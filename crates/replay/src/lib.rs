@@ -25,10 +25,12 @@
 //! minute (docs/benchmarks.md, "A whole shift"). [`replay_log`] is the same into a
 //! [`ReplayCollector`], for callers that want every estimate in memory (Python, the viewer).
 //!
-//! [`calibrate_log`] reads the whole log ([`read_vehicle_log`]), associates with the rig's
-//! nominal parameters and priors, and calibrates once in batch over every frame pair (the
-//! result), and fed pair by pair to a [`SelfCalibrator`] to find when the estimate became
-//! stable: the hand-over time at which the vehicle would have switched to phase 2.
+//! [`calibrate_log`] reads the whole log ([`read_vehicle_log`]) and runs the navigator in its
+//! calibration-only mode ([`NavMode::CalibrateFramePairs`]): the association with the rig's
+//! nominal parameters and priors, the paper's frame pairs calibrated once in batch over the
+//! whole log (the result) and fed pair by pair to the incremental calibrator to find when the
+//! estimate became stable, the hand-over time at which the vehicle would have switched to
+//! phase 2.
 //!
 //! Errors are one line naming the file and the problem ([`Error`]); nothing here panics on any
 //! input.
@@ -47,17 +49,15 @@ use std::path::{Path, PathBuf};
 use fpga_link::Decoder;
 use rig_model::camera::ParamVector;
 use rig_model::config::Rig;
-use rig_model::handover::{FramePair, Handover};
+use rig_model::handover::Handover;
 use rig_model::odometry::OdomSample;
-use selfcal::solver::{
-    Calibration, SelfCalibrator, SolveStatus, SolverSettings, StableRule, calibrate,
-};
-use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel};
+use selfcal::solver::{Calibration, SolveStatus};
+use track::Pixel;
 use vehicle_log::Record;
 
 pub use error::Error;
 pub use estimates_reader::{ESTIMATES_FRAME_TOPIC, EstimatesError, read_estimates};
-pub use nav::{NavSettings, Navigator};
+pub use nav::{FramePairSettings, NavMode, NavSettings, Navigator};
 pub use navigate::{
     LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, ReplayCollector, ReplaySink, Replayer,
     replay_log, truth_camera,
@@ -71,35 +71,6 @@ pub use types::{
     CameraSample, Consistency, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
     Replay, ReplayEnd, TruthErrors,
 };
-
-/// How the replay associates and calibrates.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Options {
-    /// Stereo matching and tracking.
-    pub front_end: FrontEndSettings,
-    /// Phase 1's frame pairs.
-    pub pairs: PairSettings,
-    /// The phase-1 solver.
-    pub solver: SolverSettings,
-    /// When the incremental calibration counts as stable (hand-over to phase 2).
-    pub stable: StableRule,
-    /// The incremental calibrator re-solves every this many pairs.
-    pub solve_every: usize,
-}
-
-impl Default for Options {
-    /// The crates' defaults; the incremental calibrator re-solves every 10 pairs (20 s of
-    /// driving at the default 40 frames between the frames of a pair).
-    fn default() -> Self {
-        Self {
-            front_end: FrontEndSettings::default(),
-            pairs: PairSettings::default(),
-            solver: SolverSettings::default(),
-            stable: StableRule::default(),
-            solve_every: 10,
-        }
-    }
-}
 
 /// Where the rig came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -319,13 +290,15 @@ pub fn decode_stream(chunks: &[&[u8]]) -> (Vec<DecodedFrame>, fpga_link::Stats) 
 ///
 /// `rig` is the rig file's content; without it the log's `/rig` message is used. Errors: the
 /// file cannot be read or is not MCAP, it is an MCAP file without the vehicle topics, a
-/// vehicle message is malformed, there is no rig, or `options` are out of range. A log cut
+/// vehicle message is malformed, there is no rig, or `settings` are out of range. `settings`
+/// are the navigator's, run in its calibration-only mode ([`NavMode::CalibrateFramePairs`]:
+/// its association, then [`NavSettings::frame_pairs`]). A log cut
 /// short, a stream with corrupt packets, or a log with too little data for a calibration are
 /// not errors: the result says so in its counts, warnings and [`Calibration::status`].
 pub fn calibrate_log(
     path: impl AsRef<Path>,
     rig: Option<Rig>,
-    options: &Options,
+    settings: &NavSettings,
 ) -> Result<LogCalibration, Error> {
     let path = path.as_ref();
     let input = read_vehicle_log(path, rig)?;
@@ -338,42 +311,42 @@ pub fn calibrate_log(
         mut warnings,
     } = input;
 
-    let mut front_end = FrontEnd::new(Model::from_rig(&rig), options.front_end)?;
-    let mut builder = PairBuilder::new(options.pairs)?;
-    let mut incremental = SelfCalibrator::new(
+    settings.frame_pairs.pairs.validate()?;
+    let mut navigator = Navigator::new(
         rig.clone(),
-        options.solver,
-        options.stable,
-        options.solve_every,
-    );
-    let mut pairs: Vec<FramePair> = Vec::new();
+        NavSettings {
+            mode: NavMode::CalibrateFramePairs,
+            ..*settings
+        },
+    )?;
     let mut next_odom = odometry.iter().peekable();
     for frame in &frames {
         while let Some(s) = next_odom.next_if(|s| s.t_us <= frame.t_us) {
-            front_end.push_odometry(*s);
-            builder.push_odometry(*s);
+            navigator.push_odometry(*s)?;
         }
-        let tracked = front_end.push_frame(frame.t_us, &frame.left, &frame.right);
-        if let Some(pair) = builder.push_frame(&tracked) {
-            if incremental.handover().is_none() {
-                incremental.add_pair(pair.clone());
-            }
-            pairs.push(pair);
-        }
+        navigator.push_frame(frame.t_us, &frame.left, &frame.right)?;
     }
+    let front_end = navigator.front_end();
     let tracker = front_end.tracker().stats();
     counts.stereo_matches = front_end.stereo_stats().matches;
     counts.tracks = tracker.started;
     counts.confirmed_tracks = tracker.confirmed;
     counts.tracker_resets = tracker.resets;
+    // Never None: the navigator was made in the calibration-only mode.
+    let phase1 = navigator.frame_pairs().ok_or(nav::Error::Settings {
+        name: "mode",
+        value: 0.0,
+        expected: "the calibration-only mode",
+    })?;
+    let pairs = phase1.pairs();
     counts.pairs = pairs.len() as u64;
     counts.landmark_pairs = pairs.iter().map(|p| p.landmarks.len() as u64).sum();
 
-    let calibration = calibrate(&pairs, &rig, &rig.nominal, &options.solver);
+    let calibration = phase1.calibrate();
     add_warnings(&counts, &calibration, &mut warnings);
     Ok(LogCalibration {
-        handover: incremental.handover().cloned(),
-        history: incremental.history().to_vec(),
+        handover: phase1.handover().cloned(),
+        history: phase1.history().to_vec(),
         rig,
         rig_source,
         calibration,

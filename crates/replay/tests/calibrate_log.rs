@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use replay::{Error, Options, RigSource, calibrate_log};
+use replay::{Error, FramePairSettings, NavSettings, RigSource, calibrate_log};
 use rig_model::Param;
 use selfcal::solver::{SolveStatus, calibrate};
 use track::PairSettings;
@@ -51,7 +51,7 @@ fn paper_calibration_log_gives_f_and_baseline() {
     let path = fixture("paper-calibration.mcap");
     let (true_camera, n_frames) = truth(&path);
     let start = std::time::Instant::now();
-    let out = calibrate_log(&path, None, &Options::default()).unwrap();
+    let out = calibrate_log(&path, None, &NavSettings::default()).unwrap();
     println!("{:?}: {:#?}", start.elapsed(), out.counts);
     let cal = &out.calibration;
     let (f, b) = (cal.camera.f, cal.camera.baseline);
@@ -77,15 +77,15 @@ fn paper_calibration_log_gives_f_and_baseline() {
 fn a_given_rig_file_is_used_as_the_log_rig_would_be() {
     let path = fixture("paper-calibration.mcap");
     let rig = rig_model::Rig::load(&fixture("paper-calibration.rig.toml")).unwrap();
-    let from_log = calibrate_log(&path, None, &Options::default()).unwrap();
-    let given = calibrate_log(&path, Some(rig.clone()), &Options::default()).unwrap();
+    let from_log = calibrate_log(&path, None, &NavSettings::default()).unwrap();
+    let given = calibrate_log(&path, Some(rig.clone()), &NavSettings::default()).unwrap();
     assert_eq!(given.rig_source, RigSource::Given);
     assert_eq!(given.calibration, from_log.calibration);
     assert!(given.warnings.is_empty(), "{:?}", given.warnings);
     // A rig that differs from the log's is used, with a warning.
     let mut other = rig;
     other.nominal.f = 690.0;
-    let out = calibrate_log(&path, Some(other), &Options::default()).unwrap();
+    let out = calibrate_log(&path, Some(other), &NavSettings::default()).unwrap();
     assert_eq!(out.rig.nominal.f, 690.0);
     assert!(
         out.warnings.iter().any(|w| w.contains("differs")),
@@ -101,7 +101,7 @@ fn a_given_rig_file_is_used_as_the_log_rig_would_be() {
 fn the_hand_over_time_is_reported() {
     let path = fixture("paper-calibration.mcap");
     let (true_camera, _) = truth(&path);
-    let options = Options::default();
+    let options = NavSettings::default();
     let out = calibrate_log(&path, None, &options).unwrap();
     let h = out.handover.as_ref().expect("calibration becomes stable");
     let (t_last, _, _) = *out.history.last().unwrap();
@@ -117,8 +117,8 @@ fn the_hand_over_time_is_reported() {
         h.t_us, t_last,
         "the incremental solver stops at the hand-over"
     );
-    let rule = options.stable;
-    assert!(out.history.len() * options.solve_every >= rule.min_pairs);
+    let rule = options.frame_pairs.stable;
+    assert!(out.history.len() * options.frame_pairs.solve_every >= rule.min_pairs);
     assert!(h.t_us < 182_000_000 + 1_000_000, "{}", h.t_us);
     let sf = h.covariance[(Param::F.index(), Param::F.index())].sqrt();
     assert!((h.camera.baseline - true_camera.baseline).abs() < 0.001);
@@ -146,12 +146,15 @@ fn simulated_log(name: &str, edit: impl FnOnce(&mut sim::Scenario)) -> (sim::Sim
 #[test]
 fn a_log_with_link_faults_is_decoded_and_counted() {
     let (run, path) = simulated_log("warehouse", |_| {});
-    let options = Options {
-        pairs: PairSettings {
-            stride: 10,
-            ..PairSettings::default()
+    let options = NavSettings {
+        frame_pairs: FramePairSettings {
+            pairs: PairSettings {
+                stride: 10,
+                ..PairSettings::default()
+            },
+            ..FramePairSettings::default()
         },
-        ..Options::default()
+        ..NavSettings::default()
     };
     let out = calibrate_log(&path, None, &options).unwrap();
     std::fs::remove_file(&path).ok();
@@ -178,7 +181,7 @@ fn a_log_with_link_faults_is_decoded_and_counted() {
         &eval::phase1::frame_pairs_by_lamp(&run, 10),
         &run.rig,
         &run.rig.nominal,
-        &options.solver,
+        &options.frame_pairs.solver,
     );
     let b_lamp = by_lamp.camera.baseline;
     println!(
@@ -212,8 +215,8 @@ fn frames_and_odometry_are_ordered_by_their_timestamps() {
         w.odom(s).unwrap();
     }
     w.finish().unwrap();
-    let a = calibrate_log(&path, None, &Options::default()).unwrap();
-    let b = calibrate_log(&shuffled, None, &Options::default()).unwrap();
+    let a = calibrate_log(&path, None, &NavSettings::default()).unwrap();
+    let b = calibrate_log(&shuffled, None, &NavSettings::default()).unwrap();
     std::fs::remove_file(&shuffled).ok();
     assert_eq!(a.calibration, b.calibration);
     assert_eq!(a.counts, b.counts);
@@ -226,7 +229,7 @@ fn a_truncated_log_is_used_as_far_as_it_goes() {
     let bytes = std::fs::read(&path).unwrap();
     let cut = scratch(&format!("cut-{}.mcap", std::process::id()));
     std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
-    let out = calibrate_log(&cut, None, &Options::default()).unwrap();
+    let out = calibrate_log(&cut, None, &NavSettings::default()).unwrap();
     std::fs::remove_file(&cut).ok();
     println!("{:#?} {:?}", out.counts, out.warnings);
     assert!(
@@ -249,7 +252,7 @@ fn one_line(e: &Error, path: &Path, what: &str) {
 #[test]
 fn a_missing_file_is_an_error_naming_it() {
     let path = scratch("no-such-log.mcap");
-    let e = calibrate_log(&path, None, &Options::default()).unwrap_err();
+    let e = calibrate_log(&path, None, &NavSettings::default()).unwrap_err();
     assert!(matches!(e, Error::Log(_)), "{e:?}");
     one_line(&e, &path, "cannot open");
 }
@@ -258,7 +261,7 @@ fn a_missing_file_is_an_error_naming_it() {
 fn a_text_file_is_not_a_log() {
     let path = scratch(&format!("text-{}.txt", std::process::id()));
     std::fs::write(&path, "t_us,x,y,theta\n0,0,0,0\n").unwrap();
-    let e = calibrate_log(&path, None, &Options::default()).unwrap_err();
+    let e = calibrate_log(&path, None, &NavSettings::default()).unwrap_err();
     std::fs::remove_file(&path).ok();
     assert!(matches!(e, Error::Log(_)), "{e:?}");
     one_line(&e, &path, "not an MCAP file");
@@ -274,7 +277,7 @@ fn a_foreign_mcap_file_is_not_a_vehicle_log() {
         println!("skipped: {} is absent", path.display());
         return;
     }
-    let e = calibrate_log(&path, None, &Options::default()).unwrap_err();
+    let e = calibrate_log(&path, None, &NavSettings::default()).unwrap_err();
     assert!(matches!(e, Error::NotVehicleLog { .. }), "{e:?}");
     one_line(&e, &path, "not a vehicle log");
     assert!(e.to_string().contains("/tf"), "{e}");
@@ -285,10 +288,10 @@ fn a_foreign_mcap_file_is_not_a_vehicle_log() {
 #[test]
 fn a_log_without_a_usable_rig_needs_one_given() {
     let (run, path) = simulated_log("paper-experiment", |sc| sc.spec.log.rig = false);
-    let e = calibrate_log(&path, None, &Options::default()).unwrap_err();
+    let e = calibrate_log(&path, None, &NavSettings::default()).unwrap_err();
     assert!(matches!(e, Error::NoRig { .. }), "{e:?}");
     one_line(&e, &path, "no rig");
-    let out = calibrate_log(&path, Some(run.rig.clone()), &Options::default()).unwrap();
+    let out = calibrate_log(&path, Some(run.rig.clone()), &NavSettings::default()).unwrap();
     std::fs::remove_file(&path).ok();
     assert_eq!(out.rig_source, RigSource::Given);
     assert!(out.counts.pairs > 0);
@@ -304,7 +307,7 @@ fn a_log_without_a_usable_rig_needs_one_given() {
     })
     .unwrap();
     w.finish().unwrap();
-    let e = calibrate_log(&path, None, &Options::default()).unwrap_err();
+    let e = calibrate_log(&path, None, &NavSettings::default()).unwrap_err();
     std::fs::remove_file(&path).ok();
     assert!(matches!(e, Error::BadRig(_)), "{e:?}");
     one_line(&e, &path, "/rig");
@@ -326,7 +329,7 @@ fn a_log_without_frames_says_so() {
         .unwrap();
     }
     w.finish().unwrap();
-    let out = calibrate_log(&path, Some(rig.clone()), &Options::default()).unwrap();
+    let out = calibrate_log(&path, Some(rig.clone()), &NavSettings::default()).unwrap();
     std::fs::remove_file(&path).ok();
     assert_eq!(out.calibration.status, SolveStatus::NoData);
     assert_eq!(out.calibration.camera, rig.nominal);
@@ -340,8 +343,8 @@ fn a_log_without_frames_says_so() {
 #[test]
 fn bad_options_are_an_error() {
     let path = fixture("paper-calibration.mcap");
-    let mut options = Options::default();
-    options.pairs.stride = 0;
+    let mut options = NavSettings::default();
+    options.frame_pairs.pairs.stride = 0;
     let e = calibrate_log(&path, None, &options).unwrap_err();
     assert!(matches!(e, Error::Settings(_)), "{e:?}");
     assert!(e.to_string().contains("pairs.stride"), "{e}");

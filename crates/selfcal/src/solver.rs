@@ -978,11 +978,11 @@ mod tests {
 
     use super::*;
     use rig_model::camera::{Mount, Pose2};
+    use rig_model::config::Noise;
     use rig_model::handover::LandmarkPair;
     use rig_model::odometry::Motion;
-    use rig_model::rig::Measurement;
-    use rig_model::config::Noise;
     use rig_model::odometry::constant_velocity_motion;
+    use rig_model::rig::Measurement;
     use rig_model::rig::{project, triangulate};
 
     /// A tilted head with every mount angle and offset non-zero, so that no term of the

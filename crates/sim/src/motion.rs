@@ -54,15 +54,8 @@ pub fn integrate_samples(samples: &[OdomSample], start: Pose2, t_us: u64) -> Pos
     pose
 }
 
-/// An angle in `(-pi, pi]`.
-pub fn wrap_angle(a: f64) -> f64 {
-    let w = a.rem_euclid(std::f64::consts::TAU);
-    if w > std::f64::consts::PI {
-        w - std::f64::consts::TAU
-    } else {
-        w
-    }
-}
+/// An angle in `(-pi, pi]`: the rig model's.
+pub use rig_model::camera::wrap_angle;
 
 #[allow(clippy::cast_precision_loss)] // microsecond spans of a run are far below 2^52
 pub(crate) fn us_to_s(us: u64) -> f64 {

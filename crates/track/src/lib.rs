@@ -65,7 +65,7 @@ pub use model::Model;
 #[cfg(feature = "alloc")]
 pub use odometry::OdometryBuffer;
 #[cfg(feature = "alloc")]
-pub use pairs::{PairBuilder, PairSettings, PairStats, PairingScheme};
+pub use pairs::{PairBuilder, PairSettings, PairStats, PairingScheme, labelled_pairs};
 #[cfg(feature = "alloc")]
 pub use stereo::{Pixel, StereoMatch, StereoMatcher, StereoSettings, StereoStats};
 #[cfg(feature = "alloc")]

@@ -270,6 +270,56 @@ impl PairBuilder {
     }
 }
 
+/// Frame pairs from measurements whose landmarks are already labelled (the simulator's lamp
+/// ids, a caller's ids): the frames in time order, each `(t_us, [(label, measurement)])`, with
+/// the odometry in time order. Built by [`PairBuilder`] with each label standing in for a
+/// confirmed track, so that labelled pairs are paired exactly as the navigator's are; every
+/// pair is kept, even one without a landmark in common, the odometry may be held across any
+/// gap, and a pair whose first frame precedes the odometry is left out. A `stride` out of
+/// range is clamped to `1..=`[`PairSettings::MAX_STRIDE`].
+pub fn labelled_pairs(
+    frames: impl IntoIterator<Item = (u64, Vec<(u64, Measurement)>)>,
+    odometry: &[OdomSample],
+    scheme: PairingScheme,
+    stride: usize,
+) -> Vec<FramePair> {
+    let settings = PairSettings {
+        scheme,
+        stride: stride.clamp(1, PairSettings::MAX_STRIDE),
+        min_landmarks: 0,
+        max_odometry_hold_us: u64::MAX,
+    };
+    let Ok(mut builder) = PairBuilder::new(settings) else {
+        return Vec::new();
+    };
+    let mut odometry = odometry.iter().peekable();
+    let mut pairs = Vec::new();
+    for (t_us, mut landmarks) in frames {
+        while let Some(s) = odometry.next_if(|s| s.t_us <= t_us) {
+            builder.push_odometry(*s);
+        }
+        landmarks.sort_by_key(|(label, _)| *label);
+        let tracked = TrackedFrame {
+            t_us,
+            observations: landmarks
+                .into_iter()
+                .enumerate()
+                .map(
+                    |(index, (label, measurement))| crate::tracker::Observation {
+                        track: TrackId(label),
+                        index,
+                        measurement,
+                        confirmed: true,
+                        hits: 1,
+                    },
+                )
+                .collect(),
+        };
+        pairs.extend(builder.push_frame(&tracked));
+    }
+    pairs
+}
+
 #[cfg(test)]
 #[allow(clippy::indexing_slicing, clippy::unwrap_used)]
 mod tests {

@@ -93,7 +93,7 @@ _U32_MAX = (1 << 32) - 1
 _HUBER, _MAX_ITERATIONS, _STEP_TOLERANCE, _OBSERVABLE_RATIO = _native.solver_defaults()
 _MIN_PAIRS, _SIGMA_FRACTION, _STEP_FRACTION, _CONSECUTIVE = _native.stable_rule_defaults()
 #: Pairs between two solves of :class:`SelfCalibrator` and :func:`calibrate_log` by default (the
-#: replay's, ``replay::Options``: 20 s of driving at the default stride).
+#: replay's, ``nav::FramePairSettings``: 20 s of driving at the default stride).
 _SOLVE_EVERY = 10
 #: Frames between the two of a pair in :func:`calibrate_log` by default (2 s at 20 Hz; the
 #: default of the Rust association, ``track::PairSettings``).
