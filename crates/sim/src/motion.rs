@@ -54,8 +54,18 @@ pub fn integrate_samples(samples: &[OdomSample], start: Pose2, t_us: u64) -> Pos
     pose
 }
 
-/// An angle in `(-pi, pi]`: the rig model's.
-pub use rig_model::camera::wrap_angle;
+/// An angle in `(-pi, pi]`, by `rem_euclid`. Not the rig model's
+/// (`rig_model::camera::wrap_angle`, by `floor`, no_std): the two round differently in the
+/// last bit outside `(-pi, pi]`, and the committed fixture logs hold this one's truth bit for
+/// bit (`tests/fixture_logs.rs`); changing it means regenerating them.
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = a.rem_euclid(std::f64::consts::TAU);
+    if w > std::f64::consts::PI {
+        w - std::f64::consts::TAU
+    } else {
+        w
+    }
+}
 
 #[allow(clippy::cast_precision_loss)] // microsecond spans of a run are far below 2^52
 pub(crate) fn us_to_s(us: u64) -> f64 {
