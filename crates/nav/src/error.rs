@@ -14,6 +14,9 @@ pub enum Error {
         /// What it must be.
         expected: &'static str,
     },
+    /// Phase 1 refused its settings otherwise than by a field out of range.
+    #[error("phase 1: {0}")]
+    Phase1(selfcal::Error),
     /// The association's settings are out of range.
     #[error("association settings: {0}")]
     Association(#[from] track::SettingsError),
@@ -58,7 +61,7 @@ impl Error {
     /// (to count refusals by kind).
     pub fn kind(&self) -> &'static str {
         match self {
-            Self::Settings { .. } => "settings",
+            Self::Settings { .. } | Self::Phase1(_) => "settings",
             Self::Association(_) => "association settings",
             Self::Filter(_) => "filter",
             Self::NonFinite { .. } => "non-finite input",

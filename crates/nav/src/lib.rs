@@ -245,13 +245,19 @@ impl Navigator {
                 expected: "strictly between 0 and 1",
             });
         }
-        if let Err(e) = settings.phase1.validate() {
-            return Err(Error::Settings {
-                name: e.name,
-                value: e.value,
-                expected: e.expected,
-            });
-        }
+        settings.phase1.validate().map_err(|e| match e {
+            selfcal::Error::Setting {
+                name,
+                value,
+                expected,
+                ..
+            } => Error::Settings {
+                name,
+                value,
+                expected,
+            },
+            other => Error::Phase1(other),
+        })?;
         let front_end = FrontEnd::new(Model::from_rig(&rig), settings.front_end)?;
         let candidates = Candidates::new(settings.candidates)?;
         let ekf = if settings.skip_phase1 {

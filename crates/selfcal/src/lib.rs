@@ -19,5 +19,10 @@
 
 extern crate alloc;
 
+pub mod error;
 pub mod smoother;
 pub mod solver;
+
+pub use error::Error;
+pub use smoother::SmootherSettings;
+pub use solver::{SolverSettings, StableRule};

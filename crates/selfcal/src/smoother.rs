@@ -28,6 +28,7 @@ use alloc::vec::Vec;
 
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
+use crate::error::{Error, check_fields};
 use crate::solver::structural_trap;
 use rig_model::camera::{CameraParams, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
 use rig_model::config::Rig;
@@ -101,21 +102,9 @@ impl Default for SmootherSettings {
     }
 }
 
-/// A [`SmootherSettings`] field out of its range.
-#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-#[error("phase-1 setting {name} = {value} must be {expected}")]
-pub struct SmootherSettingsError {
-    /// The field.
-    pub name: &'static str,
-    /// Its value.
-    pub value: f64,
-    /// What it must be.
-    pub expected: &'static str,
-}
-
 impl SmootherSettings {
-    /// Checks every field.
-    pub fn validate(&self) -> Result<(), SmootherSettingsError> {
+    /// Checks every field: the first out of its range is an [`Error::Setting`].
+    pub fn validate(&self) -> Result<(), Error> {
         #[allow(clippy::cast_precision_loss)]
         let checks: [(&'static str, f64, bool, &'static str); 12] = [
             (
@@ -181,16 +170,7 @@ impl SmootherSettings {
                 "finite, >= 0",
             ),
         ];
-        for (name, value, ok, expected) in checks {
-            if !ok {
-                return Err(SmootherSettingsError {
-                    name,
-                    value,
-                    expected,
-                });
-            }
-        }
-        Ok(())
+        check_fields("SmootherSettings", checks)
     }
 }
 

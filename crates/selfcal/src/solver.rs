@@ -22,6 +22,7 @@ use core::ops::Range;
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
+use crate::error::{Error, check_fields};
 use rig_model::camera::{CameraParams, N_PARAMS, Param, ParamVector, rot_z};
 use rig_model::config::Rig;
 use rig_model::handover::{FramePair, Handover, Mat10, ObservabilityReport, ParamObservability};
@@ -59,6 +60,39 @@ impl Default for SolverSettings {
         }
     }
 }
+
+impl SolverSettings {
+    /// Checks every field: the first out of its range is an [`Error::Setting`]. Any
+    /// `max_iterations` is valid (0 returns the start, [`SolveStatus::MaxIterations`]).
+    pub fn validate(&self) -> Result<(), Error> {
+        check_fields(
+            "SolverSettings",
+            [
+                (
+                    "huber",
+                    self.huber,
+                    self.huber.is_finite() && self.huber > 0.0,
+                    POSITIVE,
+                ),
+                (
+                    "step_tolerance",
+                    self.step_tolerance,
+                    self.step_tolerance.is_finite() && self.step_tolerance > 0.0,
+                    POSITIVE,
+                ),
+                (
+                    "observable_ratio",
+                    self.observable_ratio,
+                    self.observable_ratio > 0.0 && self.observable_ratio <= 1.0,
+                    "a number in (0, 1]",
+                ),
+            ],
+        )
+    }
+}
+
+/// What a positive real setting must be.
+const POSITIVE: &str = "a positive finite number";
 
 /// How a solve ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -869,6 +903,38 @@ impl Default for StableRule {
     }
 }
 
+impl StableRule {
+    /// Checks every field: the first out of its range is an [`Error::Setting`]. Any
+    /// `min_pairs` is valid.
+    pub fn validate(&self) -> Result<(), Error> {
+        #[allow(clippy::cast_precision_loss)] // a count shown in the message only
+        let consecutive = self.consecutive as f64;
+        check_fields(
+            "StableRule",
+            [
+                (
+                    "sigma_fraction",
+                    self.sigma_fraction,
+                    self.sigma_fraction.is_finite() && self.sigma_fraction > 0.0,
+                    POSITIVE,
+                ),
+                (
+                    "step_fraction",
+                    self.step_fraction,
+                    self.step_fraction.is_finite() && self.step_fraction > 0.0,
+                    POSITIVE,
+                ),
+                (
+                    "consecutive",
+                    consecutive,
+                    self.consecutive >= 1,
+                    "at least 1",
+                ),
+            ],
+        )
+    }
+}
+
 /// Phase 1 fed frame by frame: collects frame pairs, re-solves every `solve_every` pairs
 /// (warm-started), and decides by [`StableRule`] when the calibration is stable.
 #[derive(Debug, Clone)]
@@ -978,11 +1044,11 @@ mod tests {
 
     use super::*;
     use rig_model::camera::{Mount, Pose2};
+    use rig_model::config::Noise;
     use rig_model::handover::LandmarkPair;
     use rig_model::odometry::Motion;
-    use rig_model::rig::Measurement;
-    use rig_model::config::Noise;
     use rig_model::odometry::constant_velocity_motion;
+    use rig_model::rig::Measurement;
     use rig_model::rig::{project, triangulate};
 
     /// A tilted head with every mount angle and offset non-zero, so that no term of the
