@@ -17,7 +17,7 @@ use nalgebra::Vector3;
 use rig_model::handover::{FramePair, LandmarkPair};
 use rig_model::odometry::{Motion, OdomSample};
 use rig_model::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, triangulate};
-use selfcal::solver::{SolverSettings, calibrate};
+use selfcal::solve::{SolverSettings, calibrate};
 use track::{FrontEnd, FrontEndSettings, Model, Pixel};
 use vslam_ekf::{Ekf, Settings};
 

@@ -49,9 +49,8 @@ use rig_model::camera::ParamVector;
 use rig_model::config::Rig;
 use rig_model::handover::{FramePair, Handover};
 use rig_model::odometry::OdomSample;
-use selfcal::solver::{
-    Calibration, SelfCalibrator, SolveStatus, SolverSettings, StableRule, calibrate,
-};
+use selfcal::calibrator::{SelfCalibrator, StableRule};
+use selfcal::solve::{Calibration, SolveStatus, SolverSettings, calibrate};
 use track::{FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, Pixel};
 use vehicle_log::Record;
 

@@ -19,6 +19,9 @@ pub enum Error {
     },
 }
 
+/// What a positive real setting must be.
+pub(crate) const POSITIVE: &str = "a positive finite number";
+
 /// The first failed check of `checks` (`(field, value, ok, expected)`) as an [`Error::Setting`]
 /// of `settings`.
 pub(crate) fn check_fields<const N: usize>(

@@ -29,7 +29,7 @@ use alloc::vec::Vec;
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
 use crate::error::{Error, check_fields};
-use crate::solver::structural_trap;
+use crate::observability::structural_trap;
 use rig_model::camera::{CameraParams, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
 use rig_model::config::Rig;
 use rig_model::handover::{
