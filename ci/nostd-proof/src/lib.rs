@@ -2,9 +2,6 @@
 //! `alloc` only, into a `#![no_std]` static library (see Cargo.toml). The rig configuration
 //! needs a heap, so the library brings its own global allocator: a bump allocator over a
 //! static buffer.
-#![no_std]` static
-//! library (see Cargo.toml). the rig configuration needs a heap, so the library brings
-//! its own global allocator: a bump allocator over a static buffer.
 #![no_std]
 
 extern crate alloc;
@@ -20,7 +17,7 @@ use nalgebra::Vector3;
 use rig_model::handover::{FramePair, LandmarkPair};
 use rig_model::odometry::{Motion, OdomSample};
 use rig_model::{CameraParams, Mount, N_PARAMS, Noise, Param, Pose2, Rig, project, triangulate};
-use selfcal::solver::{SolverSettings, calibrate};
+use selfcal::solve::{SolverSettings, calibrate};
 use track::{FrontEnd, FrontEndSettings, Model, Pixel};
 use vslam_ekf::{Ekf, Settings};
 

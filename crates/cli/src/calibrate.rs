@@ -16,7 +16,7 @@ use anyhow::{Context, Result};
 use replay::{Counts, FramePairSettings, LogCalibration, NavSettings, RigSource};
 use rig_model::handover::{Handover, ObservabilityReport};
 use rig_model::{CameraParams, Param, ParamVector, Rig};
-use selfcal::solver::{Calibration, SolveStatus};
+use selfcal::solve::{Calibration, SolveStatus};
 use serde_json::{Map, Value, json};
 use track::{PairSettings, PairingScheme};
 

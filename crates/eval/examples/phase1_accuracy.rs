@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use rig_model::Param;
-use selfcal::solver::{SolverSettings, calibrate};
+use selfcal::solve::{SolverSettings, calibrate};
 
 fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);

@@ -9,7 +9,7 @@ use std::path::Path;
 use rig_model::Param;
 use rig_model::handover::FramePair;
 use rig_model::odometry::OdomSample;
-use selfcal::solver::{SolverSettings, calibrate};
+use selfcal::solve::{SolverSettings, calibrate};
 use track::{
     FrontEnd, FrontEndSettings, Model, PairBuilder, PairSettings, PairingScheme, Pixel, TrackId,
 };

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use rig_model::Param;
-use selfcal::solver::{SolveStatus, SolverSettings, calibrate};
+use selfcal::solve::{SolveStatus, SolverSettings, calibrate};
 
 fn scenario(name: &str) -> sim::Scenario {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

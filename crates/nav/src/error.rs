@@ -14,6 +14,9 @@ pub enum Error {
         /// What it must be.
         expected: &'static str,
     },
+    /// Phase 1 refused its settings otherwise than by a field out of range.
+    #[error("phase 1: {0}")]
+    Phase1(selfcal::Error),
     /// The association's settings are out of range.
     #[error("association settings: {0}")]
     Association(#[from] track::SettingsError),
@@ -58,12 +61,31 @@ impl Error {
     /// (to count refusals by kind).
     pub fn kind(&self) -> &'static str {
         match self {
-            Self::Settings { .. } => "settings",
+            Self::Settings { .. } | Self::Phase1(_) => "settings",
             Self::Association(_) => "association settings",
             Self::Filter(_) => "filter",
             Self::NonFinite { .. } => "non-finite input",
             Self::OdometryOutOfOrder { .. } => "odometry out of order",
             Self::FrameOutOfOrder { .. } => "frame out of order",
+        }
+    }
+}
+
+impl From<selfcal::Error> for Error {
+    /// A phase-1 setting out of range is a navigator setting out of range (same message).
+    fn from(e: selfcal::Error) -> Self {
+        match e {
+            selfcal::Error::Setting {
+                name,
+                value,
+                expected,
+                ..
+            } => Self::Settings {
+                name,
+                value,
+                expected,
+            },
+            other => Self::Phase1(other),
         }
     }
 }

@@ -14,7 +14,8 @@ use rig_model::camera::ParamVector;
 use rig_model::config::Rig;
 use rig_model::handover::{FramePair, Handover};
 use rig_model::odometry::OdomSample;
-use selfcal::solver::{Calibration, SelfCalibrator, SolverSettings, StableRule, calibrate};
+use selfcal::calibrator::{SelfCalibrator, StableRule};
+use selfcal::solve::{Calibration, SolverSettings, calibrate};
 use track::{PairBuilder, PairSettings, TrackedFrame};
 
 use crate::Error;
@@ -49,6 +50,8 @@ impl FramePairSettings {
     /// Checks every setting; the error names the first one out of range.
     pub fn validate(&self) -> Result<(), Error> {
         self.pairs.validate()?;
+        self.solver.validate()?;
+        self.stable.validate()?;
         if self.solve_every == 0 {
             return Err(Error::Settings {
                 name: "solve_every",

@@ -267,13 +267,7 @@ impl Navigator {
                 expected: "strictly between 0 and 1",
             });
         }
-        if let Err(e) = settings.phase1.validate() {
-            return Err(Error::Settings {
-                name: e.name,
-                value: e.value,
-                expected: e.expected,
-            });
-        }
+        settings.phase1.validate()?;
         let front_end = FrontEnd::new(Model::from_rig(&rig), settings.front_end)?;
         let candidates = Candidates::new(settings.candidates)?;
         let frame_pairs = match settings.mode {

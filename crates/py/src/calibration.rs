@@ -221,6 +221,8 @@ enum CalibInputError {
     },
     /// A setting of the log's association is out of range (`stride`).
     Association(SettingsError),
+    /// Phase 1 refused its settings otherwise than by a field out of range.
+    Phase1(selfcal::Error),
 }
 
 impl fmt::Display for CalibInputError {
@@ -322,6 +324,7 @@ impl fmt::Display for CalibInputError {
                 PairingScheme::Interleaved.name()
             ),
             Self::Association(err) => err.fmt(f),
+            Self::Phase1(err) => err.fmt(f),
         }
     }
 }
@@ -549,57 +552,50 @@ fn pairs_by_id(
     ))
 }
 
-/// [`SolverSettings`] from the keyword values, each checked.
+/// [`SolverSettings`] from the keyword values, checked by [`SolverSettings::validate`].
 fn solver_settings(
     (huber, max_iterations, step_tolerance, observable_ratio): SettingsTuple,
 ) -> Result<SolverSettings, CalibInputError> {
-    positive("huber", huber)?;
-    positive("step_tolerance", step_tolerance)?;
-    if !(observable_ratio > 0.0 && observable_ratio <= 1.0) {
-        return Err(CalibInputError::Setting {
-            name: "observable_ratio",
-            value: observable_ratio,
-            expected: "a number in (0, 1]",
-        });
-    }
-    Ok(SolverSettings {
+    let settings = SolverSettings {
         huber,
         max_iterations,
         step_tolerance,
         observable_ratio,
-    })
+    };
+    settings.validate().map_err(CalibInputError::from)?;
+    Ok(settings)
 }
 
-/// [`StableRule`] from the keyword values, each checked.
+/// [`StableRule`] from the keyword values, checked by [`StableRule::validate`].
 fn stable_rule(
     (min_pairs, sigma_fraction, step_fraction, consecutive): RuleTuple,
 ) -> Result<StableRule, CalibInputError> {
-    positive("sigma_fraction", sigma_fraction)?;
-    positive("step_fraction", step_fraction)?;
-    if consecutive == 0 {
-        return Err(CalibInputError::Setting {
-            name: "consecutive",
-            value: 0.0,
-            expected: "at least 1",
-        });
-    }
-    Ok(StableRule {
+    let rule = StableRule {
         min_pairs,
         sigma_fraction,
         step_fraction,
         consecutive,
-    })
+    };
+    rule.validate().map_err(CalibInputError::from)?;
+    Ok(rule)
 }
 
-fn positive(name: &'static str, value: f64) -> Result<(), CalibInputError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(CalibInputError::Setting {
-            name,
-            value,
-            expected: "a positive finite number",
-        })
+impl From<selfcal::Error> for CalibInputError {
+    /// A field out of range is named by its keyword.
+    fn from(err: selfcal::Error) -> Self {
+        match err {
+            selfcal::Error::Setting {
+                name,
+                value,
+                expected,
+                ..
+            } => Self::Setting {
+                name,
+                value,
+                expected,
+            },
+            other => Self::Phase1(other),
+        }
     }
 }
 

@@ -51,7 +51,7 @@ use rig_model::camera::ParamVector;
 use rig_model::config::Rig;
 use rig_model::handover::Handover;
 use rig_model::odometry::OdomSample;
-use selfcal::solver::{Calibration, SolveStatus};
+use selfcal::solve::{Calibration, SolveStatus};
 use track::Pixel;
 use vehicle_log::Record;
 

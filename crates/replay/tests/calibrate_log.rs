@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use replay::{Error, FramePairSettings, NavSettings, RigSource, calibrate_log};
 use rig_model::Param;
-use selfcal::solver::{SolveStatus, calibrate};
+use selfcal::solve::{SolveStatus, calibrate};
 use track::PairSettings;
 use vehicle_log::{Record, TruthCamera};
 

@@ -1,11 +1,11 @@
 //! One phase-1 solve: 5 landmarks over 200 frame pairs (the 2 ms target).
 //!
-//! `cargo bench -p calib --bench selfcal`
+//! `cargo bench -p selfcal --bench selfcal`
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use rig_model::camera::Param;
 use rig_model::config::Rig;
-use selfcal::solver::{SolverSettings, calibrate};
+use selfcal::solve::{SolverSettings, calibrate};
 
 #[path = "../tests/common/mod.rs"]
 mod common;

@@ -6,7 +6,7 @@ mod common;
 
 use common::synthetic::{pairs, rig, true_camera};
 use rig_model::camera::Param;
-use selfcal::solver::{SolveStatus, SolverSettings, calibrate};
+use selfcal::solve::{SolveStatus, SolverSettings, calibrate};
 
 #[test]
 fn tilted_camera_with_turns_recovers_f_and_baseline() {
@@ -121,7 +121,7 @@ fn no_data_returns_the_nominal_values() {
 
 #[test]
 fn incremental_calibration_becomes_stable_and_hands_over() {
-    use selfcal::solver::{SelfCalibrator, StableRule};
+    use selfcal::calibrator::{SelfCalibrator, StableRule};
     let truth = true_camera(0.3);
     let mut nominal = truth;
     nominal.f = 680.0;
@@ -172,7 +172,7 @@ fn bench_data_is_five_landmarks_over_200_pairs() {
 /// same sigmas (to 1e-5), on the bench's data and on a mount calibration.
 #[test]
 fn estimates_and_sigmas_match_the_reference_implementation() {
-    let check = |cal: &selfcal::solver::Calibration, expected: &[(Param, f64, f64)]| {
+    let check = |cal: &selfcal::solve::Calibration, expected: &[(Param, f64, f64)]| {
         assert_eq!(cal.status, SolveStatus::Converged);
         for &(p, value, sigma) in expected {
             let (got, got_sigma) = (cal.camera.get(p), cal.sigma(p));
