@@ -85,3 +85,29 @@ pub enum Error {
         max: u64,
     },
 }
+
+/// `EST.mcap`'s writer's errors as the replay's (the same variants, the same messages).
+impl From<estimates_log::WriteError> for Error {
+    fn from(e: estimates_log::WriteError) -> Self {
+        use estimates_log::WriteError;
+        match e {
+            WriteError::Output { path, source } => Self::Output {
+                file: estimates_log::topics::EST_FILE,
+                path,
+                source,
+            },
+            WriteError::Mcap { path, detail } => Self::Mcap { path, detail },
+            WriteError::TimeOutOfRange {
+                path,
+                topic,
+                t_us,
+                max,
+            } => Self::TimeOutOfRange {
+                path,
+                topic,
+                t_us,
+                max,
+            },
+        }
+    }
+}

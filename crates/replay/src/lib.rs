@@ -14,7 +14,7 @@
 //!    its instant.
 //! 4. **Navigate** (`nav`): association, phase 1's self-calibration, the switch, phase 2's
 //!    EKF SLAM.
-//! 5. **Output**: `EST.mcap`, `SUMMARY.json`, `TRAJ.csv` ([`OutputFiles`]).
+//! 5. **Output**: `EST.mcap` (`estimates-log`), `SUMMARY.json`, `TRAJ.csv` ([`OutputFiles`]).
 //!
 //! **The replay streams.** [`Replayer`] reads the log record by record, orders frames and
 //! odometry through a window of [`REORDER_US`] of data time, and hands each frame's estimate to
@@ -38,11 +38,9 @@
 #![deny(missing_docs)]
 
 mod error;
-mod estimates_reader;
 mod navigate;
 mod output;
 mod stream;
-mod types;
 
 use std::path::{Path, PathBuf};
 
@@ -56,21 +54,22 @@ use track::Pixel;
 use vehicle_log::Record;
 
 pub use error::Error;
-pub use estimates_reader::{ESTIMATES_FRAME_TOPIC, EstimatesError, read_estimates};
+pub use estimates_log::topics::FRAME as ESTIMATES_FRAME_TOPIC;
+pub use estimates_log::{
+    CameraSample, Consistency, Counts, EstimatesWriter, FrameEstimate, LandmarkEstimate,
+    MapSnapshot, ParamEstimate, Phase, ReadError as EstimatesError, Replay, ReplayEnd, TruthErrors,
+    end_summary_json, read_estimates, summary_json,
+};
 pub use nav::{FramePairSettings, NavMode, NavSettings, Navigator};
 pub use navigate::{
     LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, ReplayCollector, ReplaySink, Replayer,
     replay_log, truth_camera,
 };
 pub use output::{
-    EstimatesWriter, OutputFiles, TrajectoryWriter, end_summary_json, summary_json,
-    write_estimates, write_summary, write_summary_value, write_trajectory,
+    OutputFiles, TrajectoryWriter, write_estimates, write_summary, write_summary_value,
+    write_trajectory,
 };
 pub use stream::REORDER_US;
-pub use types::{
-    CameraSample, Consistency, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
-    Replay, ReplayEnd, TruthErrors,
-};
 
 /// Where the rig came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -79,71 +78,6 @@ pub enum RigSource {
     Given,
     /// The log's `/rig` message.
     Log,
-}
-
-/// What the replay counted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
-pub struct Counts {
-    /// Good packets (stereo frames) decoded.
-    pub frames: u64,
-    /// Packets rejected by the decoder.
-    pub corrupt: u64,
-    /// Frames lost (gaps in the board's frame counter).
-    pub lost: u64,
-    /// Bytes of the stream that were not part of a good packet.
-    pub bytes_skipped: u64,
-    /// Frames whose timestamp was earlier than the frame before it in the stream (sorted).
-    pub frames_out_of_order: u64,
-    /// Odometry samples.
-    pub odometry: u64,
-    /// Stereo measurements (left-right matches) over all frames.
-    pub stereo_matches: u64,
-    /// Tracks started.
-    pub tracks: u64,
-    /// Tracks confirmed.
-    pub confirmed_tracks: u64,
-    /// Frame pairs built for phase 1.
-    pub pairs: u64,
-    /// Landmark pairs in them.
-    pub landmark_pairs: u64,
-    /// Frames at which the odometry was missing, so that every track was restarted.
-    pub tracker_resets: u64,
-    /// Solves of phase 1's batch over every frame (the replay's phase 1).
-    pub phase1_solves: u64,
-    /// Stretches of the log file lost to damage (bad CRCs, broken records, a cut chunk's
-    /// unreadable rest): [`vehicle_log::Damage::spans_total`].
-    pub log_spans_lost: u64,
-    /// Bytes of the log file in them.
-    pub log_bytes_lost: u64,
-    /// Chunk records lost in them, wholly or in part.
-    pub log_chunks_lost: u64,
-    /// Log time the lost stretches covered, milliseconds (where both ends are known).
-    pub log_time_lost_ms: u64,
-}
-
-impl Counts {
-    /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 17] {
-        [
-            ("frames", self.frames),
-            ("corrupt", self.corrupt),
-            ("lost", self.lost),
-            ("bytes_skipped", self.bytes_skipped),
-            ("frames_out_of_order", self.frames_out_of_order),
-            ("odometry", self.odometry),
-            ("stereo_matches", self.stereo_matches),
-            ("tracks", self.tracks),
-            ("confirmed_tracks", self.confirmed_tracks),
-            ("pairs", self.pairs),
-            ("landmark_pairs", self.landmark_pairs),
-            ("tracker_resets", self.tracker_resets),
-            ("phase1_solves", self.phase1_solves),
-            ("log_spans_lost", self.log_spans_lost),
-            ("log_bytes_lost", self.log_bytes_lost),
-            ("log_chunks_lost", self.log_chunks_lost),
-            ("log_time_lost_ms", self.log_time_lost_ms),
-        ]
-    }
 }
 
 /// Phase 1 on a whole log.

@@ -14,9 +14,9 @@ pub enum Error {
     /// The vehicle log could not be replayed (no rig, bad settings; replay's message).
     #[error(transparent)]
     Replay(#[from] replay::Error),
-    /// The estimates file could not be read (replay's message).
+    /// The estimates file could not be read (estimates-log's message).
     #[error(transparent)]
-    Estimates(#[from] replay::EstimatesError),
+    Estimates(#[from] estimates_log::ReadError),
     /// The log's `/rig` message is not a usable rig.
     #[error(transparent)]
     Rig(#[from] rig_model::RigFileError),

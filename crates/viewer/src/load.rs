@@ -1,6 +1,6 @@
 //! Loading a file into a [`Model`]: a vehicle log is replayed through the stack
 //! (`replay::replay_log`) and its board stream decoded again for the features of every frame;
-//! an estimates file is read back (`replay::read_estimates`).
+//! an estimates file is read back (`estimates_log::read_estimates`).
 
 use std::path::Path;
 
@@ -69,9 +69,9 @@ pub fn load(
     if log
         .ignored_topics
         .iter()
-        .any(|t| t == replay::ESTIMATES_FRAME_TOPIC)
+        .any(|t| t == estimates_log::topics::FRAME)
     {
-        let replay = replay::read_estimates(path)?;
+        let replay = estimates_log::read_estimates(path)?;
         let mut model = Model::from_replay(
             path.to_path_buf(),
             SourceKind::Estimates,

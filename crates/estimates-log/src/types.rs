@@ -1,11 +1,10 @@
 //! What a replay of a whole log produces ([`Replay`]): the estimates at every stereo frame, the
 //! map, the camera parameters over time, the phase switch, the counters and, when the log
-//! carries simulator truth, the errors. The writers (`output`) turn it into `EST.mcap`,
-//! `SUMMARY.json` and `TRAJ.csv` (vehicle-interfaces.md section 5).
+//! carries simulator truth, the errors. [`crate::write_estimates`] turns it into `EST.mcap`
+//! and [`crate::read_estimates`] back; the replay writes `SUMMARY.json` and `TRAJ.csv` from
+//! it too (vehicle-interfaces.md section 5).
 
 use rig_model::camera::Param;
-
-use crate::Counts;
 
 /// The navigator's phase at a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -133,6 +132,71 @@ pub struct MapSnapshot {
     pub landmarks: Vec<LandmarkEstimate>,
 }
 
+/// What the replay counted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+pub struct Counts {
+    /// Good packets (stereo frames) decoded.
+    pub frames: u64,
+    /// Packets rejected by the decoder.
+    pub corrupt: u64,
+    /// Frames lost (gaps in the board's frame counter).
+    pub lost: u64,
+    /// Bytes of the stream that were not part of a good packet.
+    pub bytes_skipped: u64,
+    /// Frames whose timestamp was earlier than the frame before it in the stream (sorted).
+    pub frames_out_of_order: u64,
+    /// Odometry samples.
+    pub odometry: u64,
+    /// Stereo measurements (left-right matches) over all frames.
+    pub stereo_matches: u64,
+    /// Tracks started.
+    pub tracks: u64,
+    /// Tracks confirmed.
+    pub confirmed_tracks: u64,
+    /// Frame pairs built for phase 1.
+    pub pairs: u64,
+    /// Landmark pairs in them.
+    pub landmark_pairs: u64,
+    /// Frames at which the odometry was missing, so that every track was restarted.
+    pub tracker_resets: u64,
+    /// Solves of phase 1's batch over every frame (the replay's phase 1).
+    pub phase1_solves: u64,
+    /// Stretches of the log file lost to damage (bad CRCs, broken records, a cut chunk's
+    /// unreadable rest): [`vehicle_log::Damage::spans_total`].
+    pub log_spans_lost: u64,
+    /// Bytes of the log file in them.
+    pub log_bytes_lost: u64,
+    /// Chunk records lost in them, wholly or in part.
+    pub log_chunks_lost: u64,
+    /// Log time the lost stretches covered, milliseconds (where both ends are known).
+    pub log_time_lost_ms: u64,
+}
+
+impl Counts {
+    /// Every counter by name (the JSON keys and Python names), in field order.
+    pub fn named(&self) -> [(&'static str, u64); 17] {
+        [
+            ("frames", self.frames),
+            ("corrupt", self.corrupt),
+            ("lost", self.lost),
+            ("bytes_skipped", self.bytes_skipped),
+            ("frames_out_of_order", self.frames_out_of_order),
+            ("odometry", self.odometry),
+            ("stereo_matches", self.stereo_matches),
+            ("tracks", self.tracks),
+            ("confirmed_tracks", self.confirmed_tracks),
+            ("pairs", self.pairs),
+            ("landmark_pairs", self.landmark_pairs),
+            ("tracker_resets", self.tracker_resets),
+            ("phase1_solves", self.phase1_solves),
+            ("log_spans_lost", self.log_spans_lost),
+            ("log_bytes_lost", self.log_bytes_lost),
+            ("log_chunks_lost", self.log_chunks_lost),
+            ("log_time_lost_ms", self.log_time_lost_ms),
+        ]
+    }
+}
+
 /// Errors against the simulator's truth, when the log carries it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TruthErrors {
@@ -179,8 +243,8 @@ pub struct Consistency {
     pub state_dof: usize,
 }
 
-/// What a streaming replay ([`crate::Replayer`]) ends with: everything of a [`Replay`] but
-/// the series of frames, camera samples and maps, which went to its [`crate::ReplaySink`] as
+/// What a streaming replay (`replay::Replayer`) ends with: everything of a [`Replay`] but
+/// the series of frames, camera samples and maps, which went to its `replay::ReplaySink` as
 /// they came; bounded by the map, whatever the log's length.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReplayEnd {

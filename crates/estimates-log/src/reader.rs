@@ -1,8 +1,9 @@
-//! Reading `EST.mcap` back ([`read_estimates`]): the estimates file that [`crate::write_estimates`]
-//! writes, turned into the [`Replay`] it came from, so that a viewer or a script can look at a
-//! replay without running it again.
+//! Reading `EST.mcap` back ([`read_estimates`]): the estimates file that
+//! [`crate::write_estimates`] (or an [`crate::EstimatesWriter`]) writes, turned into the
+//! [`Replay`] it came from, so that a viewer or a script can look at a replay without running
+//! it again.
 //!
-//! What comes back, from which topic (the layouts are those of the `output` module):
+//! What comes back, from which topic (the layouts are the writer's):
 //!
 //! - [`Replay::frames`]: one per `/est/frame` message (`stereonav.FrameInfo`), exactly;
 //! - [`Replay::camera`]: one per `/est/camera` message (`stereonav.CameraEstimate`), exactly;
@@ -22,90 +23,18 @@
 //! numbers (non-finite when written) come back as NaN. A file cut short is read as far as it
 //! goes, with a warning in [`Replay::warnings`].
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rig_model::camera::Param;
 use serde_json::Value;
 
+use crate::error::MCAP_MAGIC;
+use crate::topics::{CAMERA, ELLIPSOID_SIGMAS, FRAME, LANDMARKS, NS_PER_US, SUMMARY, US_PER_S};
 use crate::{
-    CameraSample, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate, Phase,
-    Replay, TruthErrors,
+    CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
+    Phase, ReadError, Replay, TruthErrors,
 };
-
-/// The topic whose presence makes an MCAP file an estimates file.
-pub const ESTIMATES_FRAME_TOPIC: &str = "/est/frame";
-
-const CAMERA_TOPIC: &str = "/est/camera";
-const LANDMARKS_TOPIC: &str = "/est/landmarks";
-const SUMMARY_TOPIC: &str = "/est/summary";
-
-/// The uncertainty ellipsoid's diameters are twice this many standard deviations (as
-/// written).
-const ELLIPSOID_SIGMAS: f64 = 3.0;
-
-/// The MCAP file's magic, at its start.
-const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
-
-/// Why an estimates file could not be read. Every message is one line naming the file and the
-/// problem.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum EstimatesError {
-    /// The file could not be read.
-    #[error("cannot read {}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What the operating system said.
-        #[source]
-        source: std::io::Error,
-    },
-    /// The file does not start with MCAP's magic.
-    #[error("{} is not an MCAP file (it starts with {found:02x?}, MCAP files with {MCAP_MAGIC:02x?})", path.display())]
-    NotMcap {
-        /// The file.
-        path: PathBuf,
-        /// Its first bytes (at most 8).
-        found: Vec<u8>,
-    },
-    /// The MCAP reader failed before the first message.
-    #[error("{}: unreadable MCAP: {detail}", path.display())]
-    Mcap {
-        /// The file.
-        path: PathBuf,
-        /// What the reader said.
-        detail: String,
-    },
-    /// An MCAP file with no `/est/frame` channel.
-    #[error(
-        "{} is not an estimates file of stereonav replay: it has no {ESTIMATES_FRAME_TOPIC} messages (its topics: {})",
-        path.display(),
-        if topics.is_empty() { "none".to_string() } else { topics.join(", ") }
-    )]
-    NotEstimates {
-        /// The file.
-        path: PathBuf,
-        /// The topics it has.
-        topics: Vec<String>,
-    },
-    /// A message is not what its topic's schema says.
-    #[error("{}: {topic} message {index}: {field}: expected {expected}, found {found}", path.display())]
-    BadMessage {
-        /// The file.
-        path: PathBuf,
-        /// The topic.
-        topic: String,
-        /// The message's index on its topic, from 0.
-        index: usize,
-        /// The field (a JSON path).
-        field: String,
-        /// What the schema wants.
-        expected: &'static str,
-        /// What was there (shortened).
-        found: String,
-    },
-}
 
 /// Reads the estimates file `EST.mcap` at `path` (written by [`crate::write_estimates`]) back
 /// into a [`Replay`] (see the module docs for what comes back from where).
@@ -113,19 +42,19 @@ pub enum EstimatesError {
 /// Errors: the file cannot be read, is not MCAP, has no `/est/frame` messages, or a message of
 /// a topic read is malformed. A file cut short is not an error: what was read is returned,
 /// with a warning.
-pub fn read_estimates(path: impl AsRef<Path>) -> Result<Replay, EstimatesError> {
+pub fn read_estimates(path: impl AsRef<Path>) -> Result<Replay, ReadError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|source| EstimatesError::Io {
+    let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
         path: path.to_path_buf(),
         source,
     })?;
     if !bytes.starts_with(MCAP_MAGIC) {
-        return Err(EstimatesError::NotMcap {
+        return Err(ReadError::NotMcap {
             path: path.to_path_buf(),
             found: bytes.iter().take(MCAP_MAGIC.len()).copied().collect(),
         });
     }
-    let stream = mcap::MessageStream::new(&bytes).map_err(|e| EstimatesError::Mcap {
+    let stream = mcap::MessageStream::new(&bytes).map_err(|e| ReadError::Mcap {
         path: path.to_path_buf(),
         detail: e.to_string(),
     })?;
@@ -143,7 +72,7 @@ pub fn read_estimates(path: impl AsRef<Path>) -> Result<Replay, EstimatesError> 
                 break;
             }
             Err(e) => {
-                return Err(EstimatesError::Mcap {
+                return Err(ReadError::Mcap {
                     path: path.to_path_buf(),
                     detail: e.to_string(),
                 });
@@ -176,12 +105,12 @@ struct At<'a> {
 }
 
 impl At<'_> {
-    fn bad(&self, field: &str, expected: &'static str, found: Option<&Value>) -> EstimatesError {
+    fn bad(&self, field: &str, expected: &'static str, found: Option<&Value>) -> ReadError {
         let mut found = found.map_or_else(|| "nothing".to_string(), Value::to_string);
         if found.len() > 60 {
             found = found.chars().take(57).chain("...".chars()).collect();
         }
-        EstimatesError::BadMessage {
+        ReadError::BadMessage {
             path: self.path.to_path_buf(),
             topic: self.topic.to_string(),
             index: self.index,
@@ -192,7 +121,7 @@ impl At<'_> {
     }
 
     /// A number; `null` is NaN (a non-finite number when written).
-    fn float(&self, v: &Value, field: &str) -> Result<f64, EstimatesError> {
+    fn float(&self, v: &Value, field: &str) -> Result<f64, ReadError> {
         let x = v.get(field);
         match x {
             Some(Value::Null) => Ok(f64::NAN),
@@ -203,19 +132,19 @@ impl At<'_> {
         }
     }
 
-    fn uint(&self, v: &Value, field: &str) -> Result<u64, EstimatesError> {
+    fn uint(&self, v: &Value, field: &str) -> Result<u64, ReadError> {
         let x = v.get(field);
         x.and_then(Value::as_u64)
             .ok_or_else(|| self.bad(field, "an integer >= 0", x))
     }
 
-    fn array<'v>(&self, v: &'v Value, field: &str) -> Result<&'v Vec<Value>, EstimatesError> {
+    fn array<'v>(&self, v: &'v Value, field: &str) -> Result<&'v Vec<Value>, ReadError> {
         let x = v.get(field);
         x.and_then(Value::as_array)
             .ok_or_else(|| self.bad(field, "an array", x))
     }
 
-    fn phase(&self, v: &Value) -> Result<Phase, EstimatesError> {
+    fn phase(&self, v: &Value) -> Result<Phase, ReadError> {
         let x = v.get("phase");
         match x.and_then(Value::as_str) {
             Some("calibrating") => Ok(Phase::Calibrating),
@@ -225,7 +154,7 @@ impl At<'_> {
     }
 
     /// A JSON number or `null` (NaN) in an array.
-    fn element(&self, v: &Value, field: &str) -> Result<f64, EstimatesError> {
+    fn element(&self, v: &Value, field: &str) -> Result<f64, ReadError> {
         match v {
             Value::Null => Ok(f64::NAN),
             Value::Number(n) => n
@@ -235,7 +164,7 @@ impl At<'_> {
         }
     }
 
-    fn matrix3(&self, v: &Value, field: &str) -> Result<[[f64; 3]; 3], EstimatesError> {
+    fn matrix3(&self, v: &Value, field: &str) -> Result<[[f64; 3]; 3], ReadError> {
         let rows = self.array(v, field)?;
         let mut m = [[0.0; 3]; 3];
         if rows.len() != 3 {
@@ -256,7 +185,7 @@ impl At<'_> {
     /// `{name: {value, sigma}}` for every parameter of C and V, in [`Param::ALL`] order: V
     /// from `field` or from a `vehicle` object beside it (a summary's), and nominal with
     /// sigma 0 in files written before V existed.
-    fn params(&self, v: &Value, field: &str) -> Result<Vec<ParamEstimate>, EstimatesError> {
+    fn params(&self, v: &Value, field: &str) -> Result<Vec<ParamEstimate>, ReadError> {
         let object = v
             .get(field)
             .filter(|o| o.is_object())
@@ -296,7 +225,7 @@ impl At<'_> {
             .collect()
     }
 
-    fn frame(&self, v: &Value) -> Result<FrameEstimate, EstimatesError> {
+    fn frame(&self, v: &Value) -> Result<FrameEstimate, ReadError> {
         let pose = v
             .get("pose")
             .ok_or_else(|| self.bad("pose", "{x, y, theta}", None))?;
@@ -329,7 +258,7 @@ impl At<'_> {
         })
     }
 
-    fn camera(&self, v: &Value) -> Result<CameraSample, EstimatesError> {
+    fn camera(&self, v: &Value) -> Result<CameraSample, ReadError> {
         Ok(CameraSample {
             t_us: self.uint(v, "t_us")?,
             phase: self.phase(v)?,
@@ -337,7 +266,7 @@ impl At<'_> {
         })
     }
 
-    fn xyz(&self, v: &Value, field: &str) -> Result<[f64; 3], EstimatesError> {
+    fn xyz(&self, v: &Value, field: &str) -> Result<[f64; 3], ReadError> {
         let p = v
             .get(field)
             .ok_or_else(|| self.bad(field, "{x, y, z}", None))?;
@@ -348,8 +277,8 @@ impl At<'_> {
         ])
     }
 
-    /// A `foxglove.SceneUpdate` of `output::scene_update_json` back into a snapshot at `t_us`.
-    fn map(&self, v: &Value, t_us: u64) -> Result<MapSnapshot, EstimatesError> {
+    /// A `foxglove.SceneUpdate` of the writer's `scene_update_json` back into a snapshot at `t_us`.
+    fn map(&self, v: &Value, t_us: u64) -> Result<MapSnapshot, ReadError> {
         let mut landmarks = Vec::new();
         for entity in self.array(v, "entities")? {
             let metadata = |key: &str| -> Option<u64> {
@@ -390,7 +319,7 @@ impl At<'_> {
     }
 
     /// The covariance whose 3-sigma ellipsoid the sphere primitive draws.
-    fn covariance(&self, sphere: &Value) -> Result<[[f64; 3]; 3], EstimatesError> {
+    fn covariance(&self, sphere: &Value) -> Result<[[f64; 3]; 3], ReadError> {
         let pose = sphere
             .get("pose")
             .ok_or_else(|| self.bad("spheres[].pose", "a pose", None))?;
@@ -412,7 +341,7 @@ impl At<'_> {
         }))
     }
 
-    fn counts(&self, summary: &Value) -> Result<Counts, EstimatesError> {
+    fn counts(&self, summary: &Value) -> Result<Counts, ReadError> {
         let c = summary
             .get("counts")
             .ok_or_else(|| self.bad("counts", "an object of counters", None))?;
@@ -439,7 +368,7 @@ impl At<'_> {
         })
     }
 
-    fn truth(&self, t: &Value) -> Result<TruthErrors, EstimatesError> {
+    fn truth(&self, t: &Value) -> Result<TruthErrors, ReadError> {
         let objects: Vec<&Value> = ["camera", "vehicle"]
             .iter()
             .filter_map(|k| t.get(*k).filter(|c| c.is_object()))
@@ -450,8 +379,8 @@ impl At<'_> {
                 let errors = objects.iter().find(|o| o.get(p.name()).is_some())?;
                 Some(self.float(errors, p.name()).map(|e| (p, e)))
             })
-            .collect::<Result<Vec<_>, EstimatesError>>()?;
-        let count = |field: &str| -> Result<usize, EstimatesError> {
+            .collect::<Result<Vec<_>, ReadError>>()?;
+        let count = |field: &str| -> Result<usize, ReadError> {
             Ok(usize::try_from(self.uint(t, field)?).unwrap_or(usize::MAX))
         };
         Ok(TruthErrors {
@@ -468,7 +397,7 @@ impl At<'_> {
             // Absent from estimates files written before it was reported.
             consistency: match t.get("consistency") {
                 None | Some(Value::Null) => None,
-                Some(c) => Some(crate::Consistency {
+                Some(c) => Some(Consistency {
                     pose_nees: self.float(c, "pose_nees")?,
                     pose_frames: usize::try_from(self.uint(c, "pose_frames")?)
                         .unwrap_or(usize::MAX),
@@ -481,12 +410,12 @@ impl At<'_> {
     }
 
     /// The summary's landmarks, with a diagonal covariance from their sigmas.
-    fn summary_landmarks(&self, summary: &Value) -> Result<Vec<LandmarkEstimate>, EstimatesError> {
+    fn summary_landmarks(&self, summary: &Value) -> Result<Vec<LandmarkEstimate>, ReadError> {
         self.array(summary, "landmarks")?
             .iter()
             .map(|l| {
                 let sigma = self.array(l, "sigma")?;
-                let s = |i: usize| -> Result<f64, EstimatesError> {
+                let s = |i: usize| -> Result<f64, ReadError> {
                     let v = sigma
                         .get(i)
                         .ok_or_else(|| self.bad("landmarks[].sigma", "3 sigmas", None))?;
@@ -533,8 +462,8 @@ impl<'p> Reader<'p> {
         }
     }
 
-    fn parse(&self, topic: &str, index: usize, data: &[u8]) -> Result<Value, EstimatesError> {
-        serde_json::from_slice(data).map_err(|e| EstimatesError::BadMessage {
+    fn parse(&self, topic: &str, index: usize, data: &[u8]) -> Result<Value, ReadError> {
+        serde_json::from_slice(data).map_err(|e| ReadError::BadMessage {
             path: self.path.to_path_buf(),
             topic: topic.to_string(),
             index,
@@ -544,25 +473,25 @@ impl<'p> Reader<'p> {
         })
     }
 
-    fn message(&mut self, topic: &str, data: &[u8]) -> Result<(), EstimatesError> {
+    fn message(&mut self, topic: &str, data: &[u8]) -> Result<(), ReadError> {
         if !self.topics.iter().any(|t| t == topic) {
             self.topics.push(topic.to_string());
         }
         match topic {
-            ESTIMATES_FRAME_TOPIC => {
+            FRAME => {
                 self.seen_frame_topic = true;
                 let index = self.frames.len();
                 let v = self.parse(topic, index, data)?;
                 let frame = self.at(topic, index).frame(&v)?;
                 self.frames.push(frame);
             }
-            CAMERA_TOPIC => {
+            CAMERA => {
                 let index = self.camera.len();
                 let v = self.parse(topic, index, data)?;
                 let sample = self.at(topic, index).camera(&v)?;
                 self.camera.push(sample);
             }
-            LANDMARKS_TOPIC => {
+            LANDMARKS => {
                 let index = self.maps.len();
                 let v = self.parse(topic, index, data)?;
                 let at = self.at(topic, index);
@@ -574,13 +503,13 @@ impl<'p> Reader<'p> {
                     .and_then(|d| d.get("timestamp"))
                     .cloned();
                 let t_us = match stamp {
-                    Some(s) => at.uint(&s, "sec")? * 1_000_000 + at.uint(&s, "nsec")? / 1000,
+                    Some(s) => at.uint(&s, "sec")? * US_PER_S + at.uint(&s, "nsec")? / NS_PER_US,
                     None => return Err(at.bad("deletions[0].timestamp", "a timestamp", None)),
                 };
                 let map = at.map(&v, t_us)?;
                 self.maps.push(map);
             }
-            SUMMARY_TOPIC => {
+            SUMMARY => {
                 let v = self.parse(topic, 0, data)?;
                 self.summary = Some(v);
             }
@@ -589,9 +518,9 @@ impl<'p> Reader<'p> {
         Ok(())
     }
 
-    fn finish(mut self, mut warnings: Vec<String>) -> Result<Replay, EstimatesError> {
+    fn finish(mut self, mut warnings: Vec<String>) -> Result<Replay, ReadError> {
         if !self.seen_frame_topic {
-            return Err(EstimatesError::NotEstimates {
+            return Err(ReadError::NotEstimates {
                 path: self.path.to_path_buf(),
                 topics: self.topics,
             });
@@ -600,7 +529,7 @@ impl<'p> Reader<'p> {
         self.frames.sort_by_key(|f| f.t_us);
         self.camera.sort_by_key(|c| c.t_us);
         self.maps.sort_by_key(|m| m.t_us);
-        let at = self.at(SUMMARY_TOPIC, 0);
+        let at = self.at(SUMMARY, 0);
         let last_frame_t = self.frames.last().map(|f| f.t_us);
         let last_map = self
             .maps
@@ -609,7 +538,7 @@ impl<'p> Reader<'p> {
             .map(|m| m.landmarks.clone());
         let Some(summary) = &self.summary else {
             warnings.push(format!(
-                "{} has no {SUMMARY_TOPIC} message (cut short?): no counts, final camera from the last sample",
+                "{} has no {SUMMARY} message (cut short?): no counts, final camera from the last sample",
                 self.path.display()
             ));
             let final_camera = self
@@ -681,138 +610,5 @@ impl<'p> Reader<'p> {
             // say what was lost.
             log_damage: None,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn fixture(name: &str) -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../fixtures/logs")
-            .join(name)
-    }
-
-    fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("replay-estimates-reader-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
-    }
-
-    fn close(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
-        let scale = a.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
-        a.iter()
-            .flatten()
-            .zip(b.iter().flatten())
-            .all(|(x, y)| (x - y).abs() <= 1e-9 * scale.max(1e-300))
-    }
-
-    fn assert_round_trip(original: &Replay, back: &Replay) {
-        assert_eq!(back.frames, original.frames);
-        assert_eq!(back.camera, original.camera);
-        assert_eq!(back.final_camera, original.final_camera);
-        assert_eq!(back.phase_switch_t_us, original.phase_switch_t_us);
-        assert_eq!(back.phase1_skipped, original.phase1_skipped);
-        assert_eq!(back.counts, original.counts);
-        assert_eq!(back.truth, original.truth);
-        assert_eq!(back.warnings, original.warnings);
-        assert_eq!(back.maps.len(), original.maps.len());
-        for (a, b) in original.maps.iter().zip(&back.maps) {
-            assert_eq!(a.t_us, b.t_us);
-            assert_eq!(a.landmarks.len(), b.landmarks.len());
-            for (la, lb) in a.landmarks.iter().zip(&b.landmarks) {
-                assert_eq!(
-                    (la.id, la.position, la.observations),
-                    (lb.id, lb.position, lb.observations)
-                );
-                assert!(close(&la.covariance, &lb.covariance), "{la:?} {lb:?}");
-            }
-        }
-        assert_eq!(back.landmarks.len(), original.landmarks.len());
-        for (la, lb) in original.landmarks.iter().zip(&back.landmarks) {
-            assert_eq!((la.id, la.position), (lb.id, lb.position));
-            assert!(close(&la.covariance, &lb.covariance));
-        }
-    }
-
-    #[test]
-    fn a_replay_comes_back_from_its_estimates_file() {
-        let settings = crate::NavSettings {
-            skip_phase1: true,
-            ..crate::NavSettings::default()
-        };
-        let original = crate::replay_log(
-            fixture("paper-experiment.mcap"),
-            None,
-            &settings,
-            &mut |_, _| {},
-        )
-        .unwrap();
-        let est = scratch("pe.mcap");
-        crate::write_estimates(&est, &original).unwrap();
-        let back = read_estimates(&est).unwrap();
-        assert_round_trip(&original, &back);
-    }
-
-    #[test]
-    fn the_phase_switch_and_both_phases_come_back() {
-        let original = crate::replay_log(
-            fixture("paper-calibration.mcap"),
-            None,
-            &crate::NavSettings::default(),
-            &mut |_, _| {},
-        )
-        .unwrap();
-        assert!(original.phase_switch_t_us.is_some());
-        let est = scratch("pc.mcap");
-        crate::write_estimates(&est, &original).unwrap();
-        assert_round_trip(&original, &read_estimates(&est).unwrap());
-    }
-
-    #[test]
-    fn bad_files_are_one_line_errors() {
-        let missing = read_estimates(scratch("missing.mcap")).unwrap_err();
-        assert!(matches!(missing, EstimatesError::Io { .. }), "{missing}");
-        let text = scratch("text.mcap");
-        std::fs::write(&text, "not mcap at all").unwrap();
-        let e = read_estimates(&text).unwrap_err();
-        assert!(e.to_string().contains("is not an MCAP file"), "{e}");
-        // A vehicle log is MCAP without /est/frame.
-        let e = read_estimates(fixture("paper-experiment.mcap")).unwrap_err();
-        assert!(e.to_string().contains("/fpga/features"), "{e}");
-        assert!(matches!(e, EstimatesError::NotEstimates { .. }));
-        for e in [missing, e] {
-            assert_eq!(e.to_string().lines().count(), 1);
-        }
-    }
-
-    #[test]
-    fn a_file_cut_short_is_read_as_far_as_it_goes() {
-        let settings = crate::NavSettings {
-            skip_phase1: true,
-            ..crate::NavSettings::default()
-        };
-        let original = crate::replay_log(
-            fixture("paper-experiment.mcap"),
-            None,
-            &settings,
-            &mut |_, _| {},
-        )
-        .unwrap();
-        let est = scratch("cut-src.mcap");
-        crate::write_estimates(&est, &original).unwrap();
-        let bytes = std::fs::read(&est).unwrap();
-        let cut = scratch("cut.mcap");
-        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-        let back = read_estimates(&cut).unwrap();
-        assert!(!back.frames.is_empty() && back.frames.len() < original.frames.len());
-        assert!(
-            back.warnings.iter().any(|w| w.contains("ends early")),
-            "{:?}",
-            back.warnings
-        );
-        assert_eq!(back.frames[..], original.frames[..back.frames.len()]);
     }
 }
