@@ -24,7 +24,8 @@ use rig_model::Measurement;
 
 use crate::chi2::chi2_quantile;
 use crate::error::Error;
-use crate::filter::{Ekf, LandmarkId, UpdateReport};
+use crate::filter::{Ekf, UpdateReport};
+use crate::landmarks::LandmarkId;
 
 /// Confirmation settings.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -17,7 +17,7 @@ pub(crate) const LANES: usize = 8;
 pub(crate) const MAX_PADDED_RANK: usize = 8;
 
 /// Most states one observation involves: pose, one landmark, every camera parameter.
-pub(crate) const MAX_INVOLVED: usize = 3 + 3 + rig_model::N_PARAMS;
+pub(crate) const MAX_INVOLVED: usize = crate::measurement::MAX_H_COLUMNS;
 
 /// One observation's linearisation: the non-zero columns of its four rows of `H` (pose, its
 /// landmark, the estimated camera parameters) and its innovation.
@@ -31,6 +31,18 @@ pub(crate) struct Obs {
     pub(crate) q: usize,
     /// Innovation `z - h(x)`.
     pub(crate) nu: [f64; 4],
+}
+
+impl Obs {
+    /// The observation whose rows of `H` are `h` (eq. (8)), its innovation zero.
+    pub(crate) fn new(h: &crate::measurement::HColumns) -> Self {
+        Self {
+            cols: h.cols,
+            h: h.h,
+            q: h.len,
+            nu: [0.0; 4],
+        }
+    }
 }
 
 /// Work buffers of the update, kept between updates to avoid allocating per frame.

@@ -151,9 +151,21 @@ pub mod health;
 #[cfg(feature = "alloc")]
 mod kernels;
 #[cfg(feature = "alloc")]
+mod landmarks;
+#[cfg(feature = "alloc")]
 mod linalg;
 #[cfg(feature = "alloc")]
+pub mod measurement;
+#[cfg(feature = "alloc")]
 pub mod motion;
+#[cfg(feature = "alloc")]
+pub mod predict;
+#[cfg(feature = "alloc")]
+mod start;
+#[cfg(feature = "alloc")]
+pub mod state;
+#[cfg(feature = "alloc")]
+mod update;
 
 #[cfg(feature = "alloc")]
 pub use candidates::{CandidateSettings, Candidates, FrameReport};
@@ -161,11 +173,18 @@ pub use candidates::{CandidateSettings, Candidates, FrameReport};
 pub use error::Error;
 #[cfg(feature = "alloc")]
 pub use filter::{
-    AUTO_JOSEPH_MAX_STATES, CameraCovariance, CameraStart, CameraUpdate, CovarianceUpdate, Ekf,
-    Gated, LANDMARK_DIM, LandmarkEstimate, LandmarkId, POSE_DIM, SEQUENTIAL_MAX_STATES, Settings,
-    UpdateReport,
+    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, Gated, SEQUENTIAL_MAX_STATES,
+    Settings, UpdateReport,
 };
 #[cfg(feature = "alloc")]
 pub use health::Health;
 #[cfg(feature = "alloc")]
+pub use landmarks::{LandmarkEstimate, LandmarkId};
+#[cfg(feature = "alloc")]
+pub use measurement::{HColumns, measurement_jacobian_columns};
+#[cfg(feature = "alloc")]
 pub use motion::Increment;
+#[cfg(feature = "alloc")]
+pub use start::CameraStart;
+#[cfg(feature = "alloc")]
+pub use state::{CameraCovariance, LANDMARK_DIM, POSE_DIM, StateLayout};
