@@ -1,4 +1,5 @@
-//! The update's arithmetic on column-major slices (eq. 5-8), written for auto-vectorisation.
+//! The update's arithmetic on column-major slices (eq. (6)-(7): `A = P H^T`, `S = H A + R`,
+//! the gain's factors, the rank update), written for auto-vectorisation.
 //!
 //! The loops that carry the update's O(n k) and O(n k^2) work are compiled for AVX-512, AVX2
 //! and the build's baseline by `multiversion`, which picks the best the CPU has at run time
