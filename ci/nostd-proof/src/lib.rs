@@ -2,9 +2,6 @@
 //! `alloc` only, into a `#![no_std]` static library (see Cargo.toml). The rig configuration
 //! needs a heap, so the library brings its own global allocator: a bump allocator over a
 //! static buffer.
-#![no_std]` static
-//! library (see Cargo.toml). the rig configuration needs a heap, so the library brings
-//! its own global allocator: a bump allocator over a static buffer.
 #![no_std]
 
 extern crate alloc;
