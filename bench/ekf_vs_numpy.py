@@ -223,7 +223,7 @@ def linearise(
 
 
 def dense_update(x: F64, p: F64, predicted: F64, h: F64, z: F64, gate: float, joseph: bool) -> Dense:
-    """The EKF update (eq. 5-8), dense, with the filter's per-landmark gate."""
+    """The EKF update (eq. 6-7, with H of eq. 8), dense, with the filter's per-landmark gate."""
     nu = z - predicted
     a = p @ h.T  # n x 4m
     s = h @ a + PIXEL_NOISE**2 * np.eye(len(nu))

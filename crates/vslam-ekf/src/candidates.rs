@@ -24,7 +24,8 @@ use rig_model::Measurement;
 
 use crate::chi2::chi2_quantile;
 use crate::error::Error;
-use crate::filter::{Ekf, LandmarkId, UpdateReport};
+use crate::filter::{Ekf, UpdateReport};
+use crate::landmarks::LandmarkId;
 
 /// Confirmation settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,9 +59,9 @@ pub struct CandidateSettings {
 }
 
 /// Observations one update may use when the state has `n` elements: the batch update costs
-/// about `n^2` per observation (docs/benchmarks.md: 4 ms for 10 observations at 1504 states
-/// on this project's VM), so the budget keeps `n^2 k` near 1e7 (about 2 ms), between 8 and 64
-/// observations; half that with the Joseph form (twice the work).
+/// about `n^2` per observation (its timings at 1504 states are in docs/benchmarks.md, "Phase 2
+/// EKF SLAM"), so the budget keeps `n^2 k` near 1e7, between 8 and 64 observations; half that
+/// with the Joseph form (twice the work).
 pub fn observation_budget(n: usize, joseph: bool) -> usize {
     #[allow(
         clippy::cast_precision_loss,

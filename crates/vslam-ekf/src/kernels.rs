@@ -1,4 +1,5 @@
-//! The update's arithmetic on column-major slices (eq. 5-8), written for auto-vectorisation.
+//! The update's arithmetic on column-major slices (eq. (6)-(7): `A = P H^T`, `S = H A + R`,
+//! the gain's factors, the rank update), written for auto-vectorisation.
 //!
 //! The loops that carry the update's O(n k) and O(n k^2) work are compiled for AVX-512, AVX2
 //! and the build's baseline by `multiversion`, which picks the best the CPU has at run time
@@ -17,7 +18,7 @@ pub(crate) const LANES: usize = 8;
 pub(crate) const MAX_PADDED_RANK: usize = 8;
 
 /// Most states one observation involves: pose, one landmark, every camera parameter.
-pub(crate) const MAX_INVOLVED: usize = 3 + 3 + rig_model::N_PARAMS;
+pub(crate) const MAX_INVOLVED: usize = crate::measurement::MAX_H_COLUMNS;
 
 /// One observation's linearisation: the non-zero columns of its four rows of `H` (pose, its
 /// landmark, the estimated camera parameters) and its innovation.
@@ -31,6 +32,18 @@ pub(crate) struct Obs {
     pub(crate) q: usize,
     /// Innovation `z - h(x)`.
     pub(crate) nu: [f64; 4],
+}
+
+impl Obs {
+    /// The observation whose rows of `H` are `h` (eq. (8)), its innovation zero.
+    pub(crate) fn new(h: &crate::measurement::HColumns) -> Self {
+        Self {
+            cols: h.cols,
+            h: h.h,
+            q: h.len,
+            nu: [0.0; 4],
+        }
+    }
 }
 
 /// Work buffers of the update, kept between updates to avoid allocating per frame.

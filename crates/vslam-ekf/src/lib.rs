@@ -1,8 +1,26 @@
-//! Phase 2 of the method: EKF SLAM with the camera parameters in the state (eq. 3-8 of the
+//! Phase 2 of the method: EKF SLAM with the camera parameters in the state (eq. (3)-(8) of the
 //! paper), after phase 1 (`selfcal::solver`) has handed over a calibrated camera, or from the
 //! rig's priors when phase 1 is skipped.
 //!
-//! # State layout
+//! # Where each equation is
+//!
+//! Each equation is one named function whose doc comment names it; the vectorised arithmetic
+//! they call is in `kernels` and `linalg`.
+//!
+//! | module | what | equation |
+//! |---|---|---|
+//! | [`state`] | the state layout [`StateLayout`] (every index into `x` and `P`), the accessors | eq. (3) |
+//! | [`predict`] | the pose prediction [`Increment::apply`]; the covariance prediction [`predict::predict_covariance`]; [`Ekf::predict_odometry`] and the other entry points | eq. (4), eq. (5) |
+//! | `update` | the gain `K = P H^T S^-1` (`gain`); the state and covariance correction (`correct_state`, `covariance_correction`, Joseph or factored); gating; [`Ekf::update`] | eq. (6), eq. (7) |
+//! | [`measurement`] | `H`'s non-zero columns for one landmark, [`measurement_jacobian_columns`]; the dense [`Ekf::measurement_jacobian`] | eq. (8) |
+//! | `landmarks` | [`Ekf::add_landmark`] (initialisation with the cross-covariances), [`Ekf::remove_landmark`], [`LandmarkId`] | |
+//! | `start` | the constructors from phase 1's hand-over ([`Ekf::from_handover`], [`Ekf::from_batch`]) or the priors ([`Ekf::from_prior`]); the smoother's re-seed [`Ekf::set_joint`] | |
+//! | `filter` | [`Ekf`] itself, [`Settings`], [`UpdateReport`] | |
+//! | [`motion`] | the motion eq. (4) applies and its noise: the exact arc, [`Increment`] | |
+//! | `kernels`, `linalg` | the update's arithmetic on column-major slices (multiversioned SIMD loops, faer panels) | eq. (6)-(7) |
+//! | [`candidates`], [`health`], [`chi2`] | confirmation of new landmarks, the filter's health, chi-square bounds | |
+//!
+//! # State layout (eq. 3)
 //!
 //! `x = [X, Y, theta, L_1, ..., L_N, C_est]`: the planar pose, each landmark's world point,
 //! then the camera parameters listed in the rig file's `estimate` (in that order; the others
@@ -13,10 +31,10 @@
 //! The covariance `P` is dense, `n x n` with `n = 3 + 3N + m`, in one column-major buffer
 //! (nalgebra's `DMatrix`), so that nalgebra and faer can both view it without copying. Only its
 //! lower triangle (diagonal included) is maintained: at 500 landmarks `P` is 18 MB, fits in no
-//! cache, and the update is bound by memory traffic; mirroring after every update wrote the
-//! upper half once more and cost a third of the update. Everything inside reads the lower
-//! triangle; [`Ekf::covariance`] hands out the whole, exactly symmetric matrix (a mirrored
-//! copy), [`Ekf::covariance_lower`] the buffer itself.
+//! cache, and the update is bound by memory traffic; mirroring after every update would write
+//! the upper half once more (docs/benchmarks.md, "Phase 2 EKF SLAM"). Everything inside reads
+//! the lower triangle; [`Ekf::covariance`] hands out the whole, exactly symmetric matrix (a
+//! mirrored copy), [`Ekf::covariance_lower`] the buffer itself.
 //!
 //! The world frame is the robot at the first frame (vehicle-interfaces.md section 1): the filter
 //! starts at the origin with zero pose covariance, and the first landmarks anchor the map.
@@ -24,17 +42,19 @@
 //! (variance zero) enters with the rig's prior variance instead, uncorrelated, so that the
 //! filter can still learn it if the motion makes it observable.
 //!
-//! # Prediction (eq. 3-4)
+//! # Prediction (eq. 4-5)
 //!
 //! The odometry velocities held over each sample's period move the pose along an exact arc,
 //! as `rig_model::odometry` integrates them; [`Ekf::predict_odometry`] composes the pieces between
 //! two frames into one motion with its covariance ([`Increment`]) and applies it once. The
 //! noise is phase 1's: white velocity noise per sample, held with it, so the motion's
 //! covariance is `G diag(sv^2, sv^2, sw^2) G^T` with `G` the exact arc Jacobian with respect
-//! to the velocities ([`motion`]). Only the pose rows and columns of `P` change
-//! (`P_rr = F P_rr F^T + Q`, `P_rx = F P_rx`): O(n), never an `n x n` product.
+//! to the velocities ([`motion`]). Eq. (4) moves the pose, `pose' = pose (+) motion`
+//! ([`Increment::apply`]); eq. (5) propagates the covariance, and only the pose rows and columns
+//! of `P` change (`P_rr = F P_rr F^T + Q`, `P_rx = F P_rx`, [`predict::predict_covariance`]):
+//! O(n), never an `n x n` product.
 //!
-//! # Update (eq. 5-8) and why it has this form
+//! # Update (eq. 6-7, with H of eq. 8) and why it has this form
 //!
 //! Each landmark gives four measurements `(uL, vL, uR, vR)`; its rows of `H` are non-zero only
 //! in the pose, its own landmark and the estimated camera columns (at most 6 + m of them). The
@@ -57,12 +77,10 @@
 //!
 //! [`CovarianceUpdate::Auto`] (the default) uses the Joseph form up to
 //! [`AUTO_JOSEPH_MAX_STATES`] states (the paper's 19-state filter and maps of over a hundred
-//! landmarks) and the factored form above. At 500 landmarks (1504 states) the Joseph form
-//! takes about 3.5 ms with 5 landmarks in view and 7 ms with 10, against a budget of 5 ms;
-//! the factored form about 2 and 3.3 ms (one core of the project's AVX-512 machine, bench
-//! `map_500`). The paper's 19-state step, prediction and update with five lamps in the Joseph
-//! form, takes about 8 us (bench `step_19`; target 10 us). Both forms stay exact: the tests
-//! compare them with the dense textbook update.
+//! landmarks) and the factored form above, where the Joseph form's twice the work misses the
+//! 500-landmark update's time budget of 5 ms with 10 landmarks in view (the timings of the
+//! benches `step_19` and `map_500` are in docs/benchmarks.md, "Phase 2 EKF SLAM"). Both forms
+//! stay exact: the tests compare them with the dense textbook update.
 //!
 //! How the work is organised depends on the size of the state:
 //!
@@ -151,9 +169,21 @@ pub mod health;
 #[cfg(feature = "alloc")]
 mod kernels;
 #[cfg(feature = "alloc")]
+mod landmarks;
+#[cfg(feature = "alloc")]
 mod linalg;
 #[cfg(feature = "alloc")]
+pub mod measurement;
+#[cfg(feature = "alloc")]
 pub mod motion;
+#[cfg(feature = "alloc")]
+pub mod predict;
+#[cfg(feature = "alloc")]
+mod start;
+#[cfg(feature = "alloc")]
+pub mod state;
+#[cfg(feature = "alloc")]
+mod update;
 
 #[cfg(feature = "alloc")]
 pub use candidates::{CandidateSettings, Candidates, FrameReport};
@@ -161,11 +191,18 @@ pub use candidates::{CandidateSettings, Candidates, FrameReport};
 pub use error::Error;
 #[cfg(feature = "alloc")]
 pub use filter::{
-    AUTO_JOSEPH_MAX_STATES, CameraCovariance, CameraStart, CameraUpdate, CovarianceUpdate, Ekf,
-    Gated, LANDMARK_DIM, LandmarkEstimate, LandmarkId, POSE_DIM, SEQUENTIAL_MAX_STATES, Settings,
-    UpdateReport,
+    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, Gated, SEQUENTIAL_MAX_STATES,
+    Settings, UpdateReport,
 };
 #[cfg(feature = "alloc")]
 pub use health::Health;
 #[cfg(feature = "alloc")]
+pub use landmarks::{LandmarkEstimate, LandmarkId};
+#[cfg(feature = "alloc")]
+pub use measurement::{HColumns, measurement_jacobian_columns};
+#[cfg(feature = "alloc")]
 pub use motion::Increment;
+#[cfg(feature = "alloc")]
+pub use start::CameraStart;
+#[cfg(feature = "alloc")]
+pub use state::{CameraCovariance, LANDMARK_DIM, POSE_DIM, StateLayout};

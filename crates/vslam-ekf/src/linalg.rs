@@ -7,8 +7,8 @@
 //!
 //! Only the lower triangle of `P` (diagonal included) is maintained: for a large state the
 //! update is memory-bound (`P` is 18 MB at 1504 states and fits in no cache), and mirroring
-//! after every update would write the whole upper half once more, a third of the update's
-//! time. The upper triangle is filled in only when a caller asks for the whole matrix.
+//! after every update would write the whole upper half once more (docs/benchmarks.md, "Phase 2
+//! EKF SLAM"). The upper triangle is filled in only when a caller asks for the whole matrix.
 
 /// Up to this state size the rank update is a plain loop (axpys down each column's lower
 /// part): for small states the set-up of a blocked kernel costs more than the arithmetic.

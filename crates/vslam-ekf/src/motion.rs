@@ -1,4 +1,5 @@
-//! The prediction's motion model (eq. 3-4): the planar arc of constant robot-frame velocities
+//! The prediction's motion model (the motion that eq. (4) applies and the noise eq. (5)
+//! propagates, `crate::predict`): the planar arc of constant robot-frame velocities
 //! (vehicle-interfaces.md section 2), its Jacobians, and its noise.
 //!
 //! Noise model, the one phase 1 uses (`selfcal::solver`): each odometry sample's velocities
@@ -28,8 +29,8 @@
 //! the relocalisation of the map issue.
 
 use nalgebra::Matrix3;
+use rig_model::Noise;
 use rig_model::odometry::{Motion, OdomSample, constant_velocity_motion};
-use rig_model::{Noise, Pose2};
 
 use crate::error::Error;
 
@@ -340,19 +341,6 @@ impl Increment {
             nalgebra::Matrix3x4::zeros()
         };
         Ok((inc, reported, j))
-    }
-
-    /// The pose reached from `pose`, the Jacobian `F` of that pose with respect to `pose`, and
-    /// the process noise `Q` it adds (eq. 3-4): `pose' = pose (+) motion`,
-    /// `F = d pose' / d pose`, `Q = Rz(theta) Cov(motion) Rz(theta)^T` (the angle untouched).
-    pub fn apply(&self, pose: &Pose2) -> (Pose2, Matrix3<f64>, Matrix3<f64>) {
-        let f = compose_jacobian_first(pose.theta, &self.motion);
-        let g = compose_jacobian_second(pose.theta);
-        (
-            self.motion.apply(pose),
-            f,
-            g * self.covariance * g.transpose(),
-        )
     }
 }
 

@@ -1,0 +1,245 @@
+//! The map's landmarks: their ids and bookkeeping, initialisation from one stereo measurement
+//! with the joint linearised covariance (see the crate docs), removal, and what a caller reads
+//! of them.
+
+use alloc::vec::Vec;
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use rig_model::{Measurement, N_PARAMS};
+
+use crate::error::Error;
+use crate::filter::Ekf;
+use crate::kernels::gather_columns;
+use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout, at};
+
+/// A landmark's id: stable for its life, never reused after it is removed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct LandmarkId(pub u64);
+
+impl core::fmt::Display for LandmarkId {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "landmark {}", self.0)
+    }
+}
+
+/// What a caller sees of one landmark.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LandmarkEstimate {
+    /// Its id.
+    pub id: LandmarkId,
+    /// Position in the world frame, metres.
+    pub position: Vector3<f64>,
+    /// Its covariance.
+    pub covariance: Matrix3<f64>,
+    /// Measurements used: the one that initialised it and every accepted one since.
+    pub observations: u64,
+}
+
+/// Per-landmark bookkeeping, in state order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Slot {
+    pub(crate) id: LandmarkId,
+    pub(crate) observations: u64,
+    pub(crate) rejections_in_a_row: u32,
+}
+
+impl Ekf {
+    /// Landmarks in the map.
+    pub fn landmark_count(&self) -> usize {
+        self.landmarks.len()
+    }
+
+    /// Whether a landmark is in the map.
+    pub fn contains(&self, id: LandmarkId) -> bool {
+        self.slot(id).is_some()
+    }
+
+    /// Position of a landmark in the state order (ids increase along it).
+    pub(crate) fn slot(&self, id: LandmarkId) -> Option<usize> {
+        self.landmarks.binary_search_by_key(&id, |s| s.id).ok()
+    }
+
+    /// Index in the state of a landmark's `x` (then `y`, `z`).
+    pub fn landmark_state_index(&self, id: LandmarkId) -> Option<usize> {
+        self.slot(id).map(StateLayout::landmark)
+    }
+
+    fn estimate_at(&self, s: usize, slot: &Slot) -> LandmarkEstimate {
+        let i = StateLayout::landmark(s);
+        LandmarkEstimate {
+            id: slot.id,
+            position: self.x.fixed_rows::<3>(i).into_owned(),
+            covariance: self.block3(i),
+            observations: slot.observations,
+        }
+    }
+
+    /// One landmark's estimate.
+    pub fn landmark(&self, id: LandmarkId) -> Option<LandmarkEstimate> {
+        let s = self.slot(id)?;
+        self.landmarks.get(s).map(|slot| self.estimate_at(s, slot))
+    }
+
+    /// Measurements a landmark has used (the one that initialised it and every accepted one).
+    pub fn observations_of(&self, id: LandmarkId) -> Option<u64> {
+        let s = self.slot(id)?;
+        self.landmarks.get(s).map(|slot| slot.observations)
+    }
+
+    /// Every landmark's estimate, in state order (increasing id).
+    pub fn landmarks(&self) -> impl Iterator<Item = LandmarkEstimate> + '_ {
+        self.landmarks
+            .iter()
+            .enumerate()
+            .map(|(s, slot)| self.estimate_at(s, slot))
+    }
+
+    /// Adds a landmark triangulated from a measurement at the current pose and camera, with
+    /// its joint linearised covariance and cross-covariances (see the crate docs).
+    pub fn add_landmark(&mut self, z: &Measurement) -> Result<LandmarkId, Error> {
+        if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "measurement of a new landmark",
+                value,
+            });
+        }
+        let camera = self.camera();
+        let pose = self.pose();
+        let tri =
+            rig_model::triangulate(&camera, z).map_err(|source| Error::Triangulation { source })?;
+        let position = tri.p_in_world(&camera, &pose);
+        if let Some(&value) = position.iter().find(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "triangulated landmark",
+                value,
+            });
+        }
+        let n = self.x.len();
+        let c0 = self.camera_offset();
+        let m = self.estimated.len();
+        // G = [Gp | Gc] over the involved states (pose, estimated camera).
+        let gp = tri.jac_pose(&camera, &pose);
+        let gc_full = tri.jac_camera_in_world(&camera, &pose);
+        let mut idx: [usize; POSE_DIM + N_PARAMS] = [0; POSE_DIM + N_PARAMS];
+        let mut g = [[0.0; POSE_DIM + N_PARAMS]; 3];
+        for k in 0..POSE_DIM {
+            idx[k] = k;
+            for a in 0..3 {
+                g[a][k] = gp[(a, k)];
+            }
+        }
+        for (k, p) in self.estimated.iter().enumerate() {
+            idx[POSE_DIM + k] = c0 + k;
+            for a in 0..3 {
+                g[a][POSE_DIM + k] = gc_full[(a, p.index())];
+            }
+        }
+        let q = POSE_DIM + m;
+        // Cross covariance P_xL (n x 3): column a = sum_t G[a][t] P[:, idx[t]].
+        let mut columns = alloc::vec![0.0; n * q];
+        gather_columns(self.p.as_slice(), n, &idx[..q], &mut columns);
+        let mut cross = [Vec::new(), Vec::new(), Vec::new()];
+        for (a, col) in cross.iter_mut().enumerate() {
+            col.resize(n, 0.0);
+            for (t, pcol) in columns.chunks_exact(n).enumerate() {
+                let gat = g[a][t];
+                if gat == 0.0 {
+                    continue;
+                }
+                for (c, &p) in col.iter_mut().zip(pcol) {
+                    *c += gat * p;
+                }
+            }
+        }
+        // P_LL = G P_qq G^T + Gz R Gz^T, Gz the measurement Jacobian in the world frame.
+        let world_from_rig =
+            pose.world_from_robot_rotation() * camera.mount.robot_from_rig_rotation();
+        let gz = world_from_rig * tri.jac_measurement;
+        let r2 = self.noise.pixel * self.noise.pixel;
+        let mut pll = gz * gz.transpose() * r2;
+        for a in 0..3 {
+            for b in 0..3 {
+                let mut v = 0.0;
+                for t in 0..q {
+                    v += g[a][t] * cross[b][idx[t]];
+                }
+                pll[(a, b)] += v;
+            }
+        }
+        let pll = 0.5 * (pll + pll.transpose());
+        if pll.iter().any(|v| !v.is_finite()) || cross.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "new landmark covariance",
+                value: f64::NAN,
+            });
+        }
+        // Grow: insert 3 rows and columns at c0 (before the camera block).
+        let n2 = n + LANDMARK_DIM;
+        let mut p2 = DMatrix::<f64>::zeros(n2, n2);
+        {
+            let old = self.p.as_slice();
+            let new = p2.as_mut_slice();
+            for j2 in 0..n2 {
+                let dst = &mut new[at(n2, 0, j2)..at(n2, 0, j2 + 1)];
+                if (c0..c0 + LANDMARK_DIM).contains(&j2) {
+                    let a = j2 - c0;
+                    dst[..c0].copy_from_slice(&cross[a][..c0]);
+                    for b in 0..LANDMARK_DIM {
+                        dst[c0 + b] = pll[(b, a)];
+                    }
+                    dst[c0 + LANDMARK_DIM..].copy_from_slice(&cross[a][c0..]);
+                } else {
+                    let j = if j2 < c0 { j2 } else { j2 - LANDMARK_DIM };
+                    let src = &old[at(n, 0, j)..at(n, 0, j + 1)];
+                    dst[..c0].copy_from_slice(&src[..c0]);
+                    for b in 0..LANDMARK_DIM {
+                        dst[c0 + b] = cross[b][j];
+                    }
+                    dst[c0 + LANDMARK_DIM..].copy_from_slice(&src[c0..]);
+                }
+            }
+        }
+        let mut x2 = DVector::<f64>::zeros(n2);
+        x2.rows_mut(0, c0).copy_from(&self.x.rows(0, c0));
+        x2.fixed_rows_mut::<3>(c0).copy_from(&position);
+        x2.rows_mut(c0 + LANDMARK_DIM, m)
+            .copy_from(&self.x.rows(c0, m));
+        self.x = x2;
+        self.p = p2;
+        let id = LandmarkId(self.next_id);
+        self.next_id += 1;
+        self.landmarks.push(Slot {
+            id,
+            observations: 1,
+            rejections_in_a_row: 0,
+        });
+        self.health.landmarks_added += 1;
+        Ok(id)
+    }
+
+    /// Removes a landmark: its rows and columns leave the state.
+    pub fn remove_landmark(&mut self, id: LandmarkId) -> Result<(), Error> {
+        let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
+        let n = self.x.len();
+        let li = StateLayout::landmark(s);
+        let n2 = n - LANDMARK_DIM;
+        let keep = |i: usize| if i < li { i } else { i + LANDMARK_DIM };
+        let mut p2 = DMatrix::<f64>::zeros(n2, n2);
+        {
+            let old = self.p.as_slice();
+            let new = p2.as_mut_slice();
+            for j2 in 0..n2 {
+                let src = &old[at(n, 0, keep(j2))..at(n, 0, keep(j2) + 1)];
+                let dst = &mut new[at(n2, 0, j2)..at(n2, 0, j2 + 1)];
+                dst[..li].copy_from_slice(&src[..li]);
+                dst[li..].copy_from_slice(&src[li + LANDMARK_DIM..]);
+            }
+        }
+        let x2 = DVector::from_fn(n2, |i, _| self.x[keep(i)]);
+        self.x = x2;
+        self.p = p2;
+        self.landmarks.remove(s);
+        self.health.landmarks_removed += 1;
+        Ok(())
+    }
+}

@@ -1,0 +1,156 @@
+//! Eq. (8), the measurement Jacobian: the four measurements `(uL, vL, uR, vR)` of one landmark
+//! depend on the pose, that landmark and the estimated camera parameters only, so its rows of
+//! `H` are non-zero in at most `6 + m` columns ([`measurement_jacobian_columns`]). The update
+//! never forms `H`; the dense one ([`Ekf::measurement_jacobian`]) is for tests and tools.
+
+use alloc::vec::Vec;
+
+use nalgebra::{DMatrix, Matrix4, Vector3};
+use rig_model::camera::Param;
+use rig_model::rig::{Jac4x3, RigError};
+use rig_model::{CameraParams, Measurement, N_PARAMS, Pose2, project_with_jacobians};
+
+use crate::error::Error;
+use crate::filter::Ekf;
+use crate::kernels::Obs;
+use crate::landmarks::LandmarkId;
+use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout};
+
+/// Most non-zero columns of one landmark's rows of `H`: the pose, the landmark, every camera
+/// parameter.
+pub const MAX_H_COLUMNS: usize = POSE_DIM + LANDMARK_DIM + N_PARAMS;
+
+/// One landmark's four rows of `H` (eq. (8)) as their non-zero columns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HColumns {
+    /// State indices of the non-zero columns, increasing: the pose's three, the landmark's
+    /// three, the estimated camera parameters' (see [`measurement_jacobian_columns`]).
+    pub cols: [usize; MAX_H_COLUMNS],
+    /// `h[r][t]`: row `r` (`uL, vL, uR, vR`) of `H` at state index `cols[t]`.
+    pub h: [[f64; MAX_H_COLUMNS]; 4],
+    /// Columns in use.
+    pub len: usize,
+}
+
+/// Eq. (8): the measurement Jacobian `H = dh/dx` of the landmark in state-order slot `s`, at
+/// `pose`, `landmark` and `camera`, with the predicted measurement `h(x)`. Its rows are
+/// `[H_pose, 0, ..., H_landmark, 0, ..., H_camera]`: the pose's three columns, the
+/// landmark's own three (at [`StateLayout::landmark`]) and one per estimated parameter (from
+/// [`StateLayout::camera_start`], in `estimated` order) except the vehicle's, on which the
+/// projection does not depend. The blocks are the rig model's analytic projection Jacobians
+/// ([`rig_model::project_with_jacobians`]).
+pub fn measurement_jacobian_columns(
+    layout: &StateLayout,
+    s: usize,
+    estimated: &[Param],
+    camera: &CameraParams,
+    pose: &Pose2,
+    landmark: &Vector3<f64>,
+) -> Result<(Measurement, HColumns), RigError> {
+    let (predicted, jac) = project_with_jacobians(camera, pose, landmark)?;
+    let mut h = HColumns {
+        cols: [0; MAX_H_COLUMNS],
+        h: [[0.0; MAX_H_COLUMNS]; 4],
+        len: 0,
+    };
+    let mut push = |col: usize, column: nalgebra::Vector4<f64>| {
+        if let Some(slot) = h.cols.get_mut(h.len) {
+            *slot = col;
+            for (r, row) in h.h.iter_mut().enumerate() {
+                row[h.len] = column[r];
+            }
+            h.len += 1;
+        }
+    };
+    let blocks: [(usize, &Jac4x3); 2] = [(0, &jac.pose), (StateLayout::landmark(s), &jac.landmark)];
+    for (start, block) in blocks {
+        for k in 0..3 {
+            push(start + k, block.column(k).into_owned());
+        }
+    }
+    let c0 = layout.camera_start();
+    for (k, p) in estimated.iter().enumerate() {
+        // The projection does not depend on the vehicle's parameters: no column.
+        if !p.is_vehicle() {
+            push(c0 + k, jac.camera.column(p.index()).into_owned());
+        }
+    }
+    Ok((predicted, h))
+}
+
+impl Ekf {
+    /// Linearises the observation of the landmark in slot `s` at the current estimate
+    /// (eq. (8)): the predicted measurement and the non-zero columns of `H` (the innovation
+    /// left zero).
+    pub(crate) fn observation_model(
+        &self,
+        s: usize,
+        camera: &CameraParams,
+        pose: &Pose2,
+    ) -> Result<(Measurement, Obs), Error> {
+        let id = self.landmarks.get(s).map_or(LandmarkId(u64::MAX), |l| l.id);
+        let landmark = self
+            .x
+            .fixed_rows::<3>(StateLayout::landmark(s))
+            .into_owned();
+        let (predicted, h) = measurement_jacobian_columns(
+            &self.layout(),
+            s,
+            &self.estimated,
+            camera,
+            pose,
+            &landmark,
+        )
+        .map_err(|source| Error::Projection { id, source })?;
+        Ok((predicted, Obs::new(&h)))
+    }
+
+    /// The predicted measurement of a landmark and its innovation covariance
+    /// `S = H P H^T + R` (4x4), for association and map matching.
+    pub fn predict_measurement(
+        &self,
+        id: LandmarkId,
+    ) -> Result<(Measurement, Matrix4<f64>), Error> {
+        let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
+        let (z, m) = self.observation_model(s, &self.camera(), &self.pose())?;
+        Ok((z, self.innovation_covariance(&m)))
+    }
+
+    /// The predicted measurement of a landmark and the full `4 x n` Jacobian `H` of the
+    /// measurement with respect to the state (eq. (8)), dense. For tests and tools: the update
+    /// never forms it.
+    pub fn measurement_jacobian(
+        &self,
+        id: LandmarkId,
+    ) -> Result<(Measurement, DMatrix<f64>), Error> {
+        let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
+        let (z, m) = self.observation_model(s, &self.camera(), &self.pose())?;
+        let mut h = DMatrix::zeros(4, self.x.len());
+        for (t, &c) in m.cols.iter().enumerate().take(m.q) {
+            for r in 0..4 {
+                h[(r, c)] = m.h[r][t];
+            }
+        }
+        Ok((z, h))
+    }
+
+    /// The landmarks whose predicted measurement falls inside both images, with it.
+    pub fn visible_landmarks(&self) -> Vec<(LandmarkId, Measurement)> {
+        let camera = self.camera();
+        let pose = self.pose();
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
+        self.landmarks
+            .iter()
+            .enumerate()
+            .filter_map(|(s, slot)| {
+                let l = self
+                    .x
+                    .fixed_rows::<3>(StateLayout::landmark(s))
+                    .into_owned();
+                let z = rig_model::project(&camera, &pose, &l).ok()?;
+                (inside(z[0], z[1]) && inside(z[2], z[3])).then_some((slot.id, z))
+            })
+            .collect()
+    }
+}
