@@ -24,13 +24,14 @@ use numpy::ndarray::{Array2, ArrayView2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use replay::{LogCalibration, RigSource};
-use rig_model::handover::{FramePair, Handover, LandmarkPair, ObservabilityReport};
+use rig_model::handover::{FramePair, LandmarkPair, ObservabilityReport};
 use rig_model::odometry::{Motion, OdomSample, integrate};
-use rig_model::{CameraParams, Measurement, N_CAMERA, Param, ParamVector, Rig, RigFileError};
+use rig_model::{CameraParams, Measurement, N_CAMERA, Param, ParamVector, Rig};
 use selfcal::solver::{Calibration, SolveStatus, SolverSettings, StableRule};
 use track::{PairSettings, PairingScheme, SettingsError};
 
 use crate::input_error;
+use crate::rig::PyRig;
 
 /// Fields of the `(N, 8)` observation values, in column order.
 const OBSERVATION_FIELDS: [&str; 8] = ["uL0", "vL0", "uR0", "vR0", "uL1", "vL1", "uR1", "vR1"];
@@ -67,41 +68,6 @@ type PyMotions<'py> = (
 );
 /// Integrated spans handed back: the values (P, 4) and `samples` (P,).
 type PyIntegrated<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u64>>);
-/// [`SolverSettings`] as passed: `(huber, max_iterations, step_tolerance, observable_ratio)`.
-type SettingsTuple = (f64, usize, f64, f64);
-/// [`StableRule`] as passed: `(min_pairs, sigma_fraction, step_fraction, consecutive)`.
-type RuleTuple = (usize, f64, f64, usize);
-/// One [`rig_model::handover::ParamObservability`]: `(name, prior_sigma, data_sigma,
-/// posterior_sigma, observable, reason, structural)`.
-type ParamTuple = (
-    &'static str,
-    f64,
-    f64,
-    f64,
-    bool,
-    Option<&'static str>,
-    bool,
-);
-/// An [`ObservabilityReport`]: `(params, max_correlation (a, b, r) or None, eigenvalues)`.
-type ObservabilityTuple<'py> = (
-    Vec<ParamTuple>,
-    Option<(&'static str, &'static str, f64)>,
-    Bound<'py, PyArray1<f64>>,
-);
-/// A [`Handover`]: `(camera (10,), covariance (10, 10), t_us, observability)`.
-type HandoverTuple<'py> = (
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray2<f64>>,
-    u64,
-    ObservabilityTuple<'py>,
-);
-/// The incremental history: `(t_us (K,), values (K, 10), sigmas (K, 10))`.
-type HistoryTuple<'py> = (
-    Bound<'py, PyArray1<u64>>,
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray2<f64>>,
-);
-
 /// A calibration input the solver cannot take; the message names the array, the row, the
 /// field and the value.
 #[derive(Debug, Clone, PartialEq)]
@@ -212,8 +178,6 @@ enum CalibInputError {
         /// The values given.
         len: usize,
     },
-    /// The rig is not a valid rig file.
-    Rig(RigFileError),
     /// `pairing` is not the name of a pairing scheme.
     Pairing {
         /// The name given.
@@ -316,7 +280,6 @@ impl fmt::Display for CalibInputError {
                 f,
                 "start camera has {len} values, expected {N_CAMERA} in CAMERA_PARAMETERS order"
             ),
-            Self::Rig(err) => err.fmt(f),
             Self::Pairing { name } => write!(
                 f,
                 "pairing is {name:?}, expected {:?} or {:?}",
@@ -554,7 +517,7 @@ fn pairs_by_id(
 
 /// [`SolverSettings`] from the keyword values, checked by [`SolverSettings::validate`].
 fn solver_settings(
-    (huber, max_iterations, step_tolerance, observable_ratio): SettingsTuple,
+    (huber, max_iterations, step_tolerance, observable_ratio): (f64, usize, f64, f64),
 ) -> Result<SolverSettings, CalibInputError> {
     let settings = SolverSettings {
         huber,
@@ -568,7 +531,7 @@ fn solver_settings(
 
 /// [`StableRule`] from the keyword values, checked by [`StableRule::validate`].
 fn stable_rule(
-    (min_pairs, sigma_fraction, step_fraction, consecutive): RuleTuple,
+    (min_pairs, sigma_fraction, step_fraction, consecutive): (usize, f64, f64, usize),
 ) -> Result<StableRule, CalibInputError> {
     let rule = StableRule {
         min_pairs,
@@ -617,11 +580,6 @@ fn start_camera(values: &[f64]) -> Result<CameraParams, CalibInputError> {
     ))
 }
 
-/// The rig from the JSON form of its file; `source` names it in errors.
-fn rig_from_json(text: &str, source: &str) -> Result<Rig, CalibInputError> {
-    Rig::from_json_str(text, source).map_err(CalibInputError::Rig)
-}
-
 /// The batch solve (`selfcal::solver::calibrate`) of checked frame pairs, with the GIL
 /// released. Every source of frame pairs ends here.
 fn solve(
@@ -667,54 +625,164 @@ fn vectors_array<'py, 'a>(
         .into_pyarray(py)
 }
 
-fn observability_tuple<'py>(
-    py: Python<'py>,
-    report: &ObservabilityReport,
-) -> ObservabilityTuple<'py> {
-    let params = report
-        .params
-        .iter()
-        .map(|p| {
-            (
-                p.param.name(),
-                p.prior_sigma,
-                p.data_sigma,
-                p.posterior_sigma,
-                p.observable,
-                p.reason,
-                p.structural,
-            )
+/// How well the data constrain one estimated parameter (`rig_model::handover::ParamObservability`).
+#[pyclass(module = "stereonav._native", frozen, get_all, eq)]
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ParamObservability {
+    /// The parameter (one of `CAMERA_PARAMETERS`).
+    name: &'static str,
+    /// Its prior sigma (rig file `[prior]`).
+    prior_sigma: f64,
+    /// Its sigma from the data alone (`inf` when the data say nothing about it).
+    data_sigma: f64,
+    /// Its sigma from data and prior together.
+    posterior_sigma: f64,
+    /// Whether the data constrain it (`posterior_sigma <= observable_ratio * prior_sigma`).
+    observable: bool,
+    /// Why it is not observable, or None.
+    reason: Option<&'static str>,
+    /// Not observable because of a known trap of the rig and the path, not for lack of data.
+    structural: bool,
+}
+
+#[pymethods]
+impl ParamObservability {
+    /// A hash consistent with `==` (hashable as the frozen dataclass it replaces).
+    fn __hash__(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        // 0.0 == -0.0: one hash for both.
+        let bits = |v: f64| if v == 0.0 { 0 } else { v.to_bits() };
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        (
+            self.name,
+            bits(self.prior_sigma),
+            bits(self.data_sigma),
+            bits(self.posterior_sigma),
+            self.observable,
+            self.reason,
+            self.structural,
+        )
+            .hash(&mut h);
+        h.finish()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "ParamObservability(name={:?}, prior_sigma={}, data_sigma={}, posterior_sigma={}, \
+             observable={}, reason={}, structural={})",
+            self.name,
+            py_float(self.prior_sigma),
+            py_float(self.data_sigma),
+            py_float(self.posterior_sigma),
+            py_bool(self.observable),
+            self.reason.map_or("None".to_string(), |r| format!("{r:?}")),
+            py_bool(self.structural),
+        )
+    }
+}
+
+/// A float as Python's `repr` writes it (`inf`, `nan`, `1.0`).
+fn py_float(v: f64) -> String {
+    if v.is_nan() {
+        "nan".to_string()
+    } else if v.is_infinite() {
+        if v > 0.0 { "inf" } else { "-inf" }.to_string()
+    } else {
+        format!("{v:?}")
+    }
+}
+
+fn py_bool(b: bool) -> &'static str {
+    if b { "True" } else { "False" }
+}
+
+/// The observability analysis of the estimated parameters (`ObservabilityReport`).
+#[pyclass(module = "stereonav._native", frozen, get_all)]
+pub(crate) struct Observability {
+    /// One record per estimated parameter, in `CAMERA_PARAMETERS` order.
+    params: Vec<ParamObservability>,
+    /// `(a, b, r)`: the most correlated pair of observable parameters, or None.
+    max_correlation: Option<(&'static str, &'static str, f64)>,
+    /// The information eigenvalues in prior-sigma units, ascending, `(E,)`.
+    eigenvalues: Py<PyArray1<f64>>,
+}
+
+impl Observability {
+    fn new(py: Python<'_>, report: &ObservabilityReport) -> Self {
+        Self {
+            params: report
+                .params
+                .iter()
+                .map(|p| ParamObservability {
+                    name: p.param.name(),
+                    prior_sigma: p.prior_sigma,
+                    data_sigma: p.data_sigma,
+                    posterior_sigma: p.posterior_sigma,
+                    observable: p.observable,
+                    reason: p.reason,
+                    structural: p.structural,
+                })
+                .collect(),
+            max_correlation: report
+                .max_correlation
+                .map(|(a, b, r)| (a.name(), b.name(), r)),
+            eigenvalues: report
+                .information_eigenvalues
+                .clone()
+                .into_pyarray(py)
+                .unbind(),
+        }
+    }
+}
+
+/// What phase 1 hands to phase 2 once calibration is stable (`rig_model::handover::Handover`).
+#[pyclass(module = "stereonav._native", frozen, get_all)]
+pub(crate) struct Handover {
+    /// The calibrated camera, 10 values in `CAMERA_PARAMETERS` order.
+    camera: Py<PyArray1<f64>>,
+    /// Its covariance, (10, 10).
+    covariance: Py<PyArray2<f64>>,
+    /// Time of the frame at which calibration became stable.
+    t_us: u64,
+    /// The observability analysis at hand-over.
+    observability: Py<Observability>,
+}
+
+impl Handover {
+    fn new(py: Python<'_>, h: &rig_model::handover::Handover) -> PyResult<Self> {
+        Ok(Self {
+            camera: vector_array(py, &h.camera.to_vector()).unbind(),
+            covariance: covariance_array(py, &h.covariance).unbind(),
+            t_us: h.t_us,
+            observability: Py::new(py, Observability::new(py, &h.observability))?,
         })
-        .collect();
-    let correlation = report
-        .max_correlation
-        .map(|(a, b, r)| (a.name(), b.name(), r));
-    (
-        params,
-        correlation,
-        report.information_eigenvalues.clone().into_pyarray(py),
-    )
+    }
 }
 
-fn handover_tuple<'py>(py: Python<'py>, h: &Handover) -> HandoverTuple<'py> {
-    (
-        vector_array(py, &h.camera.to_vector()),
-        covariance_array(py, &h.covariance),
-        h.t_us,
-        observability_tuple(py, &h.observability),
-    )
+/// The camera parameters after each solve of an incremental calibration (K solves).
+#[pyclass(module = "stereonav._native", frozen, get_all)]
+pub(crate) struct CalibrationHistory {
+    /// `(K,)`: time of the last frame pair of each solve.
+    t_us: Py<PyArray1<u64>>,
+    /// `(K, 10)`: the parameters, `CAMERA_PARAMETERS` order.
+    values: Py<PyArray2<f64>>,
+    /// `(K, 10)`: their sigmas (0 for those held fixed).
+    sigmas: Py<PyArray2<f64>>,
 }
 
-/// An incremental calibration's `(t_us, parameters, sigmas)` after each solve, as arrays.
-fn history_tuple<'py>(py: Python<'py>, h: &[(u64, ParamVector, ParamVector)]) -> HistoryTuple<'py> {
-    (
-        h.iter()
-            .map(|(t, _, _)| *t)
-            .collect::<Vec<_>>()
-            .into_pyarray(py),
-        vectors_array(py, h.iter().map(|(_, v, _)| v)),
-        vectors_array(py, h.iter().map(|(_, _, s)| s)),
-    )
+impl CalibrationHistory {
+    fn new(py: Python<'_>, h: &[(u64, ParamVector, ParamVector)]) -> Self {
+        Self {
+            t_us: h
+                .iter()
+                .map(|(t, _, _)| *t)
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind(),
+            values: vectors_array(py, h.iter().map(|(_, v, _)| v)).unbind(),
+            sigmas: vectors_array(py, h.iter().map(|(_, _, s)| s)).unbind(),
+        }
+    }
 }
 
 /// The tables of `observations` and `motions` as frame pairs, or `stereonav.InputError`.
@@ -836,12 +904,10 @@ impl CalibrationResult {
         self.calibration.reduced_chi2
     }
 
-    /// `(params, max_correlation, eigenvalues)`: per estimated parameter `(name,
-    /// prior_sigma, data_sigma, posterior_sigma, observable, reason)`; `(a, b, r)` or None;
-    /// the information eigenvalues in prior-sigma units, ascending.
+    /// The observability analysis at the solution.
     #[getter]
-    fn observability<'py>(&self, py: Python<'py>) -> ObservabilityTuple<'py> {
-        observability_tuple(py, &self.calibration.observability)
+    fn observability(&self, py: Python<'_>) -> Observability {
+        Observability::new(py, &self.calibration.observability)
     }
 
     /// The parameter vector after each accepted iteration, the start first: (K, 10).
@@ -851,55 +917,180 @@ impl CalibrationResult {
     }
 }
 
-/// The default solver settings `(huber, max_iterations, step_tolerance, observable_ratio)`.
-#[pyfunction]
-pub(crate) fn solver_defaults() -> SettingsTuple {
-    let s = SolverSettings::default();
-    (
-        s.huber,
-        s.max_iterations,
-        s.step_tolerance,
-        s.observable_ratio,
-    )
+/// The settings of the phase-1 solver (`selfcal::solver::SolverSettings`); a keyword left out
+/// takes the Rust default. Raises `stereonav.InputError` for a value out of range.
+#[pyclass(name = "SolverSettings", module = "stereonav._native", frozen, get_all)]
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PySolverSettings {
+    /// Huber threshold on a landmark's Mahalanobis norm.
+    huber: f64,
+    /// Most Levenberg-Marquardt iterations.
+    max_iterations: usize,
+    /// Converged when every step is below this fraction of the parameter's sigma.
+    step_tolerance: f64,
+    /// Observable when the data bring a sigma to at most this fraction of its prior, (0, 1].
+    observable_ratio: f64,
 }
 
-/// The default stability rule `(min_pairs, sigma_fraction, step_fraction, consecutive)`.
-#[pyfunction]
-pub(crate) fn stable_rule_defaults() -> RuleTuple {
-    let r = StableRule::default();
-    (
-        r.min_pairs,
-        r.sigma_fraction,
-        r.step_fraction,
-        r.consecutive,
-    )
+impl PySolverSettings {
+    fn settings(&self) -> SolverSettings {
+        SolverSettings {
+            huber: self.huber,
+            max_iterations: self.max_iterations,
+            step_tolerance: self.step_tolerance,
+            observable_ratio: self.observable_ratio,
+        }
+    }
+}
+
+#[pymethods]
+impl PySolverSettings {
+    #[new]
+    #[pyo3(signature = (*, huber=None, max_iterations=None, step_tolerance=None, observable_ratio=None))]
+    fn new(
+        py: Python<'_>,
+        huber: Option<f64>,
+        max_iterations: Option<usize>,
+        step_tolerance: Option<f64>,
+        observable_ratio: Option<f64>,
+    ) -> PyResult<Self> {
+        let d = SolverSettings::default();
+        let s = solver_settings((
+            huber.unwrap_or(d.huber),
+            max_iterations.unwrap_or(d.max_iterations),
+            step_tolerance.unwrap_or(d.step_tolerance),
+            observable_ratio.unwrap_or(d.observable_ratio),
+        ))
+        .map_err(|e| e.into_pyerr(py))?;
+        Ok(Self {
+            huber: s.huber,
+            max_iterations: s.max_iterations,
+            step_tolerance: s.step_tolerance,
+            observable_ratio: s.observable_ratio,
+        })
+    }
+}
+
+/// The stability rule of the incremental calibration (`selfcal::solver::StableRule`) and the
+/// pairs between two solves (`solve_every`, the replay's default); a keyword left out takes
+/// the Rust default. Raises `stereonav.InputError` for a value out of range.
+#[pyclass(name = "StableRule", module = "stereonav._native", frozen, get_all)]
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PyStableRule {
+    /// Pairs at least, before calibration can be stable.
+    min_pairs: usize,
+    /// Each observable sigma at most this fraction of its prior sigma.
+    sigma_fraction: f64,
+    /// Each step between two solves below this fraction of the sigma.
+    step_fraction: f64,
+    /// Solves in a row that must meet the rule.
+    consecutive: usize,
+    /// Pairs between two solves.
+    solve_every: usize,
+}
+
+impl PyStableRule {
+    fn rule(&self) -> StableRule {
+        StableRule {
+            min_pairs: self.min_pairs,
+            sigma_fraction: self.sigma_fraction,
+            step_fraction: self.step_fraction,
+            consecutive: self.consecutive,
+        }
+    }
+}
+
+#[pymethods]
+impl PyStableRule {
+    #[new]
+    #[pyo3(signature = (*, min_pairs=None, sigma_fraction=None, step_fraction=None, consecutive=None, solve_every=None))]
+    fn new(
+        py: Python<'_>,
+        min_pairs: Option<usize>,
+        sigma_fraction: Option<f64>,
+        step_fraction: Option<f64>,
+        consecutive: Option<usize>,
+        solve_every: Option<usize>,
+    ) -> PyResult<Self> {
+        let d = StableRule::default();
+        let r = stable_rule((
+            min_pairs.unwrap_or(d.min_pairs),
+            sigma_fraction.unwrap_or(d.sigma_fraction),
+            step_fraction.unwrap_or(d.step_fraction),
+            consecutive.unwrap_or(d.consecutive),
+        ))
+        .map_err(|e| e.into_pyerr(py))?;
+        let solve_every = solve_every.unwrap_or(replay::FramePairSettings::default().solve_every);
+        if solve_every == 0 {
+            return Err(CalibInputError::Setting {
+                name: "solve_every",
+                value: 0.0,
+                expected: "at least 1",
+            }
+            .into_pyerr(py));
+        }
+        Ok(Self {
+            min_pairs: r.min_pairs,
+            sigma_fraction: r.sigma_fraction,
+            step_fraction: r.step_fraction,
+            consecutive: r.consecutive,
+            solve_every,
+        })
+    }
+}
+
+/// How a vehicle log's frames become frame pairs (`track::PairSettings`): `stride` frames
+/// apart, `pairing` `"disjoint"` or `"interleaved"`; a keyword left out takes the Rust
+/// default. Raises `stereonav.InputError` for a value out of range.
+#[pyclass(name = "PairSettings", module = "stereonav._native", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub(crate) struct PyPairSettings {
+    /// Frames from the first frame of a pair to its second.
+    stride: usize,
+    /// The pairing scheme's name.
+    pairing: &'static str,
+}
+
+#[pymethods]
+impl PyPairSettings {
+    #[new]
+    #[pyo3(signature = (*, stride=None, pairing=None))]
+    fn new(py: Python<'_>, stride: Option<usize>, pairing: Option<&str>) -> PyResult<Self> {
+        let d = replay::FramePairSettings::default().pairs;
+        let p = pair_settings(
+            stride.unwrap_or(d.stride),
+            pairing.unwrap_or(d.scheme.name()),
+        )
+        .map_err(|e| e.into_pyerr(py))?;
+        Ok(Self {
+            stride: p.stride,
+            pairing: p.scheme.name(),
+        })
+    }
 }
 
 /// Phase-1 batch solve of frame pairs given as tables (see the module documentation).
 ///
-/// `rig_json` is the rig file's tables as JSON (`rig_source` names it in errors); `start`
-/// the 10 start values (default the rig's nominal ones); `settings` `(huber,
-/// max_iterations, step_tolerance, observable_ratio)`. Raises `stereonav.InputError` naming
+/// `start` is the 10 start values (default the rig's nominal ones). Raises `stereonav.InputError` naming
 /// the array, row and field of a bad value. The GIL is released while solving.
 #[pyfunction]
-#[pyo3(signature = (rig_json, rig_source, observations, motions, start, settings))]
+#[pyo3(signature = (rig, observations, motions, start, settings))]
 pub(crate) fn calibrate(
     py: Python<'_>,
-    rig_json: &str,
-    rig_source: &str,
+    rig: PyRef<'_, PyRig>,
     observations: ObservationArrays<'_>,
     motions: MotionArrays<'_>,
     start: Option<PyReadonlyArray1<'_, f64>>,
-    settings: SettingsTuple,
+    settings: PyRef<'_, PySolverSettings>,
 ) -> PyResult<CalibrationResult> {
-    let rig = rig_from_json(rig_json, rig_source).map_err(|e| e.into_pyerr(py))?;
-    let settings = solver_settings(settings).map_err(|e| e.into_pyerr(py))?;
+    let rig = &rig.rig;
+    let settings = settings.settings();
     let start = start
         .map(|s| start_camera(&s.as_array().to_vec()))
         .transpose()
         .map_err(|e| e.into_pyerr(py))?;
     let pairs = checked_pairs(py, &observations, &motions)?;
-    Ok(solve(py, &pairs, &rig, start, &settings))
+    Ok(solve(py, &pairs, rig, start, &settings))
 }
 
 /// The motion of each span `t0_us[i] .. t1_us[i]` from the odometry `(t_us (S,), vx vy
@@ -980,49 +1171,31 @@ pub(crate) fn replay_error(py: Python<'_>, err: &replay::Error) -> PyErr {
 }
 
 /// Phase 1 on the vehicle log at `log_path` (`replay::calibrate_log`): read, decode, associate
-/// (`stride` frames apart, `pairing` `"disjoint"` or `"interleaved"`), then the batch solve with
-/// `settings` and the incremental one with `rule` every `solve_every` pairs for the hand-over.
+/// with `pairs`, then the batch solve with `settings` and the incremental one with `rule` for
+/// the hand-over.
 ///
-/// `rig_json` is a rig file's tables as JSON (`rig_source` names it in errors); None uses the
-/// log's `/rig` message. Raises `stereonav.InputError` for a log that cannot be read or is not
-/// a vehicle log, a bad rig, or a setting out of range. The GIL is released during the run.
+/// `rig` None uses the log's `/rig` message. Raises `stereonav.InputError` for a log that
+/// cannot be read or is not a vehicle log, or a bad rig. The GIL is released during the run.
 #[pyfunction]
-#[pyo3(signature = (log_path, rig_json, rig_source, stride, pairing, settings, rule, solve_every))]
-#[allow(clippy::too_many_arguments)] // the keywords of `stereonav.calibrate_log`, checked here
+#[pyo3(signature = (log_path, rig, pairs, settings, rule))]
 pub(crate) fn calibrate_log(
     py: Python<'_>,
     log_path: PathBuf,
-    rig_json: Option<&str>,
-    rig_source: &str,
-    stride: usize,
-    pairing: &str,
-    settings: SettingsTuple,
-    rule: RuleTuple,
-    solve_every: usize,
+    rig: Option<PyRef<'_, PyRig>>,
+    pairs: PyRef<'_, PyPairSettings>,
+    settings: PyRef<'_, PySolverSettings>,
+    rule: PyRef<'_, PyStableRule>,
 ) -> PyResult<LogCalibrationResult> {
-    let checked = || -> Result<_, CalibInputError> {
-        let rig = rig_json
-            .map(|text| rig_from_json(text, rig_source))
-            .transpose()?;
-        if solve_every == 0 {
-            return Err(CalibInputError::Setting {
-                name: "solve_every",
-                value: 0.0,
-                expected: "at least 1",
-            });
-        }
-        let settings = replay::NavSettings {
-            frame_pairs: replay::FramePairSettings {
-                pairs: pair_settings(stride, pairing)?,
-                solver: solver_settings(settings)?,
-                stable: stable_rule(rule)?,
-                solve_every,
-            },
-            ..replay::NavSettings::default()
-        };
-        Ok((rig, settings))
+    let rig = rig.map(|r| r.rig.clone());
+    let settings = replay::NavSettings {
+        frame_pairs: replay::FramePairSettings {
+            pairs: pair_settings(pairs.stride, pairs.pairing).map_err(|e| e.into_pyerr(py))?,
+            solver: settings.settings(),
+            stable: rule.rule(),
+            solve_every: rule.solve_every,
+        },
+        ..replay::NavSettings::default()
     };
-    let (rig, settings) = checked().map_err(|e| e.into_pyerr(py))?;
     let result = py
         .detach(|| replay::calibrate_log(&log_path, rig, &settings))
         .map_err(|e| replay_error(py, &e))?;
@@ -1045,18 +1218,21 @@ impl LogCalibrationResult {
         }
     }
 
-    /// `(camera, covariance, t_us, observability)` of the incremental calibration's hand-over
-    /// to phase 2, or None when it never became stable.
+    /// The incremental calibration's hand-over to phase 2, or None when it never became
+    /// stable.
     #[getter]
-    fn handover<'py>(&self, py: Python<'py>) -> Option<HandoverTuple<'py>> {
-        self.result.handover.as_ref().map(|h| handover_tuple(py, h))
+    fn handover(&self, py: Python<'_>) -> PyResult<Option<Handover>> {
+        self.result
+            .handover
+            .as_ref()
+            .map(|h| Handover::new(py, h))
+            .transpose()
     }
 
-    /// `(t_us (K,), values (K, 10), sigmas (K, 10))` after each incremental solve, up to the
-    /// hand-over.
+    /// The camera after each incremental solve, up to the hand-over.
     #[getter]
-    fn history<'py>(&self, py: Python<'py>) -> HistoryTuple<'py> {
-        history_tuple(py, &self.result.history)
+    fn history(&self, py: Python<'_>) -> CalibrationHistory {
+        CalibrationHistory::new(py, &self.result.history)
     }
 
     /// `[(name, count), ...]`: what was read, decoded, associated and paired.
@@ -1091,32 +1267,21 @@ pub(crate) struct SelfCalibrator {
 
 #[pymethods]
 impl SelfCalibrator {
-    /// A calibrator for the rig (its file's tables as JSON), with the solver `settings`
-    /// `(huber, max_iterations, step_tolerance, observable_ratio)` and the stability `rule`
-    /// `(min_pairs, sigma_fraction, step_fraction, consecutive)`.
+    /// A calibrator for the rig with the solver `settings` and the stability `rule`.
     #[new]
     fn new(
-        py: Python<'_>,
-        rig_json: &str,
-        rig_source: &str,
-        settings: SettingsTuple,
-        rule: RuleTuple,
-        solve_every: usize,
-    ) -> PyResult<Self> {
-        let rig = rig_from_json(rig_json, rig_source).map_err(|e| e.into_pyerr(py))?;
-        let settings = solver_settings(settings).map_err(|e| e.into_pyerr(py))?;
-        let rule = stable_rule(rule).map_err(|e| e.into_pyerr(py))?;
-        if solve_every == 0 {
-            return Err(CalibInputError::Setting {
-                name: "solve_every",
-                value: 0.0,
-                expected: "at least 1",
-            }
-            .into_pyerr(py));
+        rig: PyRef<'_, PyRig>,
+        settings: PyRef<'_, PySolverSettings>,
+        rule: PyRef<'_, PyStableRule>,
+    ) -> Self {
+        Self {
+            inner: selfcal::solver::SelfCalibrator::new(
+                rig.rig.clone(),
+                settings.settings(),
+                rule.rule(),
+                rule.solve_every,
+            ),
         }
-        Ok(Self {
-            inner: selfcal::solver::SelfCalibrator::new(rig, settings, rule, solve_every),
-        })
     }
 
     /// Adds the frame pairs of the tables, in order; returns how many solves they triggered.
@@ -1149,16 +1314,19 @@ impl SelfCalibrator {
         })
     }
 
-    /// `(camera, covariance, t_us, observability)` once calibration is stable, else None.
+    /// The hand-over to phase 2 once calibration is stable, else None.
     #[getter]
-    fn handover<'py>(&self, py: Python<'py>) -> Option<HandoverTuple<'py>> {
-        self.inner.handover().map(|h| handover_tuple(py, h))
+    fn handover(&self, py: Python<'_>) -> PyResult<Option<Handover>> {
+        self.inner
+            .handover()
+            .map(|h| Handover::new(py, h))
+            .transpose()
     }
 
-    /// `(t_us (K,), values (K, 10), sigmas (K, 10))` after each solve.
+    /// The camera after each solve.
     #[getter]
-    fn history<'py>(&self, py: Python<'py>) -> HistoryTuple<'py> {
-        history_tuple(py, self.inner.history())
+    fn history(&self, py: Python<'_>) -> CalibrationHistory {
+        CalibrationHistory::new(py, self.inner.history())
     }
 
     /// Frame pairs collected.
@@ -1324,8 +1492,21 @@ mod tests {
 
     #[test]
     fn settings_and_start_are_checked() {
-        assert!(solver_settings(solver_defaults()).is_ok());
-        assert!(stable_rule(stable_rule_defaults()).is_ok());
+        let (s, r) = (SolverSettings::default(), StableRule::default());
+        let s = (
+            s.huber,
+            s.max_iterations,
+            s.step_tolerance,
+            s.observable_ratio,
+        );
+        assert!(solver_settings(s).is_ok());
+        let r = (
+            r.min_pairs,
+            r.sigma_fraction,
+            r.step_fraction,
+            r.consecutive,
+        );
+        assert!(stable_rule(r).is_ok());
         let err = solver_settings((f64::NAN, 5, 0.01, 0.5)).expect_err("NaN huber");
         assert_eq!(
             err.to_string(),
@@ -1374,11 +1555,5 @@ mod tests {
                 "{cause}"
             );
         });
-    }
-
-    #[test]
-    fn rig_errors_name_the_source() {
-        let err = rig_from_json("{}", "RigConfig").expect_err("empty");
-        assert!(err.to_string().starts_with("RigConfig: "), "{err}");
     }
 }

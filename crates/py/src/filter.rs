@@ -24,13 +24,14 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyType;
 use rig_model::odometry::OdomSample;
-use rig_model::{Measurement, N_CAMERA, Param, Rig};
+use rig_model::{Measurement, N_CAMERA, Param};
 use vslam_ekf::{
     CameraCovariance, CameraStart, CandidateSettings, Candidates, CovarianceUpdate, Ekf,
     FrameReport, Health, LandmarkId, Settings, UpdateReport,
 };
 
 use crate::input_error;
+use crate::rig::PyRig;
 
 /// Fields of a `(M, 4)` measurement row, in column order.
 const MEASUREMENT_FIELDS: [&str; 4] = ["uL", "vL", "uR", "vR"];
@@ -50,11 +51,6 @@ const ERROR_CLASS: &str = "Error";
 /// `stereonav._errors.Error`, imported on first use.
 static ERROR: PyOnceLock<Py<PyType>> = PyOnceLock::new();
 
-/// [`Settings`] as passed: `(gate_probability, nis_window, max_consecutive_rejections,
-/// covariance_update)`.
-type SettingsTuple = (f64, usize, u32, String);
-/// [`CandidateSettings`] as passed: `(frames_to_confirm, consistency_probability)`.
-type CandidateTuple = (u32, f64);
 /// The start camera as passed: `(camera (10,), covariance (10, 10))`.
 type StartArrays<'py> = (PyReadonlyArray1<'py, f64>, PyReadonlyArray2<'py, f64>);
 /// Odometry as passed: `t_us` (S,) and `vx, vy, vtheta` (S, 3).
@@ -84,29 +80,9 @@ type LandmarkTuple<'py> = (
     Bound<'py, PyArray3<f64>>,
     Bound<'py, PyArray1<u64>>,
 );
-/// A [`Health`] handed back, its fields in declaration order.
-type HealthTuple = (
-    u64,
-    u64,
-    u64,
-    u64,
-    u64,
-    u64,
-    usize,
-    usize,
-    Option<f64>,
-    Option<f64>,
-    bool,
-    bool,
-);
 /// A predicted measurement (4,) with a matrix: its innovation covariance (4, 4) or its
 /// Jacobian (4, n).
 type PredictedTuple<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
-/// The defaults of every keyword: `(gate_probability, nis_window,
-/// max_consecutive_rejections, covariance_update, frames_to_confirm,
-/// consistency_probability)`.
-type DefaultsTuple = (f64, usize, u32, &'static str, u32, f64);
-
 /// `stereonav.Error(message)`, or a plain `RuntimeError` (caused by the import error) if that
 /// class cannot be imported.
 pub(crate) fn stereonav_error(py: Python<'_>, message: String) -> PyErr {
@@ -259,22 +235,82 @@ fn camera_start(
     })
 }
 
-/// The filter's [`Settings`] from the keyword values; ranges are checked by the filter.
-fn settings(
-    (gate_probability, nis_window, max_consecutive_rejections, form): SettingsTuple,
-) -> Result<Settings, String> {
-    let covariance_update = COVARIANCE_UPDATES
+/// The [`CovarianceUpdate`] of its name.
+fn covariance_form(form: &str) -> Result<CovarianceUpdate, String> {
+    COVARIANCE_UPDATES
         .iter()
-        .find(|(name, _)| *name == form.as_str())
+        .find(|(name, _)| *name == form)
         .map(|(_, f)| *f)
-        .ok_or_else(|| unknown_form(&form))?;
-    Ok(Settings {
-        gate_probability,
-        nis_window,
-        max_consecutive_rejections,
-        covariance_update,
-        ..Settings::default()
-    })
+        .ok_or_else(|| unknown_form(form))
+}
+
+/// The settings of [`Filter`] (`vslam_ekf::Settings` and `CandidateSettings`); a keyword left
+/// out takes the Rust default. Ranges are checked by the filter when it is made.
+#[pyclass(name = "FilterSettings", module = "stereonav._native", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub(crate) struct PyFilterSettings {
+    /// Probability mass inside each observation's innovation gate (4 dof), in (0, 1).
+    gate_probability: f64,
+    /// Gate outcomes kept for the health's NIS statistics.
+    nis_window: usize,
+    /// A landmark rejected this many times in a row is removed as false.
+    max_consecutive_rejections: u32,
+    /// Form of the covariance update: `"auto"`, `"joseph"` or `"factored"`.
+    covariance_update: &'static str,
+    /// Consecutive frames with consistent triangulations before a track becomes a landmark.
+    frames_to_confirm: u32,
+    /// Probability mass inside the consistency gate of a candidate's world points (3 dof).
+    consistency_probability: f64,
+}
+
+#[pymethods]
+impl PyFilterSettings {
+    #[new]
+    #[pyo3(signature = (*, gate_probability=None, nis_window=None, max_consecutive_rejections=None, covariance_update=None, frames_to_confirm=None, consistency_probability=None))]
+    fn new(
+        py: Python<'_>,
+        gate_probability: Option<f64>,
+        nis_window: Option<usize>,
+        max_consecutive_rejections: Option<u32>,
+        covariance_update: Option<&str>,
+        frames_to_confirm: Option<u32>,
+        consistency_probability: Option<f64>,
+    ) -> PyResult<Self> {
+        let s = Settings::default();
+        let c = CandidateSettings::default();
+        let form = match covariance_update {
+            Some(name) => covariance_form(name).map_err(|m| input_error(py, m))?,
+            None => s.covariance_update,
+        };
+        Ok(Self {
+            gate_probability: gate_probability.unwrap_or(s.gate_probability),
+            nis_window: nis_window.unwrap_or(s.nis_window),
+            max_consecutive_rejections: max_consecutive_rejections
+                .unwrap_or(s.max_consecutive_rejections),
+            covariance_update: covariance_update_name(form),
+            frames_to_confirm: frames_to_confirm.unwrap_or(c.frames_to_confirm),
+            consistency_probability: consistency_probability.unwrap_or(c.consistency_probability),
+        })
+    }
+}
+
+impl PyFilterSettings {
+    fn settings(&self) -> Result<(Settings, CandidateSettings), String> {
+        Ok((
+            Settings {
+                gate_probability: self.gate_probability,
+                nis_window: self.nis_window,
+                max_consecutive_rejections: self.max_consecutive_rejections,
+                covariance_update: covariance_form(self.covariance_update)?,
+                ..Settings::default()
+            },
+            CandidateSettings {
+                frames_to_confirm: self.frames_to_confirm,
+                consistency_probability: self.consistency_probability,
+                ..CandidateSettings::default()
+            },
+        ))
+    }
 }
 
 fn unknown_form(form: &str) -> String {
@@ -324,21 +360,54 @@ fn frame_tuple<'py>(py: Python<'py>, report: &FrameReport) -> FrameTuple<'py> {
     )
 }
 
-fn health_tuple(h: &Health) -> HealthTuple {
-    (
-        h.updates,
-        h.refused_updates,
-        h.accepted,
-        h.rejected,
-        h.landmarks_added,
-        h.landmarks_removed,
-        h.window_observations,
-        h.window_rejected,
-        h.window_mean_nis_per_dof,
-        h.window_nis_bound,
-        h.nis_too_high,
-        h.diverged,
-    )
+/// The filter's health (`vslam_ekf::Health`): counters, the NIS over a sliding window, a
+/// divergence flag.
+#[pyclass(name = "Health", module = "stereonav._native", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub(crate) struct PyHealth {
+    /// Updates applied.
+    updates: u64,
+    /// Updates refused (covariance not positive definite, or a result not finite).
+    refused_updates: u64,
+    /// Landmark observations accepted by the gate, in all.
+    accepted: u64,
+    /// Landmark observations rejected by the gate, in all.
+    rejected: u64,
+    /// Landmarks added, in all.
+    landmarks_added: u64,
+    /// Landmarks removed, in all.
+    landmarks_removed: u64,
+    /// Gate outcomes in the window.
+    window_observations: usize,
+    /// Rejections among them.
+    window_rejected: usize,
+    /// Mean NIS per degree of freedom of the accepted observations in the window, or None.
+    window_mean_nis_per_dof: Option<f64>,
+    /// That mean's 99.9 % bound, or None.
+    window_nis_bound: Option<f64>,
+    /// The window mean is above its bound.
+    nis_too_high: bool,
+    /// `nis_too_high`, or an update was ever refused.
+    diverged: bool,
+}
+
+impl From<&Health> for PyHealth {
+    fn from(h: &Health) -> Self {
+        Self {
+            updates: h.updates,
+            refused_updates: h.refused_updates,
+            accepted: h.accepted,
+            rejected: h.rejected,
+            landmarks_added: h.landmarks_added,
+            landmarks_removed: h.landmarks_removed,
+            window_observations: h.window_observations,
+            window_rejected: h.window_rejected,
+            window_mean_nis_per_dof: h.window_mean_nis_per_dof,
+            window_nis_bound: h.window_nis_bound,
+            nis_too_high: h.nis_too_high,
+            diverged: h.diverged,
+        }
+    }
 }
 
 /// A C-ordered copy of a dense matrix.
@@ -394,39 +463,27 @@ impl Filter {
 
 #[pymethods]
 impl Filter {
-    /// A filter for the rig (its file's tables as JSON; `rig_source` names it in errors),
-    /// starting from `start = (camera (10,), covariance (10, 10))` (phase 1's hand-over) or,
-    /// when None, from the rig's nominal camera and prior sigmas. `settings` is
-    /// `(gate_probability, nis_window, max_consecutive_rejections, covariance_update)`,
-    /// `candidates` `(frames_to_confirm, consistency_probability)`. Raises
-    /// `stereonav.InputError` for a bad rig, start or setting.
+    /// A filter for the rig, starting from `start = (camera (10,), covariance (10, 10))`
+    /// (phase 1's hand-over) or, when None, from the rig's nominal camera and prior sigmas.
+    /// Raises `stereonav.InputError` for a bad start or setting.
     #[new]
-    #[pyo3(signature = (rig_json, rig_source, start, settings, candidates))]
+    #[pyo3(signature = (rig, start, settings))]
     fn new(
         py: Python<'_>,
-        rig_json: &str,
-        rig_source: &str,
+        rig: PyRef<'_, PyRig>,
         start: Option<StartArrays<'_>>,
-        settings: SettingsTuple,
-        candidates: CandidateTuple,
+        settings: PyRef<'_, PyFilterSettings>,
     ) -> PyResult<Self> {
-        let rig =
-            Rig::from_json_str(rig_json, rig_source).map_err(|e| input_error(py, e.to_string()))?;
+        let rig = &rig.rig;
         let start = match &start {
             Some((camera, cov)) => {
                 camera_start(&camera.as_array(), &cov.as_array()).map_err(|m| input_error(py, m))?
             }
-            None => CameraStart::from_prior(&rig),
+            None => CameraStart::from_prior(rig),
         };
-        let settings = self::settings(settings).map_err(|m| input_error(py, m))?;
-        let (frames_to_confirm, consistency_probability) = candidates;
-        let candidates = Candidates::new(CandidateSettings {
-            frames_to_confirm,
-            consistency_probability,
-            ..CandidateSettings::default()
-        })
-        .map_err(|e| filter_error(py, e))?;
-        let ekf = Ekf::new(&rig, &start, settings).map_err(|e| filter_error(py, e))?;
+        let (settings, candidates) = settings.settings().map_err(|m| input_error(py, m))?;
+        let candidates = Candidates::new(candidates).map_err(|e| filter_error(py, e))?;
+        let ekf = Ekf::new(rig, &start, settings).map_err(|e| filter_error(py, e))?;
         Ok(Self {
             state: Mutex::new(State { ekf, candidates }),
         })
@@ -695,8 +752,8 @@ impl Filter {
     /// landmarks_removed, window_observations, window_rejected, window_mean_nis_per_dof,
     /// window_nis_bound, nis_too_high, diverged)`.
     #[getter]
-    fn health(&self) -> HealthTuple {
-        health_tuple(&self.locked().ekf.health())
+    fn health(&self) -> PyHealth {
+        PyHealth::from(&self.locked().ekf.health())
     }
 
     /// Every `(track, landmark)` binding, (K, 2), by track.
@@ -728,31 +785,10 @@ impl Filter {
     /// `stereonav.InputError` for another name.
     #[setter]
     fn set_covariance_update(&mut self, py: Python<'_>, form: &str) -> PyResult<()> {
-        let form = COVARIANCE_UPDATES
-            .iter()
-            .find(|(name, _)| *name == form)
-            .map(|(_, f)| *f)
-            .ok_or_else(|| input_error(py, unknown_form(form)))?;
+        let form = covariance_form(form).map_err(|m| input_error(py, m))?;
         self.state_mut().ekf.set_covariance_update(form);
         Ok(())
     }
-}
-
-/// The default of every keyword of `stereonav.Filter`: `(gate_probability, nis_window,
-/// max_consecutive_rejections, covariance_update, frames_to_confirm,
-/// consistency_probability)`.
-#[pyfunction]
-pub(crate) fn filter_defaults() -> DefaultsTuple {
-    let s = Settings::default();
-    let c = CandidateSettings::default();
-    (
-        s.gate_probability,
-        s.nis_window,
-        s.max_consecutive_rejections,
-        covariance_update_name(s.covariance_update),
-        c.frames_to_confirm,
-        c.consistency_probability,
-    )
 }
 
 #[cfg(test)]
@@ -801,10 +837,9 @@ mod tests {
     fn covariance_update_names_round_trip() {
         for (name, form) in COVARIANCE_UPDATES {
             assert_eq!(covariance_update_name(form), name);
-            let s = settings((0.999, 100, 5, name.to_string())).expect("valid");
-            assert_eq!(s.covariance_update, form);
+            assert_eq!(covariance_form(name), Ok(form));
         }
-        let err = settings((0.999, 100, 5, "Joseph".to_string())).expect_err("case");
+        let err = covariance_form("Joseph").expect_err("case");
         assert!(err.contains("\"Joseph\""), "{err}");
     }
 }

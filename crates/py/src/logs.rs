@@ -25,19 +25,7 @@ use vehicle_log::{OdomSample, Record, TruthCamera, TruthLandmark, TruthPose};
 
 use crate::calibration::replay_error;
 use crate::input_error;
-use crate::rig::rig_tuple;
-
-/// A rig as `stereonav._native.load_rig` returns it: `(width, height, nominal camera (10
-/// values), estimated parameter names, prior sigmas [(name, sigma)], noise (pixel, velocity,
-/// yaw_rate))`.
-type RigTuple = (
-    u32,
-    u32,
-    Vec<f64>,
-    Vec<&'static str>,
-    Vec<(&'static str, f64)>,
-    (f64, f64, f64),
-);
+use crate::rig::PyRig;
 
 /// Timestamps `(K,)` and values `(K, 3)` of a time series.
 type TimeSeries<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
@@ -365,15 +353,14 @@ impl LogContents {
         self.rig_json.as_deref()
     }
 
-    /// The first `/rig` message as a rig, in the form of `load_rig`, or None when the log has
-    /// none. Raises `stereonav.InputError` naming the key and the problem when it is not a
-    /// valid rig.
-    fn rig(&self, py: Python<'_>) -> PyResult<Option<RigTuple>> {
+    /// The first `/rig` message as a rig, or None when the log has none. Raises
+    /// `stereonav.InputError` naming the key and the problem when it is not a valid rig.
+    fn rig(&self, py: Python<'_>) -> PyResult<Option<PyRig>> {
         self.rig_json
             .as_deref()
             .map(|text| {
                 Rig::from_json_str(text, &self.rig_source())
-                    .map(|rig| rig_tuple(&rig))
+                    .map(|rig| PyRig { rig })
                     .map_err(|e| input_error(py, e.to_string()))
             })
             .transpose()

@@ -32,14 +32,15 @@ use pyo3::prelude::*;
 use replay::{
     CameraSample, FrameEstimate, LandmarkEstimate, NavSettings, ParamEstimate, Phase, Replay,
 };
+use rig_model::N_CAMERA;
 use rig_model::odometry::OdomSample;
-use rig_model::{N_CAMERA, Rig};
 use selfcal::smoother::SmootherSettings;
 use track::Pixel;
 
 use crate::calibration::replay_error;
 use crate::filter::stereonav_error;
 use crate::input_error;
+use crate::rig::PyRig;
 
 /// The phases in the order of their codes in the per-frame arrays (`phase[i]` indexes this).
 pub(crate) const PHASES: [Phase; 2] = [Phase::Calibrating, Phase::Navigating];
@@ -58,18 +59,6 @@ type LandmarkTuple<'py> = (
     Bound<'py, PyArray3<f64>>,
     U64Array<'py>,
 );
-/// Every frame of a replay: `t_us` (F,), phase codes (F,), poses `X, Y, theta` (F, 3), pose
-/// covariances (F, 3, 3), accepted observations (F,), rejected observations (F,), landmarks
-/// in the map after the frame (F,).
-type FramesTuple<'py> = (
-    U64Array<'py>,
-    Bound<'py, PyArray1<u8>>,
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray3<f64>>,
-    U64Array<'py>,
-    U64Array<'py>,
-    U64Array<'py>,
-);
 /// Every accepted observation of a replay: `t_us` (K,), landmark ids (K,), NIS (K,).
 type NisTuple<'py> = (U64Array<'py>, U64Array<'py>, F64Array<'py>);
 /// The camera parameters over time: `t_us` (K,), phase codes (K,), values (K, 10), sigmas
@@ -82,21 +71,6 @@ type CameraHistoryTuple<'py> = (
 );
 /// Every camera parameter: values (10,) and sigmas (10,), `Param::ALL` order.
 type CameraTuple<'py> = (F64Array<'py>, F64Array<'py>);
-/// A `nav::FrameOutcome` handed back: accepted landmark ids and NIS, rejected, added and
-/// removed landmark ids, `(track, landmark)` pairs rematched (K, 2), and the flags `solved`,
-/// `switched`, `no_odometry`.
-type OutcomeTuple<'py> = (
-    U64Array<'py>,
-    F64Array<'py>,
-    U64Array<'py>,
-    U64Array<'py>,
-    U64Array<'py>,
-    Bound<'py, PyArray2<u64>>,
-    bool,
-    bool,
-    bool,
-);
-
 /// The code of a phase: its index in [`PHASES`].
 fn phase_code(phase: Phase) -> u8 {
     match phase {
@@ -188,23 +162,57 @@ fn landmark_tuple<'py>(py: Python<'py>, all: &[LandmarkEstimate]) -> LandmarkTup
     )
 }
 
-fn frames_tuple<'py>(py: Python<'py>, frames: &[FrameEstimate]) -> FramesTuple<'py> {
-    let n = frames.len();
-    let column = |f: fn(&FrameEstimate) -> u64| frames.iter().map(f).collect::<Vec<_>>();
-    (
-        column(|f| f.t_us).into_pyarray(py),
-        frames
-            .iter()
-            .map(|f| phase_code(f.phase))
-            .collect::<Vec<_>>()
-            .into_pyarray(py),
-        Array2::from_shape_fn((n, 3), |(i, k)| frames[i].pose[k]).into_pyarray(py),
-        Array3::from_shape_fn((n, 3, 3), |(i, a, b)| frames[i].pose_covariance[a][b])
-            .into_pyarray(py),
-        column(|f| f.nis.len() as u64).into_pyarray(py),
-        column(|f| u64::from(f.rejected)).into_pyarray(py),
-        column(|f| f.landmarks as u64).into_pyarray(py),
-    )
+/// Every frame of a replay, one row a frame (`replay::FrameEstimate`).
+#[pyclass(module = "stereonav._native", frozen, get_all)]
+pub(crate) struct ReplayFrames {
+    /// `(F,)`: the frame's time.
+    t_us: Py<PyArray1<u64>>,
+    /// `(F,)`: the phase, an index into `phase_names()`.
+    phase: Py<PyArray1<u8>>,
+    /// `(F, 3)`: the pose `X, Y, theta` after the frame.
+    pose: Py<PyArray2<f64>>,
+    /// `(F, 3, 3)`: its covariance.
+    pose_covariance: Py<PyArray3<f64>>,
+    /// `(F,)`: landmark observations the gate let through.
+    accepted: Py<PyArray1<u64>>,
+    /// `(F,)`: landmark observations the gate left out.
+    rejected: Py<PyArray1<u64>>,
+    /// `(F,)`: landmarks in the map after the frame.
+    landmarks: Py<PyArray1<u64>>,
+}
+
+impl ReplayFrames {
+    fn new(py: Python<'_>, frames: &[FrameEstimate]) -> Self {
+        let n = frames.len();
+        let column = |f: fn(&FrameEstimate) -> u64| {
+            frames
+                .iter()
+                .map(f)
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind()
+        };
+        Self {
+            t_us: column(|f| f.t_us),
+            phase: frames
+                .iter()
+                .map(|f| phase_code(f.phase))
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind(),
+            pose: Array2::from_shape_fn((n, 3), |(i, k)| frames[i].pose[k])
+                .into_pyarray(py)
+                .unbind(),
+            pose_covariance: Array3::from_shape_fn((n, 3, 3), |(i, a, b)| {
+                frames[i].pose_covariance[a][b]
+            })
+            .into_pyarray(py)
+            .unbind(),
+            accepted: column(|f| f.nis.len() as u64),
+            rejected: column(|f| u64::from(f.rejected)),
+            landmarks: column(|f| f.landmarks as u64),
+        }
+    }
 }
 
 fn nis_tuple<'py>(py: Python<'py>, frames: &[FrameEstimate]) -> NisTuple<'py> {
@@ -264,30 +272,25 @@ pub(crate) fn phase_names() -> Vec<&'static str> {
 /// order by data time, then the navigator frame by frame (phase 1, the switch, phase 2),
 /// with the errors against the simulator's truth when the log has it.
 ///
-/// `rig_json` is a rig file's tables as JSON (`rig_source` names it in errors); None uses the
-/// log's `/rig` message. `skip_phase1` starts phase 2 at the first frame from the rig's
+/// `rig` None uses the log's `/rig` message. `skip_phase1` starts phase 2 at the first frame from the rig's
 /// nominal values and priors; `phase1_frames` bounds phase 1's batch (default when None);
 /// `consider_camera` keeps phase 2 from refining the camera parameters
 /// (`vslam_ekf::CameraUpdate::Consider`). Raises `stereonav.InputError` for a log that cannot be read or is not
 /// a vehicle log, a bad rig or a setting out of range; a log cut short is replayed as far as
 /// it goes, with a warning. The GIL is released during the run.
 #[pyfunction]
-#[pyo3(name = "replay", signature = (log_path, rig_json, rig_source, skip_phase1, phase1_frames, consider_camera))]
+#[pyo3(name = "replay", signature = (log_path, rig, skip_phase1, phase1_frames, consider_camera))]
 pub(crate) fn replay_log(
     py: Python<'_>,
     log_path: PathBuf,
-    rig_json: Option<&str>,
-    rig_source: &str,
+    rig: Option<PyRef<'_, PyRig>>,
     skip_phase1: bool,
     phase1_frames: Option<usize>,
     consider_camera: bool,
 ) -> PyResult<ReplayResult> {
     let settings = nav_settings(skip_phase1, phase1_frames, consider_camera)
         .map_err(|e| input_error(py, e.to_string()))?;
-    let rig = rig_json
-        .map(|text| Rig::from_json_str(text, rig_source))
-        .transpose()
-        .map_err(|e| input_error(py, e.to_string()))?;
+    let rig = rig.map(|r| r.rig.clone());
     let replay = py
         .detach(|| replay::replay_log(&log_path, rig, &settings, &mut |_, _| {}))
         .map_err(|e| replay_error(py, &e))?;
@@ -308,11 +311,10 @@ impl ReplayResult {
         replay::summary_json(&self.replay).to_string()
     }
 
-    /// Every frame: `(t_us (F,), phase (F,) codes into phase_names(), pose (F, 3),
-    /// pose_covariance (F, 3, 3), accepted (F,), rejected (F,), landmarks (F,))`.
+    /// Every frame, as columns.
     #[getter]
-    fn frames<'py>(&self, py: Python<'py>) -> FramesTuple<'py> {
-        frames_tuple(py, &self.replay.frames)
+    fn frames(&self, py: Python<'_>) -> ReplayFrames {
+        ReplayFrames::new(py, &self.replay.frames)
     }
 
     /// Every accepted observation: `(t_us (K,), landmark id (K,), NIS (K,))`, in frame order.
@@ -478,36 +480,67 @@ fn pixels(side: &str, a: &ArrayView2<'_, f64>) -> Result<Vec<Pixel>, String> {
     Ok(out)
 }
 
-fn outcome_tuple<'py>(py: Python<'py>, o: &nav::FrameOutcome) -> OutcomeTuple<'py> {
-    let ids = |ids: &[vslam_ekf::LandmarkId]| {
-        ids.iter()
-            .map(|id| id.0)
-            .collect::<Vec<_>>()
+/// What one frame of the navigator did (`nav::FrameOutcome`).
+#[pyclass(module = "stereonav._native", frozen, get_all)]
+pub(crate) struct FrameOutcome {
+    /// `(A,)`: landmarks updated at this frame.
+    accepted: Py<PyArray1<u64>>,
+    /// `(A,)`: their NIS (4 dof).
+    accepted_nis: Py<PyArray1<f64>>,
+    /// `(R,)`: landmarks whose observation the gate left out.
+    rejected: Py<PyArray1<u64>>,
+    /// `(K,)`: landmarks added.
+    added: Py<PyArray1<u64>>,
+    /// `(D,)`: landmarks removed as false.
+    removed: Py<PyArray1<u64>>,
+    /// `(M, 2)`: `(track, landmark)` pairs bound by map matching.
+    rematched: Py<PyArray2<u64>>,
+    /// Phase 1 solved at this frame.
+    solved: bool,
+    /// The switch to phase 2 happened at this frame.
+    switched: bool,
+    /// The odometry did not reach back to the previous frame: the pose was held.
+    no_odometry: bool,
+}
+
+impl FrameOutcome {
+    fn new(py: Python<'_>, o: &nav::FrameOutcome) -> Self {
+        let ids = |ids: &[vslam_ekf::LandmarkId]| {
+            ids.iter()
+                .map(|id| id.0)
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind()
+        };
+        Self {
+            accepted: o
+                .accepted
+                .iter()
+                .map(|(id, _)| id.0)
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind(),
+            accepted_nis: o
+                .accepted
+                .iter()
+                .map(|(_, nis)| *nis)
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind(),
+            rejected: ids(&o.rejected),
+            added: ids(&o.added),
+            removed: ids(&o.removed),
+            rematched: Array2::from_shape_fn((o.rematched.len(), 2), |(i, k)| {
+                let (track, id) = o.rematched[i];
+                if k == 0 { track } else { id.0 }
+            })
             .into_pyarray(py)
-    };
-    (
-        o.accepted
-            .iter()
-            .map(|(id, _)| id.0)
-            .collect::<Vec<_>>()
-            .into_pyarray(py),
-        o.accepted
-            .iter()
-            .map(|(_, nis)| *nis)
-            .collect::<Vec<_>>()
-            .into_pyarray(py),
-        ids(&o.rejected),
-        ids(&o.added),
-        ids(&o.removed),
-        Array2::from_shape_fn((o.rematched.len(), 2), |(i, k)| {
-            let (track, id) = o.rematched[i];
-            if k == 0 { track } else { id.0 }
-        })
-        .into_pyarray(py),
-        o.solved,
-        o.switched,
-        o.no_odometry,
-    )
+            .unbind(),
+            solved: o.solved,
+            switched: o.switched,
+            no_odometry: o.no_odometry,
+        }
+    }
 }
 
 /// The navigator and the newest odometry time it took (so that a batch of odometry can be
@@ -546,34 +579,31 @@ impl Navigator {
         t_us: u64,
         left: &[Pixel],
         right: &[Pixel],
-    ) -> PyResult<OutcomeTuple<'py>> {
+    ) -> PyResult<FrameOutcome> {
         let navigator = &mut self.state_mut().navigator;
         let outcome = py
             .detach(|| navigator.push_frame(t_us, left, right))
             .map_err(|e| step_error(py, e))?;
-        Ok(outcome_tuple(py, &outcome))
+        Ok(FrameOutcome::new(py, &outcome))
     }
 }
 
 #[pymethods]
 impl Navigator {
-    /// A navigator for the rig (its file's tables as JSON; `rig_source` names it in errors),
-    /// at the world origin. `skip_phase1` starts phase 2 at the first frame from the rig's
+    /// A navigator for the rig, at the world origin. `skip_phase1` starts phase 2 at the first frame from the rig's
     /// nominal values and priors; `phase1_frames` bounds phase 1's batch (default when None);
     /// `consider_camera` keeps phase 2 from refining the camera
     /// parameters. Raises `stereonav.InputError` for a bad rig or setting.
     #[new]
-    #[pyo3(signature = (rig_json, rig_source, skip_phase1, phase1_frames, consider_camera))]
+    #[pyo3(signature = (rig, skip_phase1, phase1_frames, consider_camera))]
     fn new(
         py: Python<'_>,
-        rig_json: &str,
-        rig_source: &str,
+        rig: PyRef<'_, PyRig>,
         skip_phase1: bool,
         phase1_frames: Option<usize>,
         consider_camera: bool,
     ) -> PyResult<Self> {
-        let rig =
-            Rig::from_json_str(rig_json, rig_source).map_err(|e| input_error(py, e.to_string()))?;
+        let rig = rig.rig.clone();
         let settings = nav_settings(skip_phase1, phase1_frames, consider_camera)
             .map_err(|e| input_error(py, e.to_string()))?;
         let navigator =
@@ -634,7 +664,7 @@ impl Navigator {
         t_us: u64,
         left: PyReadonlyArray2<'py, f64>,
         right: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<OutcomeTuple<'py>> {
+    ) -> PyResult<FrameOutcome> {
         let left = pixels("left", &left.as_array()).map_err(|m| input_error(py, m))?;
         let right = pixels("right", &right.as_array()).map_err(|m| input_error(py, m))?;
         self.step(py, t_us, &left, &right)

@@ -3,8 +3,9 @@
 
 use nalgebra::Vector3;
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use rig_model::{CameraParams, N_CAMERA, Param, Pose2, Rig};
 
 use crate::input_error;
@@ -224,50 +225,126 @@ pub(crate) fn rectify_points<'py>(
     Ok(out.into_pyarray(py))
 }
 
-/// Reads a rig file (TOML). Returns `(width, height, nominal camera (10 values), estimated
-/// parameter names, prior sigmas {name: sigma}, noise (pixel, velocity, yaw_rate))`; raises
-/// `stereonav.InputError` naming the file, the key and the problem.
-#[pyfunction]
-#[allow(clippy::type_complexity)]
-pub(crate) fn load_rig(
-    py: Python<'_>,
-    path: std::path::PathBuf,
-) -> PyResult<(
-    u32,
-    u32,
-    Vec<f64>,
-    Vec<&'static str>,
-    Vec<(&'static str, f64)>,
-    (f64, f64, f64),
-)> {
-    let rig = Rig::load(&path).map_err(|e| input_error(py, e.to_string()))?;
-    Ok(rig_tuple(&rig))
+/// A rig file (`vehicle-interfaces.md` section 3), checked: image size, nominal camera, the
+/// parameters to estimate, their priors and the noise model. Every function of the module that
+/// needs a rig takes this object (see `stereonav.RigConfig`, which builds it).
+#[pyclass(name = "Rig", module = "stereonav._native", frozen)]
+pub(crate) struct PyRig {
+    pub(crate) rig: Rig,
 }
 
-#[allow(clippy::type_complexity)]
-pub(crate) fn rig_tuple(
-    rig: &Rig,
-) -> (
-    u32,
-    u32,
-    Vec<f64>,
-    Vec<&'static str>,
-    Vec<(&'static str, f64)>,
-    (f64, f64, f64),
-) {
-    let prior = rig
-        .estimate
-        .iter()
-        .filter_map(|p| rig.prior[p.index()].map(|s| (p.name(), s)))
-        .collect();
-    (
-        rig.width,
-        rig.height,
-        crate::camera_values(&rig.nominal),
-        rig.estimate.iter().map(|p| p.name()).collect(),
-        prior,
-        (rig.noise.pixel, rig.noise.velocity, rig.noise.yaw_rate),
-    )
+#[pymethods]
+impl PyRig {
+    /// A rig from the values of a rig file's tables, checked as the file is (the same
+    /// `stereonav.InputError`, `source` naming the values in it).
+    #[new]
+    #[pyo3(signature = (*, width, height, nominal, estimate, prior, pixel_noise, velocity_noise, yaw_rate_noise, source))]
+    #[allow(clippy::too_many_arguments)] // the fields of a rig file, by keyword
+    fn new(
+        py: Python<'_>,
+        width: i64,
+        height: i64,
+        nominal: PyReadonlyArray1<'_, f64>,
+        estimate: Vec<String>,
+        prior: Vec<(String, f64)>,
+        pixel_noise: f64,
+        velocity_noise: f64,
+        yaw_rate_noise: f64,
+        source: &str,
+    ) -> PyResult<Self> {
+        let values = nominal.as_array();
+        if values.len() != N_CAMERA {
+            return Err(input_error(
+                py,
+                format!(
+                    "{source}: nominal has {} values, expected {N_CAMERA}",
+                    values.len()
+                ),
+            ));
+        }
+        let nominal = crate::camera_from_values(
+            &values.iter().copied().collect::<Vec<_>>(),
+            &rig_model::Vehicle::NOMINAL,
+        );
+        let estimate: Vec<&str> = estimate.iter().map(String::as_str).collect();
+        let prior: Vec<(&str, f64)> = prior.iter().map(|(n, s)| (n.as_str(), *s)).collect();
+        let values = rig_model::RigValues {
+            width,
+            height,
+            nominal,
+            estimate: &estimate,
+            prior: &prior,
+            noise: rig_model::Noise {
+                pixel: pixel_noise,
+                velocity: velocity_noise,
+                yaw_rate: yaw_rate_noise,
+            },
+        };
+        let rig = Rig::from_values(&values, source).map_err(|e| input_error(py, e.to_string()))?;
+        Ok(Self { rig })
+    }
+
+    /// Reads a rig file (TOML); raises `stereonav.InputError` naming the file, the key and the
+    /// problem.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Self> {
+        let rig = Rig::load(&path).map_err(|e| input_error(py, e.to_string()))?;
+        Ok(Self { rig })
+    }
+
+    /// Image width, pixels.
+    #[getter]
+    fn width(&self) -> u32 {
+        self.rig.width
+    }
+
+    /// Image height, pixels.
+    #[getter]
+    fn height(&self) -> u32 {
+        self.rig.height
+    }
+
+    /// The nominal camera, 10 values in `CAMERA_PARAMETERS` order.
+    #[getter]
+    fn nominal<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        crate::camera_values(&self.rig.nominal).into_pyarray(py)
+    }
+
+    /// Names of the estimated parameters, in `CAMERA_PARAMETERS` order.
+    #[getter]
+    fn estimate(&self) -> Vec<&'static str> {
+        self.rig.estimate.iter().map(|p| p.name()).collect()
+    }
+
+    /// 1-sigma prior of each estimated parameter, by name, in the order of `estimate`.
+    #[getter]
+    fn prior<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let out = PyDict::new(py);
+        for p in &self.rig.estimate {
+            if let Some(s) = self.rig.prior[p.index()] {
+                out.set_item(p.name(), s)?;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Pixel noise of each of uL, vL, uR, vR (px, 1 sigma).
+    #[getter]
+    fn pixel_noise(&self) -> f64 {
+        self.rig.noise.pixel
+    }
+
+    /// Odometry velocity noise per sample (m/s, 1 sigma).
+    #[getter]
+    fn velocity_noise(&self) -> f64 {
+        self.rig.noise.velocity
+    }
+
+    /// Odometry yaw-rate noise per sample (rad/s, 1 sigma).
+    #[getter]
+    fn yaw_rate_noise(&self) -> f64 {
+        self.rig.noise.yaw_rate
+    }
 }
 
 /// The names of the 10 camera parameters, in the order of the camera arrays.

@@ -4,22 +4,65 @@
 use fpga_link::{Decoder, Event, Feature, Header, MAX_PACKET_LEN};
 use numpy::PyArray1;
 use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
 use pyo3::types::PyBytes;
 
 use crate::{FEATURE_RECORD_BYTES, input_error};
 
-/// A decoded frame as plain data: `(frame, t_us, flags, lost_before, left_records,
-/// right_records)`, the records packed as in the wire format.
+/// A decoded frame as plain data, the records packed as in the wire format.
 type OwnedFrame = (u32, u64, u8, u32, Vec<u8>, Vec<u8>);
-/// The same, handed to Python with the records as 1-D `uint8` arrays.
-type PyFrame<'py> = (
-    u32,
-    u64,
-    u8,
-    u32,
-    Bound<'py, PyArray1<u8>>,
-    Bound<'py, PyArray1<u8>>,
-);
+
+/// `stereonav._arrays`, the module of the package's NumPy dtypes.
+const ARRAYS_MODULE: &str = "stereonav._arrays";
+/// Its dtype of one feature record.
+const FEATURE_DTYPE: &str = "FEATURE_DTYPE";
+/// `stereonav._arrays.FEATURE_DTYPE`, imported on first use.
+static FEATURE_DTYPE_OBJECT: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+
+/// One good packet: a stereo frame's features as the board sent them (`board-icd.md`
+/// section 3).
+#[pyclass(module = "stereonav._native", frozen, get_all)]
+pub(crate) struct Frame {
+    /// Frame counter (u32, +1 per stereo frame, wraps).
+    frame: u32,
+    /// Mid-exposure timestamp, microseconds, on the vehicle's clock.
+    t_us: u64,
+    /// Bit 0: the left camera overflowed `MAX_FEATURES`; bit 1: the right one did.
+    flags: u8,
+    /// Frames lost just before this one (gap in counters modulo 2**32).
+    lost_before: u32,
+    /// The left camera's features, `(N,)` of `FEATURE_DTYPE`, in the board's order.
+    left: Py<PyAny>,
+    /// The right camera's features, `(N,)` of `FEATURE_DTYPE`, in the board's order.
+    right: Py<PyAny>,
+}
+
+#[pymethods]
+impl Frame {
+    /// Whether the left camera had more features than `MAX_FEATURES`.
+    #[getter]
+    fn left_overflow(&self) -> bool {
+        self.flags & 1 != 0
+    }
+
+    /// Whether the right camera had more features than `MAX_FEATURES`.
+    #[getter]
+    fn right_overflow(&self) -> bool {
+        self.flags & 2 != 0
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        Ok(format!(
+            "Frame(frame={}, t_us={}, flags={}, lost_before={}, left={}, right={})",
+            self.frame,
+            self.t_us,
+            self.flags,
+            self.lost_before,
+            self.left.bind(py).repr()?,
+            self.right.bind(py).repr()?,
+        ))
+    }
+}
 
 fn own(frame: &fpga_link::Frame<'_>) -> OwnedFrame {
     let records = frame.feature_bytes();
@@ -35,18 +78,26 @@ fn own(frame: &fpga_link::Frame<'_>) -> OwnedFrame {
     )
 }
 
-fn to_python(py: Python<'_>, frames: Vec<OwnedFrame>) -> Vec<PyFrame<'_>> {
+/// A frame's packed records as a `(N,)` array of `stereonav._arrays.FEATURE_DTYPE`.
+pub(crate) fn feature_array(py: Python<'_>, records: Vec<u8>) -> PyResult<Py<PyAny>> {
+    let dtype = FEATURE_DTYPE_OBJECT.import(py, ARRAYS_MODULE, FEATURE_DTYPE)?;
+    Ok(PyArray1::from_vec(py, records)
+        .call_method1("view", (dtype,))?
+        .unbind())
+}
+
+fn to_python(py: Python<'_>, frames: Vec<OwnedFrame>) -> PyResult<Vec<Frame>> {
     frames
         .into_iter()
-        .map(|(frame, t_us, flags, lost, left, right)| {
-            (
+        .map(|(frame, t_us, flags, lost_before, left, right)| {
+            Ok(Frame {
                 frame,
                 t_us,
                 flags,
-                lost,
-                PyArray1::from_vec(py, left),
-                PyArray1::from_vec(py, right),
-            )
+                lost_before,
+                left: feature_array(py, left)?,
+                right: feature_array(py, right)?,
+            })
         })
         .collect()
 }
@@ -68,9 +119,9 @@ impl StreamDecoder {
         }
     }
 
-    /// Decodes a chunk of the stream (any size); returns the frames it completed as tuples
-    /// `(frame, t_us, flags, lost_before, left_records, right_records)`. The GIL is released.
-    fn push<'py>(&mut self, py: Python<'py>, data: &[u8]) -> Vec<PyFrame<'py>> {
+    /// Decodes a chunk of the stream (any size); returns the frames it completed. The GIL is
+    /// released.
+    fn push(&mut self, py: Python<'_>, data: &[u8]) -> PyResult<Vec<Frame>> {
         let decoder = &mut self.decoder;
         let frames = py.detach(|| {
             let mut frames = Vec::new();
@@ -90,7 +141,7 @@ impl StreamDecoder {
     }
 
     /// Ends the stream: a packet still incomplete is corrupt and its inside is searched.
-    fn finish<'py>(&mut self, py: Python<'py>) -> Vec<PyFrame<'py>> {
+    fn finish(&mut self, py: Python<'_>) -> PyResult<Vec<Frame>> {
         let mut frames = Vec::new();
         while let Some(event) = self.decoder.decode_end() {
             if let Event::Frame(frame) = event {

@@ -44,4 +44,4 @@ pub use rig::{
     project_with_jacobians, triangulate,
 };
 #[cfg(feature = "std")]
-pub use rig_file::RigFileError;
+pub use rig_file::{RigFileError, RigValues};

@@ -341,6 +341,24 @@ fn describe(v: &Value) -> String {
     }
 }
 
+/// The values of a rig file's tables as a program holds them, for [`Rig::from_values`]: the
+/// names of the estimated parameters and of the priors are not checked yet.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigValues<'a> {
+    /// `[camera] width`, pixels.
+    pub width: i64,
+    /// `[camera] height`, pixels.
+    pub height: i64,
+    /// `[camera]` and `[mount]` (the vehicle part is not used).
+    pub nominal: CameraParams,
+    /// `[estimate] parameters`, by name.
+    pub estimate: &'a [&'a str],
+    /// `[prior]`: name and 1-sigma of each estimated parameter.
+    pub prior: &'a [(&'a str, f64)],
+    /// `[noise]`.
+    pub noise: Noise,
+}
+
 impl Rig {
     /// Reads a rig file (TOML). Errors name the file, the key and what was wrong.
     pub fn load(path: &Path) -> Result<Self, RigFileError> {
@@ -385,6 +403,75 @@ impl Rig {
                         .to_string(),
             });
         };
+        Self::from_table(&root, source_name)
+    }
+
+    /// A rig from the values of a rig file's `[camera]`, `[mount]`, `[estimate]`, `[prior]`
+    /// and `[noise]` tables as a program holds them (the Python `RigConfig`), checked as the
+    /// file's text is, with the same errors (`source_name` names the values in them). The
+    /// vehicle is nominal and there are no lens tables, as in those values.
+    pub fn from_values(values: &RigValues<'_>, source_name: &str) -> Result<Self, RigFileError> {
+        let table = |entries: &[(&str, Value)]| {
+            Value::Table(
+                entries
+                    .iter()
+                    .map(|(k, v)| ((*k).to_string(), v.clone()))
+                    .collect(),
+            )
+        };
+        let c = &values.nominal;
+        let m = &c.mount;
+        let n = &values.noise;
+        let mut root = Table::new();
+        root.insert(
+            "camera".to_string(),
+            table(&[
+                ("width", Value::Integer(values.width)),
+                ("height", Value::Integer(values.height)),
+                ("f", Value::Float(c.f)),
+                ("cx", Value::Float(c.cx)),
+                ("cy", Value::Float(c.cy)),
+                ("baseline", Value::Float(c.baseline)),
+            ]),
+        );
+        root.insert(
+            "mount".to_string(),
+            table(&[
+                ("x", Value::Float(m.x)),
+                ("y", Value::Float(m.y)),
+                ("z", Value::Float(m.z)),
+                ("roll", Value::Float(m.roll)),
+                ("pitch", Value::Float(m.pitch)),
+                ("yaw", Value::Float(m.yaw)),
+            ]),
+        );
+        let names = values
+            .estimate
+            .iter()
+            .map(|name| Value::String((*name).to_string()))
+            .collect();
+        root.insert(
+            "estimate".to_string(),
+            table(&[("parameters", Value::Array(names))]),
+        );
+        root.insert(
+            "prior".to_string(),
+            Value::Table(
+                values
+                    .prior
+                    .iter()
+                    .map(|(name, sigma)| ((*name).to_string(), Value::Float(*sigma)))
+                    .collect(),
+            ),
+        );
+        root.insert(
+            "noise".to_string(),
+            table(&[
+                ("pixel", Value::Float(n.pixel)),
+                ("velocity", Value::Float(n.velocity)),
+                ("yaw_rate", Value::Float(n.yaw_rate)),
+            ]),
+        );
         Self::from_table(&root, source_name)
     }
 

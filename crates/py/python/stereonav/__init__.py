@@ -51,6 +51,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _native
+from ._arrays import FEATURE_DTYPE
 from ._errors import Error, InputError, InputTypeError
 from .board_stream import Frame, StreamDecoder, StreamStats, encode_packet
 from .simulation import ODOMETRY_DTYPE, TRAJECTORY_DTYPE, Simulation, simulate
@@ -188,13 +189,6 @@ __all__ = [
 
 #: The package version (the Rust workspace's version).
 __version__: Final[str] = _native.__version__
-
-#: One feature as the board sends it (``board-icd.md`` section 2, step 7): column ``x_q4`` and
-#: row ``y_q4`` in Q12.4 pixels (``u = x_q4 / 16``, ``v = y_q4 / 16``) and the Harris response
-#: ``r`` at the integer pixel. Little-endian and packed, 8 bytes, as in the board's stream.
-FEATURE_DTYPE: Final[np.dtype[np.void]] = np.dtype(
-    [("x_q4", "<u2"), ("y_q4", "<u2"), ("r", "<i4")]
-)
 
 #: The board's default ``THRESHOLD`` register, 2**18: a pixel is a candidate when ``r > T``.
 DEFAULT_THRESHOLD: Final[int] = 1 << 18

@@ -16,27 +16,36 @@ __all__ = [
     "read_log",
     "Navigator",
     "ReplayResult",
+    "ReplayFrames",
+    "FrameOutcome",
     "phase_names",
     "replay",
     "Filter",
     "MonteCarloResult",
-    "filter_defaults",
+    "FilterSettings",
+    "Health",
     "monte_carlo",
+    "CalibrationHistory",
     "CalibrationResult",
+    "Handover",
     "LogCalibrationResult",
+    "Observability",
+    "PairSettings",
+    "ParamObservability",
+    "SolverSettings",
+    "StableRule",
     "SelfCalibrator",
     "calibrate",
     "calibrate_log",
     "frame_pairs",
     "integrate_odometry",
-    "solver_defaults",
-    "stable_rule_defaults",
     "FEATURE_RECORD_BYTES",
     "SimRun",
     "StreamDecoder",
+    "Frame",
     "simulate",
     "camera_parameter_names",
-    "load_rig",
+    "Rig",
     "rectify_points",
     "project",
     "triangulate",
@@ -67,17 +76,43 @@ def harris_response(image: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
     ``ValueError``) for a size outside ``16..=4095``.
     """
 
-_RawFrame = tuple[int, int, int, int, npt.NDArray[np.uint8], npt.NDArray[np.uint8]]
+@final
+class Frame:
+    """One good packet: a stereo frame's features as the board sent them."""
+
+    @property
+    def frame(self) -> int:
+        """Frame counter (u32, +1 per stereo frame, wraps)."""
+    @property
+    def t_us(self) -> int:
+        """Mid-exposure timestamp, microseconds, on the vehicle's clock."""
+    @property
+    def flags(self) -> int:
+        """Bit 0: the left camera overflowed ``MAX_FEATURES``; bit 1: the right one did."""
+    @property
+    def lost_before(self) -> int:
+        """Frames lost just before this one (gap in counters modulo 2**32)."""
+    @property
+    def left(self) -> npt.NDArray[np.void]:
+        """The left camera's features, ``(N,)`` of ``FEATURE_DTYPE``, in the board's order."""
+    @property
+    def right(self) -> npt.NDArray[np.void]:
+        """The right camera's features, ``(N,)`` of ``FEATURE_DTYPE``, in the board's order."""
+    @property
+    def left_overflow(self) -> bool:
+        """Whether the left camera had more features than ``MAX_FEATURES``."""
+    @property
+    def right_overflow(self) -> bool:
+        """Whether the right camera had more features than ``MAX_FEATURES``."""
 
 @final
 class StreamDecoder:
-    """Push decoder of the board's byte stream; frames as raw tuples
-    ``(frame, t_us, flags, lost_before, left_records, right_records)``."""
+    """Push decoder of the board's byte stream."""
 
     def __init__(self) -> None: ...
-    def push(self, data: bytes) -> list[_RawFrame]:
+    def push(self, data: bytes) -> list[Frame]:
         """Decode a chunk; return the frames it completed."""
-    def finish(self) -> list[_RawFrame]:
+    def finish(self) -> list[Frame]:
         """End the stream; return the frames found in a packet cut off by the end."""
     @property
     def stats(self) -> tuple[int, int, int, int]:
@@ -104,10 +139,52 @@ def triangulate(
 def rectify_points(points: _F64, path: str, camera: str) -> _F64:
     """Raw pixels of one camera into the rectified rig model (NaN rows: not mappable)."""
 
-def load_rig(
-    path: str,
-) -> tuple[int, int, list[float], list[str], list[tuple[str, float]], tuple[float, float, float]]:
-    """The rig file's values; raises ``stereonav.InputError``."""
+@final
+class Rig:
+    """A rig file, checked (see ``stereonav.RigConfig``)."""
+
+    def __new__(
+        cls,
+        *,
+        width: int,
+        height: int,
+        nominal: _F64,
+        estimate: list[str],
+        prior: list[tuple[str, float]],
+        pixel_noise: float,
+        velocity_noise: float,
+        yaw_rate_noise: float,
+        source: str,
+    ) -> Rig:
+        """A rig from the values of a rig file's tables, checked as the file is; raises
+        ``stereonav.InputError`` naming ``source``."""
+    @staticmethod
+    def load(path: str) -> Rig:
+        """Read a rig file (TOML); raises ``stereonav.InputError``."""
+    @property
+    def width(self) -> int:
+        """Image width, pixels."""
+    @property
+    def height(self) -> int:
+        """Image height, pixels."""
+    @property
+    def nominal(self) -> _F64:
+        """The nominal camera, 10 values in ``CAMERA_PARAMETERS`` order."""
+    @property
+    def estimate(self) -> list[str]:
+        """Names of the estimated parameters."""
+    @property
+    def prior(self) -> dict[str, float]:
+        """1-sigma prior of each estimated parameter, by name."""
+    @property
+    def pixel_noise(self) -> float:
+        """Pixel noise (px, 1 sigma)."""
+    @property
+    def velocity_noise(self) -> float:
+        """Odometry velocity noise per sample (m/s, 1 sigma)."""
+    @property
+    def yaw_rate_noise(self) -> float:
+        """Odometry yaw-rate noise per sample (rad/s, 1 sigma)."""
 
 def camera_parameter_names() -> list[str]:
     """The ten camera parameter names in array order."""
@@ -155,24 +232,147 @@ _Observations = tuple[_U64, _F64]
 _Motions = tuple[_U64, _F64, _U64]
 #: ``(t_us (S,), vx vy vtheta (S, 3))``.
 _Odometry = tuple[_U64, _F64]
-#: ``(huber, max_iterations, step_tolerance, observable_ratio)``.
-_Settings = tuple[float, int, float, float]
-#: ``(min_pairs, sigma_fraction, step_fraction, consecutive)``.
-_Rule = tuple[int, float, float, int]
-#: ``(name, prior_sigma, data_sigma, posterior_sigma, observable, reason, structural)``.
-_ParamRecord = tuple[str, float, float, float, bool, "str | None", bool]
-#: ``(params, max_correlation (a, b, r) or None, eigenvalues)``.
-_Observability = tuple[list[_ParamRecord], "tuple[str, str, float] | None", _F64]
-#: ``(camera (10,), covariance (10, 10), t_us, observability)``.
-_Handover = tuple[_F64, _F64, int, _Observability]
-#: ``(t_us (K,), values (K, 10), sigmas (K, 10))``.
-_History = tuple[_U64, _F64, _F64]
 
-def solver_defaults() -> _Settings:
-    """The default solver settings ``(huber, max_iterations, step_tolerance, observable_ratio)``."""
+@final
+class SolverSettings:
+    """The phase-1 solver's settings; a keyword left out takes the Rust default."""
 
-def stable_rule_defaults() -> _Rule:
-    """The default stability rule ``(min_pairs, sigma_fraction, step_fraction, consecutive)``."""
+    def __new__(
+        cls,
+        *,
+        huber: float | None = None,
+        max_iterations: int | None = None,
+        step_tolerance: float | None = None,
+        observable_ratio: float | None = None,
+    ) -> SolverSettings: ...
+    @property
+    def huber(self) -> float:
+        """Huber threshold on a landmark's Mahalanobis norm."""
+    @property
+    def max_iterations(self) -> int:
+        """Most Levenberg-Marquardt iterations."""
+    @property
+    def step_tolerance(self) -> float:
+        """Converged when every step is below this fraction of the parameter's sigma."""
+    @property
+    def observable_ratio(self) -> float:
+        """Observable when the data bring a sigma to at most this fraction of its prior."""
+
+@final
+class StableRule:
+    """The incremental calibration's stability rule and solve interval; a keyword left out
+    takes the Rust default."""
+
+    def __new__(
+        cls,
+        *,
+        min_pairs: int | None = None,
+        sigma_fraction: float | None = None,
+        step_fraction: float | None = None,
+        consecutive: int | None = None,
+        solve_every: int | None = None,
+    ) -> StableRule: ...
+    @property
+    def min_pairs(self) -> int:
+        """Pairs at least, before calibration can be stable."""
+    @property
+    def sigma_fraction(self) -> float:
+        """Each observable sigma at most this fraction of its prior sigma."""
+    @property
+    def step_fraction(self) -> float:
+        """Each step between two solves below this fraction of the sigma."""
+    @property
+    def consecutive(self) -> int:
+        """Solves in a row that must meet the rule."""
+    @property
+    def solve_every(self) -> int:
+        """Pairs between two solves."""
+
+@final
+class PairSettings:
+    """How a log's frames become frame pairs; a keyword left out takes the Rust default."""
+
+    def __new__(cls, *, stride: int | None = None, pairing: str | None = None) -> PairSettings: ...
+    @property
+    def stride(self) -> int:
+        """Frames from the first frame of a pair to its second."""
+    @property
+    def pairing(self) -> str:
+        """``"disjoint"`` or ``"interleaved"``."""
+
+@final
+class ParamObservability:
+    """How well the data constrain one estimated parameter (compared by value)."""
+
+    def __eq__(self, value: object, /) -> bool: ...
+    def __ne__(self, value: object, /) -> bool: ...
+    def __hash__(self) -> int: ...
+    @property
+    def name(self) -> str:
+        """The parameter (one of ``CAMERA_PARAMETERS``)."""
+    @property
+    def prior_sigma(self) -> float:
+        """Its prior sigma (rig file ``[prior]``)."""
+    @property
+    def data_sigma(self) -> float:
+        """Its sigma from the data alone (``inf`` when the data say nothing about it)."""
+    @property
+    def posterior_sigma(self) -> float:
+        """Its sigma from data and prior together."""
+    @property
+    def observable(self) -> bool:
+        """Whether the data constrain it."""
+    @property
+    def reason(self) -> str | None:
+        """Why it is not observable, or None."""
+    @property
+    def structural(self) -> bool:
+        """Not observable because of a known trap of the rig and the path."""
+
+@final
+class Observability:
+    """The observability analysis of the estimated parameters."""
+
+    @property
+    def params(self) -> list[ParamObservability]:
+        """One record per estimated parameter, in ``CAMERA_PARAMETERS`` order."""
+    @property
+    def max_correlation(self) -> tuple[str, str, float] | None:
+        """``(a, b, r)``: the most correlated pair of observable parameters, or None."""
+    @property
+    def eigenvalues(self) -> _F64:
+        """The information eigenvalues in prior-sigma units, ascending, ``(E,)``."""
+
+@final
+class Handover:
+    """What phase 1 hands to phase 2 once calibration is stable."""
+
+    @property
+    def camera(self) -> _F64:
+        """The calibrated camera, ``(10,)``."""
+    @property
+    def covariance(self) -> _F64:
+        """Its covariance, ``(10, 10)``."""
+    @property
+    def t_us(self) -> int:
+        """Time of the frame at which calibration became stable."""
+    @property
+    def observability(self) -> Observability:
+        """The observability analysis at hand-over."""
+
+@final
+class CalibrationHistory:
+    """The camera parameters after each solve of an incremental calibration (K solves)."""
+
+    @property
+    def t_us(self) -> _U64:
+        """``(K,)``: time of the last frame pair of each solve."""
+    @property
+    def values(self) -> _F64:
+        """``(K, 10)``: the parameters."""
+    @property
+    def sigmas(self) -> _F64:
+        """``(K, 10)``: their sigmas."""
 
 @final
 class CalibrationResult:
@@ -193,17 +393,16 @@ class CalibrationResult:
     @property
     def reduced_chi2(self) -> float: ...
     @property
-    def observability(self) -> _Observability: ...
+    def observability(self) -> Observability: ...
     @property
     def history(self) -> _F64: ...
 
 def calibrate(
-    rig_json: str,
-    rig_source: str,
+    rig: Rig,
     observations: _Observations,
     motions: _Motions,
     start: _F64 | None,
-    settings: _Settings,
+    settings: SolverSettings,
 ) -> CalibrationResult:
     """Phase-1 batch solve of frame pairs as tables; raises ``stereonav.InputError``."""
 
@@ -220,17 +419,15 @@ def frame_pairs(
 class SelfCalibrator:
     """Phase 1 fed pair by pair (see ``stereonav.SelfCalibrator``)."""
 
-    def __new__(
-        cls, rig_json: str, rig_source: str, settings: _Settings, rule: _Rule, solve_every: int
-    ) -> SelfCalibrator: ...
+    def __new__(cls, rig: Rig, settings: SolverSettings, rule: StableRule) -> SelfCalibrator: ...
     def add_pairs(self, observations: _Observations, motions: _Motions) -> int:
         """Add frame pairs; return the number of solves they triggered."""
     @property
     def latest(self) -> CalibrationResult | None: ...
     @property
-    def handover(self) -> _Handover | None: ...
+    def handover(self) -> Handover | None: ...
     @property
-    def history(self) -> _History: ...
+    def history(self) -> CalibrationHistory: ...
     @property
     def pairs(self) -> int: ...
 
@@ -241,9 +438,9 @@ class LogCalibrationResult:
     @property
     def calibration(self) -> CalibrationResult: ...
     @property
-    def handover(self) -> _Handover | None: ...
+    def handover(self) -> Handover | None: ...
     @property
-    def history(self) -> _History: ...
+    def history(self) -> CalibrationHistory: ...
     @property
     def counts(self) -> list[tuple[str, int]]: ...
     @property
@@ -253,13 +450,10 @@ class LogCalibrationResult:
 
 def calibrate_log(
     log_path: str,
-    rig_json: str | None,
-    rig_source: str,
-    stride: int,
-    pairing: str,
-    settings: _Settings,
-    rule: _Rule,
-    solve_every: int,
+    rig: Rig | None,
+    pairs: PairSettings,
+    settings: SolverSettings,
+    rule: StableRule,
 ) -> LogCalibrationResult:
     """Phase 1 on a vehicle log (read, decode, associate, solve); raises
     ``stereonav.InputError`` naming the file or the setting."""
@@ -268,30 +462,88 @@ def calibrate_log(
 _UpdateTuple = tuple[_U64, _F64, _U64, _F64, _U64]
 #: ``(update, added (K, 2), removed (K, 2), ignored, pending)``; pairs are ``(track, landmark)``.
 _FrameTuple = tuple[_UpdateTuple, _U64, _U64, int, int]
-#: ``(gate_probability, nis_window, max_consecutive_rejections, covariance_update)``.
-_FilterSettings = tuple[float, int, int, str]
-#: ``(frames_to_confirm, consistency_probability)``.
-_CandidateSettings = tuple[int, float]
-#: ``(updates, refused_updates, accepted, rejected, landmarks_added, landmarks_removed,
-#: window_observations, window_rejected, window_mean_nis_per_dof, window_nis_bound,
-#: nis_too_high, diverged)``.
-_HealthTuple = tuple[int, int, int, int, int, int, int, int, "float | None", "float | None", bool, bool]
 
-def filter_defaults() -> tuple[float, int, int, str, int, float]:
-    """The defaults ``(gate_probability, nis_window, max_consecutive_rejections,
-    covariance_update, frames_to_confirm, consistency_probability)``."""
+@final
+class FilterSettings:
+    """The settings of :class:`Filter`; a keyword left out takes the Rust default."""
+
+    def __new__(
+        cls,
+        *,
+        gate_probability: float | None = None,
+        nis_window: int | None = None,
+        max_consecutive_rejections: int | None = None,
+        covariance_update: str | None = None,
+        frames_to_confirm: int | None = None,
+        consistency_probability: float | None = None,
+    ) -> FilterSettings: ...
+    @property
+    def gate_probability(self) -> float:
+        """Probability mass inside each observation's innovation gate (4 dof)."""
+    @property
+    def nis_window(self) -> int:
+        """Gate outcomes kept for the health's NIS statistics."""
+    @property
+    def max_consecutive_rejections(self) -> int:
+        """A landmark rejected this many times in a row is removed as false."""
+    @property
+    def covariance_update(self) -> str:
+        """``"auto"``, ``"joseph"`` or ``"factored"``."""
+    @property
+    def frames_to_confirm(self) -> int:
+        """Consecutive consistent frames before a track becomes a landmark."""
+    @property
+    def consistency_probability(self) -> float:
+        """Probability mass inside a candidate's consistency gate (3 dof)."""
+
+@final
+class Health:
+    """The filter's health: counters, the NIS over a sliding window, a divergence flag."""
+
+    @property
+    def updates(self) -> int:
+        """Updates applied."""
+    @property
+    def refused_updates(self) -> int:
+        """Updates refused."""
+    @property
+    def accepted(self) -> int:
+        """Observations accepted by the gate, in all."""
+    @property
+    def rejected(self) -> int:
+        """Observations rejected by the gate, in all."""
+    @property
+    def landmarks_added(self) -> int:
+        """Landmarks added, in all."""
+    @property
+    def landmarks_removed(self) -> int:
+        """Landmarks removed, in all."""
+    @property
+    def window_observations(self) -> int:
+        """Gate outcomes in the window."""
+    @property
+    def window_rejected(self) -> int:
+        """Rejections among them."""
+    @property
+    def window_mean_nis_per_dof(self) -> float | None:
+        """Mean NIS per dof of the accepted observations in the window, or None."""
+    @property
+    def window_nis_bound(self) -> float | None:
+        """That mean's 99.9 % bound, or None."""
+    @property
+    def nis_too_high(self) -> bool:
+        """The window mean is above its bound."""
+    @property
+    def diverged(self) -> bool:
+        """``nis_too_high``, or an update was ever refused."""
+
 
 @final
 class Filter:
     """Phase 2, the EKF with the camera in the state (see ``stereonav.Filter``)."""
 
     def __new__(
-        cls,
-        rig_json: str,
-        rig_source: str,
-        start: tuple[_F64, _F64] | None,
-        settings: _FilterSettings,
-        candidates: _CandidateSettings,
+        cls, rig: Rig, start: tuple[_F64, _F64] | None, settings: FilterSettings
     ) -> Filter: ...
     def copy(self) -> Filter:
         """An independent copy."""
@@ -335,7 +587,7 @@ class Filter:
     def camera_state_index(self, name: str) -> int:
         """Index of an estimated camera parameter in the state."""
     @property
-    def health(self) -> _HealthTuple: ...
+    def health(self) -> Health: ...
     @property
     def bindings(self) -> _U64:
         """``(K, 2)``: ``(track, landmark)``."""
@@ -420,12 +672,64 @@ def monte_carlo(
 _LandmarkTuple = tuple[_U64, _F64, _F64, _U64]
 #: ``(values (10,), sigmas (10,))`` in ``CAMERA_PARAMETERS`` order.
 _CameraTuple = tuple[_F64, _F64]
-#: ``(t_us (F,), phase (F,), pose (F, 3), pose_covariance (F, 3, 3), accepted (F,),
-#: rejected (F,), landmarks (F,))``.
-_FramesTuple = tuple[_U64, npt.NDArray[np.uint8], _F64, _F64, _U64, _U64, _U64]
-#: ``(accepted ids, accepted NIS, rejected ids, added ids, removed ids, rematched (K, 2),
-#: solved, switched, no_odometry)``.
-_OutcomeTuple = tuple[_U64, _F64, _U64, _U64, _U64, _U64, bool, bool, bool]
+
+@final
+class ReplayFrames:
+    """Every frame of a replay, as columns (F frames)."""
+
+    @property
+    def t_us(self) -> _U64:
+        """``(F,)``: the frame's time."""
+    @property
+    def phase(self) -> npt.NDArray[np.uint8]:
+        """``(F,)``: the phase, an index into :func:`phase_names`."""
+    @property
+    def pose(self) -> _F64:
+        """``(F, 3)``: the pose ``X, Y, theta`` after the frame."""
+    @property
+    def pose_covariance(self) -> _F64:
+        """``(F, 3, 3)``: its covariance."""
+    @property
+    def accepted(self) -> _U64:
+        """``(F,)``: observations the gate let through."""
+    @property
+    def rejected(self) -> _U64:
+        """``(F,)``: observations the gate left out."""
+    @property
+    def landmarks(self) -> _U64:
+        """``(F,)``: landmarks in the map after the frame."""
+
+@final
+class FrameOutcome:
+    """What one frame of :class:`Navigator` did."""
+
+    @property
+    def accepted(self) -> _U64:
+        """``(A,)``: landmarks updated at this frame."""
+    @property
+    def accepted_nis(self) -> _F64:
+        """``(A,)``: their NIS (4 dof)."""
+    @property
+    def rejected(self) -> _U64:
+        """``(R,)``: landmarks whose observation the gate left out."""
+    @property
+    def added(self) -> _U64:
+        """``(K,)``: landmarks added."""
+    @property
+    def removed(self) -> _U64:
+        """``(D,)``: landmarks removed as false."""
+    @property
+    def rematched(self) -> _U64:
+        """``(M, 2)``: ``(track, landmark)`` pairs bound by map matching."""
+    @property
+    def solved(self) -> bool:
+        """Phase 1 solved at this frame."""
+    @property
+    def switched(self) -> bool:
+        """The switch to phase 2 happened at this frame."""
+    @property
+    def no_odometry(self) -> bool:
+        """The odometry did not reach back to the previous frame: the pose was held."""
 
 def phase_names() -> list[str]:
     """The phase names, in the order of the per-frame phase codes."""
@@ -437,7 +741,7 @@ class ReplayResult:
     def summary_json(self) -> str:
         """``SUMMARY.json`` as JSON text."""
     @property
-    def frames(self) -> _FramesTuple: ...
+    def frames(self) -> ReplayFrames: ...
     @property
     def nis(self) -> tuple[_U64, _U64, _F64]:
         """``(t_us (K,), landmark id (K,), NIS (K,))``."""
@@ -467,8 +771,7 @@ class ReplayResult:
 
 def replay(
     log_path: str,
-    rig_json: str | None,
-    rig_source: str,
+    rig: Rig | None,
     skip_phase1: bool,
     phase1_frames: int | None,
     consider_camera: bool,
@@ -482,15 +785,14 @@ class Navigator:
 
     def __new__(
         cls,
-        rig_json: str,
-        rig_source: str,
+        rig: Rig,
         skip_phase1: bool,
         phase1_frames: int | None,
         consider_camera: bool,
     ) -> Navigator: ...
     def push_odometry(self, t_us: _U64, values: _F64) -> None:
         """Odometry ``(t_us (S,), vx vy vtheta (S, 3))``, sorted, none older than before."""
-    def push_frame(self, t_us: int, left: _F64, right: _F64) -> _OutcomeTuple:
+    def push_frame(self, t_us: int, left: _F64, right: _F64) -> FrameOutcome:
         """One stereo frame, features ``(N, 2)`` pixels ``u, v`` a side."""
     def finish(self) -> bool:
         """The end of the drive: phase 1 hands over if still running; phase 2's smoother solves."""
@@ -513,8 +815,6 @@ class Navigator:
     @property
     def stats(self) -> list[tuple[str, int]]: ...
 
-_RigTuple = tuple[int, int, list[float], list[str], list[tuple[str, float]], tuple[float, float, float]]
-
 @final
 class LogContents:
     """A vehicle log read whole, as logged (see ``stereonav.VehicleLog``)."""
@@ -531,8 +831,8 @@ class LogContents:
     @property
     def rig_json(self) -> str | None:
         """The first ``/rig`` message's text, or None."""
-    def rig(self) -> _RigTuple | None:
-        """The first ``/rig`` message as :func:`load_rig` returns a rig, or None; raises
+    def rig(self) -> Rig | None:
+        """The first ``/rig`` message as a rig, or None; raises
         ``stereonav.InputError`` for an invalid rig."""
     @property
     def truth_poses(self) -> tuple[_U64, _F64]:

@@ -8,13 +8,13 @@ and returns the good frames; corrupt packets and garbage are skipped and counted
 
 from __future__ import annotations
 
-import dataclasses
 from typing import NamedTuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 from . import _native
+from ._arrays import FEATURE_DTYPE as _FEATURE_DTYPE
 from ._errors import InputError, InputTypeError
 
 __all__ = ["Frame", "StreamDecoder", "StreamStats", "encode_packet"]
@@ -22,46 +22,19 @@ __all__ = ["Frame", "StreamDecoder", "StreamStats", "encode_packet"]
 #: Anything that exposes bytes: ``bytes``, ``bytearray``, ``memoryview`` or a ``uint8`` array.
 BytesLike = Union[bytes, bytearray, memoryview, npt.NDArray[np.uint8]]
 
-_FEATURE_DTYPE = np.dtype([("x_q4", "<u2"), ("y_q4", "<u2"), ("r", "<i4")])
 _U32_MAX = (1 << 32) - 1
 _U64_MAX = (1 << 64) - 1
 
 
-@dataclasses.dataclass(frozen=True)
-class Frame:
-    """One good packet: a stereo frame's features as the board sent them.
-
-    Attributes
-    ----------
-    frame : int
-        Frame counter (u32, +1 per stereo frame, wraps).
-    t_us : int
-        Mid-exposure timestamp, microseconds, on the vehicle's clock.
-    flags : int
-        Bit 0: the left camera overflowed ``MAX_FEATURES``; bit 1: the right one did.
-    lost_before : int
-        Frames lost just before this one (gap in counters modulo 2**32).
-    left, right : numpy.ndarray of FEATURE_DTYPE, shape (N,)
-        The features of each camera in the board's order: ``x_q4`` (``<u2``), ``y_q4``
-        (``<u2``), ``r`` (``<i4``).
-    """
-
-    frame: int
-    t_us: int
-    flags: int
-    lost_before: int
-    left: npt.NDArray[np.void]
-    right: npt.NDArray[np.void]
-
-    @property
-    def left_overflow(self) -> bool:
-        """Whether the left camera had more features than ``MAX_FEATURES``."""
-        return bool(self.flags & 1)
-
-    @property
-    def right_overflow(self) -> bool:
-        """Whether the right camera had more features than ``MAX_FEATURES``."""
-        return bool(self.flags & 2)
+#: One good packet: a stereo frame's features as the board sent them (a frozen native object).
+#:
+#: Attributes: ``frame`` (int, the frame counter, u32, +1 per stereo frame, wraps), ``t_us``
+#: (int, mid-exposure timestamp, microseconds, on the vehicle's clock), ``flags`` (int, bit 0:
+#: the left camera overflowed ``MAX_FEATURES``; bit 1: the right one did), ``lost_before``
+#: (int, frames lost just before this one: the gap in counters modulo 2**32), ``left`` and
+#: ``right`` (numpy.ndarray of FEATURE_DTYPE, shape (N,): the features of each camera in the
+#: board's order), ``left_overflow`` and ``right_overflow`` (bool, the two flags).
+Frame = _native.Frame
 
 
 class StreamStats(NamedTuple):
@@ -89,18 +62,6 @@ def _as_bytes(name: str, data: object) -> bytes:
     raise InputTypeError(
         f"{name} must be bytes, bytearray, memoryview or a uint8 array, "
         f"got {type(data).__qualname__}"
-    )
-
-
-def _frame(raw: tuple[int, int, int, int, npt.NDArray[np.uint8], npt.NDArray[np.uint8]]) -> Frame:
-    frame, t_us, flags, lost, left, right = raw
-    return Frame(
-        frame=frame,
-        t_us=t_us,
-        flags=flags,
-        lost_before=lost,
-        left=left.view(_FEATURE_DTYPE),
-        right=right.view(_FEATURE_DTYPE),
     )
 
 
@@ -134,11 +95,11 @@ class StreamDecoder:
         Raises :class:`stereonav.InputTypeError` (a ``TypeError``) if ``data`` is not
         bytes-like. The GIL is released while decoding.
         """
-        return [_frame(raw) for raw in self._native.push(_as_bytes("data", data))]
+        return self._native.push(_as_bytes("data", data))
 
     def finish(self) -> list[Frame]:
         """End the stream; return the frames found in a packet cut off by the end."""
-        return [_frame(raw) for raw in self._native.finish()]
+        return self._native.finish()
 
     @property
     def stats(self) -> StreamStats:

@@ -26,7 +26,6 @@ built and solved, in Rust; it returns a :class:`LogCalibration`.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 from typing import Any, NamedTuple, Optional, Union, final
@@ -36,7 +35,8 @@ import numpy.typing as npt
 
 from . import _native
 from ._errors import InputError, InputTypeError
-from .rig import CAMERA_PARAMETERS, Camera, RigConfig, _camera, load_rig
+from ._arrays import readonly as _readonly
+from .rig import CAMERA_PARAMETERS, Camera, RigConfig, _camera, _native_rig
 from .simulation import ODOMETRY_DTYPE
 
 __all__ = [
@@ -90,14 +90,12 @@ _MEASUREMENT_VALUES = ("uL", "vL", "uR", "vR")
 _ODOMETRY_VALUES = ("vx", "vy", "vtheta")
 _U32_MAX = (1 << 32) - 1
 
-_HUBER, _MAX_ITERATIONS, _STEP_TOLERANCE, _OBSERVABLE_RATIO = _native.solver_defaults()
-_MIN_PAIRS, _SIGMA_FRACTION, _STEP_FRACTION, _CONSECUTIVE = _native.stable_rule_defaults()
-#: Pairs between two solves of :class:`SelfCalibrator` and :func:`calibrate_log` by default (the
-#: replay's, ``nav::FramePairSettings``: 20 s of driving at the default stride).
-_SOLVE_EVERY = 10
-#: Frames between the two of a pair in :func:`calibrate_log` by default (2 s at 20 Hz; the
-#: default of the Rust association, ``track::PairSettings``).
-_STRIDE = 40
+# The keyword defaults are the Rust ``Default``s (``selfcal::solver::SolverSettings`` and
+# ``StableRule``, the replay's ``solve_every``, ``track::PairSettings``), read from the native
+# settings objects made without keywords.
+_SOLVER = _native.SolverSettings()
+_RULE = _native.StableRule()
+_PAIRS = _native.PairSettings()
 #: The pairing schemes of :func:`calibrate_log`.
 _PAIRINGS = ("disjoint", "interleaved")
 
@@ -108,40 +106,20 @@ _U64 = npt.NDArray[np.uint64]
 # --- Results -------------------------------------------------------------------------------
 
 
-@final
-@dataclasses.dataclass(frozen=True)
-class ParamObservability:
-    """How well the data constrain one estimated parameter.
-
-    Attributes
-    ----------
-    name : str
-        The parameter (one of :data:`CAMERA_PARAMETERS`).
-    prior_sigma : float
-        Its prior sigma (rig file ``[prior]``).
-    data_sigma : float
-        Its sigma from the data alone (``inf`` when the data say nothing about it).
-    posterior_sigma : float
-        Its sigma from data and prior together.
-    observable : bool
-        Whether the data constrain it (``posterior_sigma <= observable_ratio * prior_sigma``);
-        an unobservable parameter is held at its nominal value.
-    reason : str or None
-        Why it is not observable (the known traps: an upward camera on planar motion cannot
-        give ``f``, planar motion never gives the height, a straight path not the offsets).
-    structural : bool
-        Not observable because of one of those known traps of the rig and the path, rather
-        than for lack of data so far (which more driving may cure, and which holds back the
-        hand-over to phase 2).
-    """
-
-    name: str
-    prior_sigma: float
-    data_sigma: float
-    posterior_sigma: float
-    observable: bool
-    reason: Optional[str]
-    structural: bool
+#: How well the data constrain one estimated parameter (a frozen native object, compared by
+#: value).
+#:
+#: Attributes: ``name`` (str, one of :data:`CAMERA_PARAMETERS`), ``prior_sigma`` (float, its
+#: prior sigma, rig file ``[prior]``), ``data_sigma`` (float, its sigma from the data alone,
+#: ``inf`` when the data say nothing about it), ``posterior_sigma`` (float, from data and prior
+#: together), ``observable`` (bool, whether the data constrain it: ``posterior_sigma <=
+#: observable_ratio * prior_sigma``; an unobservable parameter is held at its nominal value),
+#: ``reason`` (str or None, why it is not observable: the known traps, an upward camera on
+#: planar motion cannot give ``f``, planar motion never gives the height, a straight path not
+#: the offsets) and ``structural`` (bool, not observable because of one of those traps of the
+#: rig and the path rather than for lack of data so far, which more driving may cure and which
+#: holds back the hand-over to phase 2).
+ParamObservability = _native.ParamObservability
 
 
 class Correlation(NamedTuple):
@@ -312,22 +290,17 @@ class LogCalibration:
     rig_source: str
 
 
-def _readonly(array: npt.NDArray[Any]) -> npt.NDArray[Any]:
-    array.setflags(write=False)
-    return array
-
-
 def _sigmas(covariance: _F64) -> dict[str, float]:
     diagonal = np.clip(np.diag(covariance), 0.0, None)
     return {name: float(math.sqrt(v)) for name, v in zip(CAMERA_PARAMETERS, diagonal)}
 
 
-def _observability(raw: _native._Observability) -> Observability:
-    params, correlation, eigenvalues = raw
+def _observability(native: _native.Observability) -> Observability:
+    correlation = native.max_correlation
     return Observability(
-        params=tuple(ParamObservability(*record) for record in params),
+        params=tuple(native.params),
         max_correlation=None if correlation is None else Correlation(*correlation),
-        eigenvalues=_readonly(eigenvalues),
+        eigenvalues=_readonly(native.eigenvalues),
     )
 
 
@@ -348,17 +321,26 @@ def _calibration(native: _native.CalibrationResult) -> Calibration:
     )
 
 
-def _handover(raw: Optional[_native._Handover]) -> Optional[Handover]:
-    if raw is None:
+def _handover(native: Optional[_native.Handover]) -> Optional[Handover]:
+    if native is None:
         return None
-    camera, covariance, t_us, observability = raw
     return Handover(
-        camera=Camera.from_array(camera),
-        sigmas=_sigmas(covariance),
-        covariance=_readonly(covariance),
-        t_us=t_us,
-        observability=_observability(observability),
+        camera=Camera.from_array(native.camera),
+        sigmas=_sigmas(native.covariance),
+        covariance=_readonly(native.covariance),
+        t_us=native.t_us,
+        observability=_observability(native.observability),
     )
+
+
+def _history(native: _native.CalibrationHistory, *, readonly: bool) -> CalibrationHistory:
+    if readonly:
+        return CalibrationHistory(
+            t_us=_readonly(native.t_us),
+            values=_readonly(native.values),
+            sigmas=_readonly(native.sigmas),
+        )
+    return CalibrationHistory(t_us=native.t_us, values=native.values, sigmas=native.sigmas)
 
 
 # --- Checking the arrays -------------------------------------------------------------------
@@ -462,47 +444,13 @@ def _motions_array(t_us: _U64, values: _F64, samples: _U64) -> npt.NDArray[np.vo
     return out
 
 
-def _rig_json(rig: object) -> tuple[str, str]:
-    """The rig's tables as JSON (the form of a log's ``/rig`` message) and a name for errors."""
-    if isinstance(rig, (str, os.PathLike)):
-        source = os.fspath(rig)
-        rig = load_rig(rig)
-    elif isinstance(rig, RigConfig):
-        source = "RigConfig"
-    else:
+def _rig(rig: object) -> _native.Rig:
+    """The native rig of a :class:`RigConfig` or a rig file's path (errors name it)."""
+    if not isinstance(rig, (str, os.PathLike, RigConfig)):
         raise InputTypeError(
             f"rig must be a stereonav.RigConfig or the path of a rig file, got {_describe(rig)}"
         )
-    c = rig.nominal
-    tables = {
-        "camera": {
-            "width": rig.width,
-            "height": rig.height,
-            "f": c.f,
-            "cx": c.cx,
-            "cy": c.cy,
-            "baseline": c.baseline,
-        },
-        "mount": {
-            "x": c.mount_x,
-            "y": c.mount_y,
-            "z": c.mount_z,
-            "roll": c.mount_roll,
-            "pitch": c.mount_pitch,
-            "yaw": c.mount_yaw,
-        },
-        "estimate": {"parameters": list(rig.estimate)},
-        "prior": dict(rig.prior),
-        "noise": {
-            "pixel": rig.pixel_noise,
-            "velocity": rig.velocity_noise,
-            "yaw_rate": rig.yaw_rate_noise,
-        },
-    }
-    try:
-        return json.dumps(tables, allow_nan=False), source
-    except (TypeError, ValueError) as err:
-        raise InputError(f"{source}: not a valid rig: {err}") from err
+    return _native_rig(rig)
 
 
 def _number(name: str, value: object) -> float:
@@ -522,12 +470,28 @@ def _count(name: str, value: object, low: int) -> int:
 
 def _settings(
     huber: object, max_iterations: object, step_tolerance: object, observable_ratio: object
-) -> tuple[float, int, float, float]:
-    return (
-        _number("huber", huber),
-        _count("max_iterations", max_iterations, 0),
-        _number("step_tolerance", step_tolerance),
-        _number("observable_ratio", observable_ratio),
+) -> _native.SolverSettings:
+    return _native.SolverSettings(
+        huber=_number("huber", huber),
+        max_iterations=_count("max_iterations", max_iterations, 0),
+        step_tolerance=_number("step_tolerance", step_tolerance),
+        observable_ratio=_number("observable_ratio", observable_ratio),
+    )
+
+
+def _rule(
+    min_pairs: object,
+    sigma_fraction: object,
+    step_fraction: object,
+    consecutive: object,
+    solve_every: object,
+) -> _native.StableRule:
+    return _native.StableRule(
+        min_pairs=_count("min_pairs", min_pairs, 0),
+        sigma_fraction=_number("sigma_fraction", sigma_fraction),
+        step_fraction=_number("step_fraction", step_fraction),
+        consecutive=_count("consecutive", consecutive, 1),
+        solve_every=_count("solve_every", solve_every, 1),
     )
 
 
@@ -636,10 +600,10 @@ def calibrate(
     rig: RigLike,
     *,
     start: Optional[Union[Camera, npt.ArrayLike]] = None,
-    huber: float = _HUBER,
-    max_iterations: int = _MAX_ITERATIONS,
-    step_tolerance: float = _STEP_TOLERANCE,
-    observable_ratio: float = _OBSERVABLE_RATIO,
+    huber: float = _SOLVER.huber,
+    max_iterations: int = _SOLVER.max_iterations,
+    step_tolerance: float = _SOLVER.step_tolerance,
+    observable_ratio: float = _SOLVER.observable_ratio,
 ) -> Calibration:
     """Calibrate the rig's estimated camera parameters from frame pairs (phase 1, batch).
 
@@ -691,12 +655,10 @@ def calibrate(
     """
     pair, values = _observation_tables(observations)
     motion_tables = _motion_tables(motions)
-    rig_json, rig_source = _rig_json(rig)
+    native_rig = _rig(rig)
     start_array = None if start is None else _camera(start)
     settings = _settings(huber, max_iterations, step_tolerance, observable_ratio)
-    native = _native.calibrate(
-        rig_json, rig_source, (pair, values), motion_tables, start_array, settings
-    )
+    native = _native.calibrate(native_rig, (pair, values), motion_tables, start_array, settings)
     return _calibration(native)
 
 
@@ -704,17 +666,17 @@ def calibrate_log(
     log_path: Union[str, "os.PathLike[str]"],
     rig: Optional[RigLike] = None,
     *,
-    stride: int = _STRIDE,
-    pairing: str = "disjoint",
-    huber: float = _HUBER,
-    max_iterations: int = _MAX_ITERATIONS,
-    step_tolerance: float = _STEP_TOLERANCE,
-    observable_ratio: float = _OBSERVABLE_RATIO,
-    solve_every: int = _SOLVE_EVERY,
-    min_pairs: int = _MIN_PAIRS,
-    sigma_fraction: float = _SIGMA_FRACTION,
-    step_fraction: float = _STEP_FRACTION,
-    consecutive: int = _CONSECUTIVE,
+    stride: int = _PAIRS.stride,
+    pairing: str = _PAIRS.pairing,
+    huber: float = _SOLVER.huber,
+    max_iterations: int = _SOLVER.max_iterations,
+    step_tolerance: float = _SOLVER.step_tolerance,
+    observable_ratio: float = _SOLVER.observable_ratio,
+    solve_every: int = _RULE.solve_every,
+    min_pairs: int = _RULE.min_pairs,
+    sigma_fraction: float = _RULE.sigma_fraction,
+    step_fraction: float = _RULE.step_fraction,
+    consecutive: int = _RULE.consecutive,
 ) -> LogCalibration:
     """Phase 1 on a vehicle log: calibrate the rig's estimated camera parameters in batch.
 
@@ -765,31 +727,19 @@ def calibrate_log(
     path = os.fspath(log_path)
     if not isinstance(path, str):
         raise InputTypeError(f"log_path must be a str path, got {_describe(path)}")
-    rig_json, rig_source = (None, "the log's /rig") if rig is None else _rig_json(rig)
+    native_rig = None if rig is None else _rig(rig)
     if not isinstance(pairing, str):
         raise InputTypeError(
             f"pairing must be a str ({' or '.join(map(repr, _PAIRINGS))}), got {_describe(pairing)}"
         )
-    rule = (
-        _count("min_pairs", min_pairs, 0),
-        _number("sigma_fraction", sigma_fraction),
-        _number("step_fraction", step_fraction),
-        _count("consecutive", consecutive, 1),
-    )
-    native = _native.calibrate_log(
-        path,
-        rig_json,
-        rig_source,
-        _count("stride", stride, 1),
-        pairing,
-        _settings(huber, max_iterations, step_tolerance, observable_ratio),
-        rule,
-        _count("solve_every", solve_every, 1),
-    )
+    pairs = _native.PairSettings(stride=_count("stride", stride, 1), pairing=pairing)
+    settings = _settings(huber, max_iterations, step_tolerance, observable_ratio)
+    rule = _rule(min_pairs, sigma_fraction, step_fraction, consecutive, solve_every)
+    native = _native.calibrate_log(path, native_rig, pairs, settings, rule)
     return LogCalibration(
         calibration=_calibration(native.calibration),
         handover=_handover(native.handover),
-        history=CalibrationHistory(*(_readonly(a) for a in native.history)),
+        history=_history(native.history, readonly=True),
         counts=dict(native.counts),
         warnings=tuple(native.warnings),
         rig_source=native.rig_source,
@@ -829,30 +779,20 @@ class SelfCalibrator:
         self,
         rig: RigLike,
         *,
-        solve_every: int = _SOLVE_EVERY,
-        min_pairs: int = _MIN_PAIRS,
-        sigma_fraction: float = _SIGMA_FRACTION,
-        step_fraction: float = _STEP_FRACTION,
-        consecutive: int = _CONSECUTIVE,
-        huber: float = _HUBER,
-        max_iterations: int = _MAX_ITERATIONS,
-        step_tolerance: float = _STEP_TOLERANCE,
-        observable_ratio: float = _OBSERVABLE_RATIO,
+        solve_every: int = _RULE.solve_every,
+        min_pairs: int = _RULE.min_pairs,
+        sigma_fraction: float = _RULE.sigma_fraction,
+        step_fraction: float = _RULE.step_fraction,
+        consecutive: int = _RULE.consecutive,
+        huber: float = _SOLVER.huber,
+        max_iterations: int = _SOLVER.max_iterations,
+        step_tolerance: float = _SOLVER.step_tolerance,
+        observable_ratio: float = _SOLVER.observable_ratio,
     ) -> None:
-        rig_json, rig_source = _rig_json(rig)
-        rule = (
-            _count("min_pairs", min_pairs, 0),
-            _number("sigma_fraction", sigma_fraction),
-            _number("step_fraction", step_fraction),
-            _count("consecutive", consecutive, 1),
-        )
-        self._native = _native.SelfCalibrator(
-            rig_json,
-            rig_source,
-            _settings(huber, max_iterations, step_tolerance, observable_ratio),
-            rule,
-            _count("solve_every", solve_every, 1),
-        )
+        native_rig = _rig(rig)
+        rule = _rule(min_pairs, sigma_fraction, step_fraction, consecutive, solve_every)
+        settings = _settings(huber, max_iterations, step_tolerance, observable_ratio)
+        self._native = _native.SelfCalibrator(native_rig, settings, rule)
 
     def add_pairs(self, observations: npt.NDArray[np.void], motions: npt.NDArray[np.void]) -> int:
         """Add frame pairs in the array form of :func:`calibrate`, in the order of ``motions``.
@@ -898,7 +838,7 @@ class SelfCalibrator:
     @property
     def history(self) -> CalibrationHistory:
         """The camera parameters and sigmas after each solve."""
-        return CalibrationHistory(*self._native.history)
+        return _history(self._native.history, readonly=False)
 
     @property
     def pairs(self) -> int:

@@ -30,6 +30,10 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _native
+from ._arrays import BINDING_DTYPE, GATE_DTYPE
+from ._arrays import bindings as _bindings
+from ._arrays import gated as _gated
+from ._arrays import readonly as _readonly
 from ._errors import InputError, InputTypeError
 from .calibration import (
     Handover,
@@ -38,8 +42,7 @@ from .calibration import (
     _describe,
     _number,
     _odometry_tables,
-    _readonly,
-    _rig_json,
+    _rig,
 )
 from .rig import Camera
 
@@ -55,13 +58,6 @@ __all__ = [
     "UpdateReport",
 ]
 
-#: One landmark observation's gate outcome: ``id`` (``<u8``, the landmark) and ``nis``
-#: (``<f8``, its normalised innovation squared, 4 dof; ``inf`` when the landmark could not
-#: be projected at the current estimate).
-GATE_DTYPE = np.dtype([("id", "<u8"), ("nis", "<f8")])
-#: A track bound to a landmark: ``track`` (``<u8``, the caller's track id) and ``landmark``
-#: (``<u8``, the filter's landmark id).
-BINDING_DTYPE = np.dtype([("track", "<u8"), ("landmark", "<u8")])
 #: One landmark of the map: ``id`` (``<u8``), its world position ``x, y, z`` (``<f8``,
 #: metres), its position ``covariance`` (``<f8``, shape (3, 3), m**2) and ``observations``
 #: (``<u8``: the measurement that created it and every accepted one since). The 1-sigma
@@ -82,14 +78,9 @@ LANDMARK_DTYPE = np.dtype(
 #: ``"auto"`` (Joseph up to 400 states, factored above: the default).
 COVARIANCE_UPDATES: tuple[str, ...] = ("auto", "joseph", "factored")
 
-(
-    _GATE_PROBABILITY,
-    _NIS_WINDOW,
-    _MAX_CONSECUTIVE_REJECTIONS,
-    _COVARIANCE_UPDATE,
-    _FRAMES_TO_CONFIRM,
-    _CONSISTENCY_PROBABILITY,
-) = _native.filter_defaults()
+# The keyword defaults are the Rust ``Default``s (``vslam_ekf::Settings``,
+# ``CandidateSettings``), read from the native settings made without keywords.
+_DEFAULTS = _native.FilterSettings()
 
 _F64 = npt.NDArray[np.float64]
 _U64 = npt.NDArray[np.uint64]
@@ -197,6 +188,11 @@ class Health:
     diverged: bool
 
 
+def _health(native: _native.Health) -> Health:
+    """The :class:`Health` of the native one, field by field by name."""
+    return Health(**{f.name: getattr(native, f.name) for f in dataclasses.fields(Health)})
+
+
 class PredictedMeasurement(NamedTuple):
     """A landmark's predicted measurement at the current estimate (:meth:`Filter.predict_measurement`)."""
 
@@ -204,18 +200,6 @@ class PredictedMeasurement(NamedTuple):
     z: _F64
     #: ``(4, 4)`` float64: the innovation covariance ``S = H P H^T + R``.
     covariance: _F64
-
-
-def _gated(ids: _U64, nis: _F64) -> npt.NDArray[np.void]:
-    out = np.zeros(len(ids), dtype=GATE_DTYPE)
-    out["id"], out["nis"] = ids, nis
-    return _readonly(out)
-
-
-def _bindings(pairs: _U64) -> npt.NDArray[np.void]:
-    out = np.zeros(len(pairs), dtype=BINDING_DTYPE)
-    out["track"], out["landmark"] = pairs[:, 0], pairs[:, 1]
-    return out
 
 
 def _update_report(raw: _native._UpdateTuple) -> UpdateReport:
@@ -334,25 +318,25 @@ class Filter:
         rig: RigLike,
         handover: Optional[Handover] = None,
         *,
-        gate_probability: float = _GATE_PROBABILITY,
-        nis_window: int = _NIS_WINDOW,
-        max_consecutive_rejections: int = _MAX_CONSECUTIVE_REJECTIONS,
-        covariance_update: str = _COVARIANCE_UPDATE,
-        frames_to_confirm: int = _FRAMES_TO_CONFIRM,
-        consistency_probability: float = _CONSISTENCY_PROBABILITY,
+        gate_probability: float = _DEFAULTS.gate_probability,
+        nis_window: int = _DEFAULTS.nis_window,
+        max_consecutive_rejections: int = _DEFAULTS.max_consecutive_rejections,
+        covariance_update: str = _DEFAULTS.covariance_update,
+        frames_to_confirm: int = _DEFAULTS.frames_to_confirm,
+        consistency_probability: float = _DEFAULTS.consistency_probability,
     ) -> None:
-        rig_json, rig_source = _rig_json(rig)
-        settings = (
-            _probability("gate_probability", gate_probability),
-            _count("nis_window", nis_window, 1),
-            _small_count("max_consecutive_rejections", max_consecutive_rejections),
-            _form(covariance_update),
+        native_rig = _rig(rig)
+        settings = _native.FilterSettings(
+            gate_probability=_probability("gate_probability", gate_probability),
+            nis_window=_count("nis_window", nis_window, 1),
+            max_consecutive_rejections=_small_count(
+                "max_consecutive_rejections", max_consecutive_rejections
+            ),
+            covariance_update=_form(covariance_update),
+            frames_to_confirm=_small_count("frames_to_confirm", frames_to_confirm),
+            consistency_probability=_probability("consistency_probability", consistency_probability),
         )
-        candidates = (
-            _small_count("frames_to_confirm", frames_to_confirm),
-            _probability("consistency_probability", consistency_probability),
-        )
-        self._native = _native.Filter(rig_json, rig_source, _start(handover), settings, candidates)
+        self._native = _native.Filter(native_rig, _start(handover), settings)
 
     @classmethod
     def _wrap(cls, native: _native.Filter) -> Filter:
@@ -630,7 +614,7 @@ class Filter:
     @property
     def health(self) -> Health:
         """Counters, the windowed NIS and the divergence flag."""
-        return Health(*self._native.health)
+        return _health(self._native.health)
 
     @property
     def bindings(self) -> npt.NDArray[np.void]:

@@ -16,8 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _native
+from ._arrays import readonly as _readonly
 from .board_stream import Frame, StreamDecoder, StreamStats
-from .calibration import _readonly
 from .navigation import _path
 from .rig import Camera, RigConfig, _rig_config
 from .simulation import ODOMETRY_DTYPE, TRAJECTORY_DTYPE

@@ -24,8 +24,9 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _native
+from ._arrays import readonly as _readonly
 from ._errors import InputError, InputTypeError
-from .calibration import _count, _describe, _number, _readonly
+from .calibration import _count, _describe, _number
 
 __all__ = ["Banded", "MonteCarloRuns", "MonteCarloSummary", "monte_carlo"]
 

@@ -32,10 +32,12 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _native
+from ._arrays import readonly as _readonly
 from ._errors import InputError, InputTypeError
-from .calibration import RigLike, _count, _describe, _odometry_tables, _readonly, _rig_json, _times
-from .filter import BINDING_DTYPE, GATE_DTYPE, _gated
-from .rig import CAMERA_PARAMETERS, RigConfig
+from .calibration import RigLike, _count, _describe, _odometry_tables, _times
+from ._arrays import bindings as _bindings
+from ._arrays import gated as _gated
+from .rig import CAMERA_PARAMETERS, RigConfig, _native_rig
 from .simulation import TRAJECTORY_DTYPE
 
 __all__ = [
@@ -237,16 +239,21 @@ class Replay:
     @classmethod
     def _from_native(cls, native: _native.ReplayResult) -> Replay:
         """The typed result of a native replay, every array copied out once."""
-        t_us, phase, poses, covariances, accepted, rejected, landmarks = native.frames
+        columns = native.frames
+        t_us, phase, poses, covariances = (
+            columns.t_us,
+            columns.phase,
+            columns.pose,
+            columns.pose_covariance,
+        )
         trajectory = np.zeros(len(t_us), dtype=TRAJECTORY_DTYPE)
         trajectory["t_us"] = t_us
         if len(t_us):
             trajectory["x"], trajectory["y"], trajectory["theta"] = poses.T
         frames = np.zeros(len(t_us), dtype=FRAME_INFO_DTYPE)
         frames["t_us"], frames["phase"] = t_us, phase
-        frames["accepted"] = np.minimum(accepted, _U32_MAX)
-        frames["rejected"] = np.minimum(rejected, _U32_MAX)
-        frames["landmarks"] = np.minimum(landmarks, _U32_MAX)
+        for field in ("accepted", "rejected", "landmarks"):
+            frames[field] = np.minimum(getattr(columns, field), _U32_MAX)
         nis_t, nis_id, nis_value = native.nis
         nis = np.zeros(len(nis_t), dtype=NIS_DTYPE)
         nis["t_us"], nis["id"], nis["nis"] = nis_t, nis_id, nis_value
@@ -453,12 +460,12 @@ def _features(side: str, value: object) -> _F64:
     return np.ascontiguousarray(array, dtype=np.float64)
 
 
-def _rig(name: str, rig: object) -> tuple[str, str]:
+def _rig(name: str, rig: object) -> _native.Rig:
     if not isinstance(rig, (str, os.PathLike, RigConfig)):
         raise InputTypeError(
             f"{name} must be a stereonav.RigConfig or the path of a rig file, got {_describe(rig)}"
         )
-    return _rig_json(rig)
+    return _native_rig(rig)
 
 
 # --- The replay ----------------------------------------------------------------------------
@@ -524,11 +531,10 @@ def replay(
     ({'value': 0.1164..., 'sigma': 0.0001...}, 5)
     """
     path = _path("log_path", log_path)
-    rig_json, rig_source = (None, "the log's /rig") if rig_path is None else _rig("rig_path", rig_path)
+    native_rig = None if rig_path is None else _rig("rig_path", rig_path)
     native = _native.replay(
         path,
-        rig_json,
-        rig_source,
+        native_rig,
         _flag("skip_phase1", skip_phase1),
         _phase1_frames(phase1_frames),
         _flag("consider_camera", consider_camera),
@@ -586,10 +592,8 @@ class Navigator:
         phase1_frames: Optional[int] = None,
         consider_camera: bool = False,
     ) -> None:
-        rig_json, rig_source = _rig("rig", rig)
         self._native = _native.Navigator(
-            rig_json,
-            rig_source,
+            _rig("rig", rig),
             _flag("skip_phase1", skip_phase1),
             _phase1_frames(phase1_frames),
             _flag("consider_camera", consider_camera),
@@ -693,20 +697,16 @@ class Navigator:
             definiteness); the frame's motion was applied, the update not.
         """
         t = _timestamp("t_us", t_us)
-        raw = self._native.push_frame(t, _features("left", left), _features("right", right))
-        accepted_ids, accepted_nis, rejected, added, removed, rematched, solved, switched, held = raw
-        bindings = np.zeros(len(rematched), dtype=BINDING_DTYPE)
-        if len(rematched):
-            bindings["track"], bindings["landmark"] = rematched[:, 0], rematched[:, 1]
+        native = self._native.push_frame(t, _features("left", left), _features("right", right))
         return FrameOutcome(
-            accepted=_gated(accepted_ids, accepted_nis),
-            rejected=_readonly(rejected),
-            added=_readonly(added),
-            removed=_readonly(removed),
-            rematched=_readonly(bindings),
-            solved=solved,
-            switched=switched,
-            no_odometry=held,
+            accepted=_gated(native.accepted, native.accepted_nis),
+            rejected=_readonly(native.rejected),
+            added=_readonly(native.added),
+            removed=_readonly(native.removed),
+            rematched=_readonly(_bindings(native.rematched)),
+            solved=native.solved,
+            switched=native.switched,
+            no_odometry=native.no_odometry,
         )
 
     def finish(self) -> bool:

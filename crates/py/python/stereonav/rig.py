@@ -244,21 +244,49 @@ def load_rig(path: Union[str, os.PathLike[str]]) -> RigConfig:
 
     Raises :class:`stereonav.InputError` naming the file, the key and the problem.
     """
-    return _rig_config(_native.load_rig(os.fspath(path)))
+    return _rig_config(_native.Rig.load(os.fspath(path)))
 
 
-def _rig_config(
-    raw: tuple[int, int, list[float], list[str], list[tuple[str, float]], tuple[float, float, float]],
-) -> RigConfig:
-    """The :class:`RigConfig` of a native rig tuple (:func:`load_rig`, a log's ``/rig``)."""
-    width, height, nominal, estimate, prior, noise = raw
+def _rig_config(native: _native.Rig) -> RigConfig:
+    """The :class:`RigConfig` of a native rig (:func:`load_rig`, a log's ``/rig``)."""
     return RigConfig(
-        width=width,
-        height=height,
-        nominal=Camera.from_array(nominal),
-        estimate=tuple(estimate),
-        prior=dict(prior),
-        pixel_noise=noise[0],
-        velocity_noise=noise[1],
-        yaw_rate_noise=noise[2],
+        width=native.width,
+        height=native.height,
+        nominal=Camera.from_array(native.nominal),
+        estimate=tuple(native.estimate),
+        prior=dict(native.prior),
+        pixel_noise=native.pixel_noise,
+        velocity_noise=native.velocity_noise,
+        yaw_rate_noise=native.yaw_rate_noise,
     )
+
+
+def _native_rig(rig: object) -> _native.Rig:
+    """The native rig of a :class:`RigConfig` or a rig file's path, checked as a rig file is
+    (errors name the path, or ``RigConfig``)."""
+    if isinstance(rig, (str, os.PathLike)):
+        source = os.fspath(rig)
+        if not isinstance(source, str):
+            raise InputTypeError(f"rig path must be a str path, got {type(source).__qualname__}")
+        config = load_rig(source)
+    elif isinstance(rig, RigConfig):
+        source, config = "RigConfig", rig
+    else:
+        raise InputTypeError(
+            "rig must be a stereonav.RigConfig or the path of a rig file, "
+            f"got {type(rig).__qualname__}"
+        )
+    try:
+        return _native.Rig(
+            width=config.width,
+            height=config.height,
+            nominal=np.ascontiguousarray(config.nominal.to_array()),
+            estimate=list(config.estimate),
+            prior=list(dict(config.prior).items()),
+            pixel_noise=config.pixel_noise,
+            velocity_noise=config.velocity_noise,
+            yaw_rate_noise=config.yaw_rate_noise,
+            source=source,
+        )
+    except (TypeError, OverflowError) as err:
+        raise InputError(f"{source}: not a valid rig: {err}") from err
