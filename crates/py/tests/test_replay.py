@@ -48,7 +48,7 @@ FOREIGN = SHARED / "foreign-mcap"
 FOXGLOVE_SCHEMAS = SHARED / "foxglove-jsonschema"
 #: The lamps of the paper's scenarios.
 LAMPS = 5
-#: The topics of EST.mcap and their schemas (crates/replay/src/output.rs).
+#: The topics of EST.mcap and their schemas (crates/estimates-log/src/topics.rs).
 EST_TOPICS = {
     "/est/pose": "foxglove.PoseInFrame",
     "/est/trajectory": "foxglove.PosesInFrame",

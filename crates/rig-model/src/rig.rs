@@ -49,7 +49,7 @@ pub enum RigError {
     },
 }
 
-/// The analytic Jacobians of the four measurements (eq. 6-8's `H` blocks).
+/// The analytic Jacobians of the four measurements (the blocks of eq. (8)'s `H`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProjectionJacobians {
     /// With respect to the robot pose `(X, Y, theta)`.

@@ -10,9 +10,9 @@ phase 1 is skipped, from the rig's nominal values and prior sigmas).
 A :class:`Filter` is stepped frame by frame:
 
 - :meth:`Filter.predict_odometry` (or :meth:`Filter.predict`) moves the pose with the
-  odometry between two frames (eq. 3-4);
+  odometry between two frames (eq. 4-5);
 - :meth:`Filter.observe` takes the frame's stereo measurements keyed by the association's
-  track ids: tracks bound to a landmark update the filter (eq. 5-8), each observation gated
+  track ids: tracks bound to a landmark update the filter (eq. 6-8), each observation gated
   on its own normalised innovation squared (NIS); an unbound track becomes a landmark after
   ``frames_to_confirm`` consecutive frames whose triangulations agree;
 - or, by landmark id, :meth:`Filter.update` and :meth:`Filter.add_landmark` directly.
