@@ -1,5 +1,5 @@
 //! `stereonav replay LOG.mcap [--rig RIG.toml] [--out EST.mcap] [--summary SUMMARY.json]
-//! [--trajectory TRAJ.csv] [--skip-phase1] [--phase1-frames N] [--consider-camera]`: the whole stack on a vehicle log
+//! [--trajectory TRAJ.csv] [--save-map MAP] [--skip-phase1] [--phase1-frames N] [--consider-camera]`: the whole stack on a vehicle log
 //! (vehicle-interfaces.md section 5; `replay::Replayer`).
 //!
 //! The replay streams: `EST.mcap` and `TRAJ.csv` are written as the frames come and
@@ -41,6 +41,10 @@ pub(crate) struct Args {
     /// Write the trajectory as CSV (`t_us,x,y,theta`, a row per stereo frame).
     #[arg(long, value_name = "TRAJ.csv")]
     trajectory: Option<PathBuf>,
+    /// Write the map the run built (landmarks with their covariance, the calibrated C and V,
+    /// the rig) in the project's map format (docs/maps.md).
+    #[arg(long, value_name = "MAP")]
+    save_map: Option<PathBuf>,
     /// Skip phase 1: start phase 2 at the first frame from the rig's nominal values and priors
     /// (as in the paper's experiment).
     #[arg(long)]
@@ -95,11 +99,15 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     let started = Instant::now();
     // The log's start first: a foreign file or one without a rig makes no output.
     let replayer = Replayer::open(&args.log, rig, &settings)?;
+    let rig_used = replayer.rig().clone();
     let mut outputs = OutputFiles::create(args.out.as_deref(), args.trajectory.as_deref())?;
     let result = replayer.run(&mut outputs, &mut progress);
     bar.finish();
     let end = result?;
     outputs.finish(&end, args.summary.as_deref())?;
+    if let Some(path) = &args.save_map {
+        replay::saved_map(&end, &rig_used, &args.log).save(path)?;
+    }
     let took = started.elapsed();
     {
         let mut stderr = io::stderr().lock();

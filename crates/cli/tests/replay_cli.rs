@@ -237,3 +237,39 @@ fn stride_zero_is_one_line() {
     ]);
     assert_one_line_error(&out, "stride");
 }
+
+/// `--save-map` writes the run's map: the summary's landmarks with their covariance, every
+/// parameter of C and V at its final value, and the rig; it reads back through `map-file`.
+#[test]
+fn save_map_writes_the_summary_s_map() {
+    let (summary, map) = (scratch("sq-summary.json"), scratch("sq.map"));
+    let out = stereonav(&[
+        "replay",
+        s(&fixture("paper-square.mcap")),
+        "--summary",
+        s(&summary),
+        "--save-map",
+        s(&map),
+    ]);
+    ok(&out);
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let saved = map_file::Map::load(&map).unwrap();
+    let landmarks = doc["landmarks"].as_array().unwrap();
+    assert_eq!(saved.landmarks.len(), landmarks.len());
+    for (l, j) in saved.landmarks.iter().zip(landmarks) {
+        assert_eq!(l.id, j["id"].as_u64().unwrap());
+        assert_eq!(l.position[0], j["x"].as_f64().unwrap());
+        assert_eq!(l.covariance[2][2].sqrt(), j["sigma"][2].as_f64().unwrap());
+    }
+    assert_eq!(saved.parameters.len(), rig_model::Param::ALL.len());
+    let baseline = saved
+        .parameters
+        .iter()
+        .find(|p| p.param == rig_model::Param::Baseline)
+        .unwrap();
+    assert_eq!(
+        baseline.value,
+        doc["camera"]["baseline"]["value"].as_f64().unwrap()
+    );
+    assert!(saved.source_log.ends_with("paper-square.mcap"));
+}

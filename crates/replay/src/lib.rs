@@ -38,6 +38,7 @@
 #![deny(missing_docs)]
 
 mod error;
+mod map;
 mod navigate;
 mod output;
 mod stream;
@@ -60,6 +61,7 @@ pub use estimates_log::{
     MapSnapshot, ParamEstimate, Phase, ReadError as EstimatesError, Replay, ReplayEnd, TruthErrors,
     end_summary_json, read_estimates, summary_json,
 };
+pub use map::saved_map;
 pub use nav::{FramePairSettings, NavMode, NavSettings, Navigator};
 pub use navigate::{
     LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, ReplayCollector, ReplaySink, Replayer,
