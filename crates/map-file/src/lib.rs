@@ -175,8 +175,8 @@ impl Map {
 
     fn body(&self) -> Result<Value, Error> {
         for l in &self.landmarks {
-            let all = l.position.iter().chain(l.covariance.iter().flatten());
-            if !all.clone().all(|v| v.is_finite()) {
+            let mut values = l.position.iter().chain(l.covariance.iter().flatten());
+            if !values.all(|v| v.is_finite()) {
                 return Err(Error::Invalid {
                     detail: format!("landmark {} has a non-finite position or covariance", l.id),
                 });

@@ -247,6 +247,8 @@ pub fn calibrate_log(
         mut warnings,
     } = input;
 
+    // Checked here as well as by the navigator so that a bad pairing stays the replay's own
+    // `Error::Settings` (as before the navigator ran it), not a navigator error.
     settings.frame_pairs.pairs.validate()?;
     let mut navigator = Navigator::new(
         rig.clone(),
