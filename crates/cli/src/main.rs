@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 mod calibrate;
 mod fpga;
 mod harris;
+mod localize;
 mod log;
 mod progress;
 mod replay;
@@ -43,6 +44,10 @@ enum Command {
     /// SLAM; prints a short summary and writes the estimates (MCAP), the summary (JSON) and the
     /// trajectory (CSV) on request.
     Replay(replay::Args),
+    /// A vehicle log on a saved map (`replay --save-map`): the vehicle may start anywhere in
+    /// it and be moved while blind; prints whether and where it localised, the lamps missing
+    /// and new, and writes the summary (JSON) and trajectory (CSV) on request.
+    Localize(localize::Args),
     /// Vehicle logs: `log check` says what is damaged and what a replay will use (exit 0 only
     /// for an undamaged log); `log recover` writes every readable record to a clean log.
     Log(log::Args),
@@ -92,6 +97,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => done(simulate::run(&args)),
         Command::Calibrate(args) => done(calibrate::run(&args)),
         Command::Replay(args) => done(replay::run(&args)),
+        Command::Localize(args) => done(localize::run(&args)),
         // `log check` exits 1 for a damaged log, without an error line.
         Command::Log(args) => log::run(&args),
         Command::Rig(args) => done(rig_import::run(&args)),

@@ -48,6 +48,9 @@ pub enum Error {
     /// The navigator refused its settings or the rig.
     #[error("navigator: {0}")]
     Navigator(#[from] nav::Error),
+    /// The localiser refused the map or its settings.
+    #[error("localiser: {0}")]
+    Localize(String),
     /// An output file (`EST.mcap`, `SUMMARY.json`, `TRAJ.csv`) could not be created or
     /// written.
     #[error("cannot write {file}: {}: {source}", path.display())]

@@ -38,6 +38,7 @@
 #![deny(missing_docs)]
 
 mod error;
+mod localization;
 mod map;
 mod navigate;
 mod output;
@@ -61,6 +62,11 @@ pub use estimates_log::{
     MapSnapshot, ParamEstimate, Phase, ReadError as EstimatesError, Replay, ReplayEnd, TruthErrors,
     end_summary_json, read_estimates, summary_json,
 };
+pub use localization::{
+    LocalizeEnd, LocalizeTruth, LocalizedFrame, LocalizedTrajectoryWriter, WRONG_FIX_M,
+    localize_log, localize_summary_json, localizer_for, map_with_new_lamps,
+};
+pub use localize::{LocalizerSettings, RelocSettings};
 pub use map::saved_map;
 pub use nav::{FramePairSettings, NavMode, NavSettings, Navigator};
 pub use navigate::{

@@ -1,0 +1,168 @@
+//! `stereonav localize LOG.mcap --map MAP [--rig RIG.toml] [--summary SUMMARY.json]
+//! [--trajectory TRAJ.csv] [--save-map NEW_MAP]`: a vehicle log on a saved map
+//! (vehicle-interfaces.md section 5; `replay::localize_log`).
+//!
+//! The vehicle may start anywhere in the map and be moved while the stack is blind; poses are
+//! in the map's frame. Prints a short human summary on stdout (frames localised, the fixes,
+//! the lamps missing and new and, when the log has simulator truth, the errors); warnings go
+//! to stderr.
+
+use std::fmt::Write as _;
+use std::io::{self, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+use replay::{LocalizeEnd, LocalizedTrajectoryWriter, LocalizerSettings};
+use rig_model::Rig;
+
+use crate::progress::ByteProgress;
+
+/// Arguments of `stereonav localize`.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
+    #[arg(value_name = "LOG.mcap")]
+    log: PathBuf,
+    /// The saved map (`stereonav replay --save-map`, docs/maps.md).
+    #[arg(long, value_name = "MAP")]
+    map: PathBuf,
+    /// The rig file (its lens, image size and noise); without it, the rig the map was made
+    /// with. The camera's calibration always comes from the map.
+    #[arg(long, value_name = "RIG.toml")]
+    rig: Option<PathBuf>,
+    /// Write the summary as JSON (the replay's keys plus `localized_t_us` and `lamps_missing`).
+    #[arg(long, value_name = "SUMMARY.json")]
+    summary: Option<PathBuf>,
+    /// Write the trajectory as CSV (`t_us,x,y,theta,localized`, a row per stereo frame).
+    #[arg(long, value_name = "TRAJ.csv")]
+    trajectory: Option<PathBuf>,
+    /// Write a new version of the map with the lamps this run found that are not in it.
+    #[arg(long, value_name = "NEW_MAP")]
+    save_map: Option<PathBuf>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<()> {
+    let map = map_file::Map::load(&args.map)?;
+    let rig = args.rig.as_deref().map(Rig::load).transpose()?;
+    let mut traj = args
+        .trajectory
+        .as_deref()
+        .map(LocalizedTrajectoryWriter::create)
+        .transpose()?;
+    let mut bar = ByteProgress::new("localising");
+    let mut progress = |done: u64, total: u64| bar.update(done, total);
+    let started = Instant::now();
+    let mut rows = |f: &replay::LocalizedFrame| match traj.as_mut() {
+        Some(t) => t.frame(f),
+        None => Ok(()),
+    };
+    let result = replay::localize_log(
+        &args.log,
+        &map,
+        rig,
+        LocalizerSettings::default(),
+        &mut rows,
+        &mut progress,
+    );
+    bar.finish();
+    let end = result?;
+    if let Some(t) = traj {
+        t.finish()?;
+    }
+    if let Some(path) = &args.summary {
+        replay::write_summary_value(path, &replay::localize_summary_json(&end))?;
+    }
+    if let Some(path) = &args.save_map {
+        replay::map_with_new_lamps(&map, &end, &args.log).save(path)?;
+    }
+    let took = started.elapsed();
+    {
+        let mut stderr = io::stderr().lock();
+        for w in &end.warnings {
+            writeln!(stderr, "stereonav: warning: {w}")?;
+        }
+    }
+    let text = human_summary(&args.log, &end, took);
+    io::stdout().lock().write_all(text.as_bytes())?;
+    Ok(())
+}
+
+/// The few lines a person reads after a localisation run.
+fn human_summary(log: &std::path::Path, r: &LocalizeEnd, took: Duration) -> String {
+    let mut s = String::new();
+    let span_s = match (r.first_t_us, &r.last_frame) {
+        (Some(a), Some(b)) => (b.t_us.saturating_sub(a)) as f64 * 1e-6,
+        _ => 0.0,
+    };
+    let _ = writeln!(
+        s,
+        "{}: {} stereo frames ({span_s:.1} s of data) localised in {:.2} s; {} corrupt packets, {} frames lost",
+        log.display(),
+        r.frames_processed,
+        took.as_secs_f64(),
+        r.counts.corrupt,
+        r.counts.lost
+    );
+    let pct = if r.frames_processed > 0 {
+        100.0 * r.localized_frames as f64 / r.frames_processed as f64
+    } else {
+        0.0
+    };
+    let first = r.first_t_us.unwrap_or(0);
+    let fixes: Vec<String> = r
+        .localized_t_us
+        .iter()
+        .map(|t| format!("{:.2} s", t.saturating_sub(first) as f64 * 1e-6))
+        .collect();
+    let _ = writeln!(
+        s,
+        "localised in {} of {} frames ({pct:.1} %); position (re)gained at {}",
+        r.localized_frames,
+        r.frames_processed,
+        if fixes.is_empty() {
+            "never".to_string()
+        } else {
+            fixes.join(", ")
+        }
+    );
+    let _ = writeln!(
+        s,
+        "lost: {} after gaps, {} without odometry, {} when the lamps stopped fitting, {} too uncertain",
+        r.lost[0], r.lost[1], r.lost[2], r.lost[3]
+    );
+    let _ = writeln!(
+        s,
+        "map: {} landmarks; missing: {:?}; new lamps: {}",
+        r.landmarks.len(),
+        r.lamps_missing,
+        r.new_lamps.len()
+    );
+    if let Some(f) = &r.last_frame
+        && let Some([x, y, th]) = f.pose
+    {
+        let _ = writeln!(
+            s,
+            "final pose: x {x:.3} m, y {y:.3} m, theta {:.2} deg ({})",
+            th.to_degrees(),
+            if f.localized {
+                "localised"
+            } else {
+                "lost: best guess"
+            }
+        );
+    }
+    if let Some(t) = &r.truth {
+        let _ = writeln!(
+            s,
+            "against the log's truth: error RMS {:.2} mm (max {:.2} mm) over {} localised frames, heading RMS {:.3} deg, {} frames localised more than {:.2} m off",
+            t.ate_rms_m * 1e3,
+            t.ate_max_m * 1e3,
+            t.localized_frames,
+            t.heading_rms_rad.to_degrees(),
+            t.wrong_frames,
+            replay::WRONG_FIX_M
+        );
+    }
+    s
+}

@@ -1,0 +1,478 @@
+//! `stereonav localize`: a vehicle log run on a saved map (vehicle-interfaces.md section 5).
+//!
+//! The log is read as for a replay (decoded, in data-time order); each frame goes through the
+//! [`localize::Localizer`] built from the map: its lamps, its calibrated `C` and `V`, and the
+//! rig (the one given, or else the map's own; the lens, image size and noise come from it).
+//! The log's `/rig` is not needed: the map carries the rig it was made with.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use localize::{FrameResult, LampMap, Localizer, LocalizerSettings, MapLamp, NewLamp, Status};
+use map_file::{Map, MapLandmark};
+use nalgebra::{Matrix3, Vector3};
+use rig_model::Param;
+use rig_model::camera::{CameraParams, wrap_angle};
+use rig_model::config::Rig;
+use serde_json::{Value, json};
+
+use crate::stream::{Input, LogStream};
+use crate::{Counts, Error, ParamEstimate};
+
+/// One frame of a localisation run, as `TRAJ.csv` has it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalizedFrame {
+    /// The frame's time, microseconds.
+    pub t_us: u64,
+    /// The pose (map frame), or `None` when the localiser has no guess.
+    pub pose: Option<[f64; 3]>,
+    /// Its 1-sigma in x, y and theta (NaN without a pose).
+    pub sigma: [f64; 3],
+    /// Whether the localiser stands behind the pose.
+    pub localized: bool,
+    /// Map lamps associated at this frame.
+    pub matched: u32,
+    /// Live relocalisation hypotheses.
+    pub hypotheses: u32,
+}
+
+/// The errors of a localisation run against the log's simulator truth (the truth taken to be
+/// in the map's frame: the mapping run started at the truth's origin).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LocalizeTruth {
+    /// Frames with a true pose.
+    pub frames: u64,
+    /// Of those, frames localised.
+    pub localized_frames: u64,
+    /// Position error RMS over the localised frames, metres.
+    pub ate_rms_m: f64,
+    /// Largest position error of a localised frame, metres.
+    pub ate_max_m: f64,
+    /// Heading error RMS over the localised frames, radians.
+    pub heading_rms_rad: f64,
+    /// Localised frames with a position error over [`WRONG_FIX_M`].
+    pub wrong_frames: u64,
+}
+
+/// A localised frame this far from the truth counts as a wrong fix, metres (the acceptance
+/// bound of issue 20).
+pub const WRONG_FIX_M: f64 = 0.25;
+
+/// What a localisation run ends with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalizeEnd {
+    /// The decoder's and reader's counters.
+    pub counts: Counts,
+    /// Frames processed.
+    pub frames_processed: u64,
+    /// Frames localised.
+    pub localized_frames: u64,
+    /// Each time the position was (re)gained, microseconds.
+    pub localized_t_us: Vec<u64>,
+    /// Map landmark ids that should have been seen often and were not.
+    pub lamps_missing: Vec<u64>,
+    /// Lamps seen that are not in the map.
+    pub new_lamps: Vec<NewLamp>,
+    /// The last frame.
+    pub last_frame: Option<LocalizedFrame>,
+    /// First frame's time, microseconds.
+    pub first_t_us: Option<u64>,
+    /// `C` (the map's) and `V` (refined), every parameter.
+    pub parameters: Vec<ParamEstimate>,
+    /// The map's landmarks, with the times each was associated in this run.
+    pub landmarks: Vec<(MapLandmark, u32)>,
+    /// Times lost, by reason: gap, no odometry, innovations, uncertain.
+    pub lost: [u64; 4],
+    /// Hypotheses generated.
+    pub hypotheses: u64,
+    /// Warnings, one line each.
+    pub warnings: Vec<String>,
+    /// Errors against the truth, when the log has it.
+    pub truth: Option<LocalizeTruth>,
+}
+
+/// The localiser for a map: its lamps indexed, the camera from the map's parameters.
+///
+/// Errors: a map without lamps or with a bad one, settings out of range.
+pub fn localizer_for(
+    map: &Map,
+    rig: Option<Rig>,
+    settings: LocalizerSettings,
+) -> Result<Localizer, Error> {
+    let rig = rig.unwrap_or_else(|| map.rig.clone());
+    let mut camera: CameraParams = map.rig.nominal;
+    let mut sigma = [0.0; rig_model::N_PARAMS];
+    for p in &map.parameters {
+        camera.set(p.param, p.value);
+        if let Some(s) = sigma.get_mut(p.param.index()) {
+            *s = p.sigma;
+        }
+    }
+    let lamps: Vec<MapLamp> = map
+        .landmarks
+        .iter()
+        .map(|l| MapLamp {
+            id: l.id,
+            position: Vector3::from(l.position),
+            covariance: Matrix3::from_fn(|r, c| l.covariance[r][c]),
+        })
+        .collect();
+    let reach = settings.max_reach_m;
+    let index = LampMap::new(lamps, reach.min(2.0 * pair_radius(&camera, &rig)))
+        .map_err(|e| Error::Localize(e.to_string()))?;
+    Localizer::new(index, rig, camera, &sigma, settings).map_err(|e| Error::Localize(e.to_string()))
+}
+
+/// The widest horizontal distance two lamps seen in one frame can be apart, metres: twice the
+/// footprint radius of the image's half-diagonal at the typical ceiling distance (10 m
+/// above the cameras at most, for the pair table).
+fn pair_radius(c: &CameraParams, rig: &Rig) -> f64 {
+    let half = f64::from(rig.width).hypot(f64::from(rig.height)) / 2.0;
+    let angle = (half / c.f).atan().min(1.2);
+    10.0 * angle.tan()
+}
+
+/// Runs the log at `path` on `map`; `trajectory` gets every frame; `progress` is called with
+/// `(bytes read, bytes in the file)`.
+///
+/// Errors: the log cannot be read or is not a vehicle log, the map cannot localise.
+pub fn localize_log(
+    path: &Path,
+    map: &Map,
+    rig: Option<Rig>,
+    settings: LocalizerSettings,
+    trajectory: &mut dyn FnMut(&LocalizedFrame) -> Result<(), Error>,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<LocalizeEnd, Error> {
+    let mut localizer = localizer_for(map, rig, settings)?;
+    let mut stream = LogStream::open(path)?;
+    stream.preamble(false)?;
+    let mut refused: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
+    let mut frames = 0_u64;
+    let mut first_t = None;
+    let mut last = None;
+    let mut truth = TruthSums::default();
+    while let Some(input) = stream.next_input()? {
+        match input {
+            Input::Odometry(s) => {
+                if let Err(e) = localizer.push_odometry(s) {
+                    *refused.entry(e.to_string()).or_default() += 1;
+                }
+            }
+            Input::Frame(f) => {
+                let result = match localizer.push_frame(f.t_us, &f.left, &f.right) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        *refused.entry(e.to_string()).or_default() += 1;
+                        continue;
+                    }
+                };
+                frames += 1;
+                first_t.get_or_insert(f.t_us);
+                let row = frame_row(&result);
+                if let Some(t) = stream.truth.pose_at(f.t_us) {
+                    truth.add(&row, [t.x, t.y, t.theta]);
+                }
+                stream.truth.forget_before(f.t_us);
+                trajectory(&row)?;
+                last = Some(row);
+                let (done, total) = stream.progress();
+                progress(done, total);
+            }
+        }
+    }
+    let mut warnings: Vec<String> = Vec::new();
+    if let Some(why) = stream.reader().truncated() {
+        warnings.push(format!(
+            "the log ends early ({why}): localised as far as it goes"
+        ));
+    }
+    warnings.extend(stream.reader().warnings().iter().cloned());
+    for (what, n) in &refused {
+        warnings.push(format!("{n} inputs refused: {what}"));
+    }
+    if stream.counts.frames == 0 {
+        warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
+    }
+    if stream.counts.odometry == 0 {
+        warnings.push("no odometry on /odom: the vehicle's motion is unknown".to_string());
+    }
+    if localizer.localized_t_us().is_empty() && frames > 0 {
+        warnings.push(
+            "never localised: no lamp constellation in view matched the map uniquely".to_string(),
+        );
+    }
+    let stats = localizer.stats();
+    let (v, v_sigma) = localizer.vehicle();
+    let mut parameters: Vec<ParamEstimate> = Param::ALL
+        .iter()
+        .map(|&param| {
+            let from_map = map.parameters.iter().find(|p| p.param == param);
+            ParamEstimate {
+                param,
+                value: from_map.map_or(map.rig.nominal.get(param), |p| p.value),
+                sigma: from_map.map_or(0.0, |p| p.sigma),
+            }
+        })
+        .collect();
+    for (k, p) in Param::VEHICLE.iter().enumerate() {
+        if let Some(e) = parameters.iter_mut().find(|e| e.param == *p) {
+            e.value = v.to_array().get(k).copied().unwrap_or(e.value);
+            e.sigma = v_sigma.get(k).copied().unwrap_or(e.sigma);
+        }
+    }
+    let seen = &localizer.lamp_counts().seen;
+    let landmarks = map
+        .landmarks
+        .iter()
+        .zip(seen)
+        .map(|(l, &n)| (*l, n))
+        .collect();
+    Ok(LocalizeEnd {
+        counts: stream.counts,
+        frames_processed: frames,
+        localized_frames: stats.localized_frames,
+        localized_t_us: localizer.localized_t_us().to_vec(),
+        lamps_missing: localizer.lamps_missing(),
+        new_lamps: localizer.new_lamps(),
+        last_frame: last,
+        first_t_us: first_t,
+        parameters,
+        landmarks,
+        lost: stats.lost,
+        hypotheses: stats.hypotheses,
+        warnings,
+        truth: stream.truth.any.then(|| truth.finish()),
+    })
+}
+
+fn frame_row(r: &FrameResult) -> LocalizedFrame {
+    let c = &r.pose_covariance;
+    let sd = |v: f64| if v >= 0.0 { v.sqrt() } else { f64::NAN };
+    LocalizedFrame {
+        t_us: r.t_us,
+        pose: r.pose.map(|p| [p.x, p.y, p.theta]),
+        sigma: if r.pose.is_some() {
+            [sd(c[(0, 0)]), sd(c[(1, 1)]), sd(c[(2, 2)])]
+        } else {
+            [f64::NAN; 3]
+        },
+        localized: r.status == Status::Localized,
+        matched: u32::try_from(r.matched.len()).unwrap_or(u32::MAX),
+        hypotheses: u32::try_from(r.hypotheses).unwrap_or(u32::MAX),
+    }
+}
+
+#[derive(Debug, Default)]
+struct TruthSums {
+    frames: u64,
+    localized: u64,
+    sq: f64,
+    sq_heading: f64,
+    max: f64,
+    wrong: u64,
+}
+
+impl TruthSums {
+    fn add(&mut self, row: &LocalizedFrame, truth: [f64; 3]) {
+        self.frames += 1;
+        if let (true, Some(p)) = (row.localized, row.pose) {
+            let e = (p[0] - truth[0]).hypot(p[1] - truth[1]);
+            let h = wrap_angle(p[2] - truth[2]);
+            self.localized += 1;
+            self.sq += e * e;
+            self.sq_heading += h * h;
+            self.max = self.max.max(e);
+            if e > WRONG_FIX_M {
+                self.wrong += 1;
+            }
+        }
+    }
+
+    fn finish(&self) -> LocalizeTruth {
+        #[allow(clippy::cast_precision_loss)]
+        let n = self.localized.max(1) as f64;
+        LocalizeTruth {
+            frames: self.frames,
+            localized_frames: self.localized,
+            ate_rms_m: if self.localized > 0 {
+                (self.sq / n).sqrt()
+            } else {
+                f64::NAN
+            },
+            ate_max_m: if self.localized > 0 {
+                self.max
+            } else {
+                f64::NAN
+            },
+            heading_rms_rad: if self.localized > 0 {
+                (self.sq_heading / n).sqrt()
+            } else {
+                f64::NAN
+            },
+            wrong_frames: self.wrong,
+        }
+    }
+}
+
+/// `SUMMARY.json` of a localisation run: the replay's keys (vehicle-interfaces.md section 5;
+/// `phase_switch_t_us` is `null`, `landmarks` the map's with the associations of this run as
+/// `observations`), plus `localized_t_us`, `lamps_missing`, `new_lamps` (`[{x, y, z, sigma,
+/// observations}]`), `localized_frames`, `lost_by_reason`, `warnings`, and `truth` (or
+/// `null`).
+pub fn localize_summary_json(end: &LocalizeEnd) -> Value {
+    let c = &end.counts;
+    let pose = end.last_frame.and_then(|f| {
+        f.pose
+            .map(|[x, y, theta]| json!({"t_us": f.t_us, "x": x, "y": y, "theta": theta, "localized": f.localized}))
+    });
+    let params = |vehicle: bool| {
+        Value::Object(
+            end.parameters
+                .iter()
+                .filter(|p| p.param.is_vehicle() == vehicle)
+                .map(|p| {
+                    (
+                        p.param.name().to_owned(),
+                        json!({"value": finite(p.value), "sigma": finite(p.sigma)}),
+                    )
+                })
+                .collect(),
+        )
+    };
+    let landmarks: Vec<Value> = end
+        .landmarks
+        .iter()
+        .map(|(l, n)| {
+            let [x, y, z] = l.position;
+            let s = |i: usize| l.covariance[i][i].max(0.0).sqrt();
+            json!({"id": l.id, "x": x, "y": y, "z": z, "sigma": [s(0), s(1), s(2)], "observations": n})
+        })
+        .collect();
+    let new_lamps: Vec<Value> = end
+        .new_lamps
+        .iter()
+        .map(|l| {
+            let s = |i: usize| l.covariance[(i, i)].max(0.0).sqrt();
+            json!({"x": l.position.x, "y": l.position.y, "z": l.position.z,
+                   "sigma": [s(0), s(1), s(2)], "observations": l.observations})
+        })
+        .collect();
+    let truth = end.truth.map_or(Value::Null, |t| {
+        json!({
+            "frames": t.frames,
+            "localized_frames": t.localized_frames,
+            "ate_rms_m": finite(t.ate_rms_m),
+            "ate_max_m": finite(t.ate_max_m),
+            "heading_rms_rad": finite(t.heading_rms_rad),
+            "wrong_frames": t.wrong_frames,
+            "wrong_fix_m": WRONG_FIX_M,
+        })
+    });
+    json!({
+        "frames": c.frames,
+        "corrupt": c.corrupt,
+        "lost": c.lost,
+        "phase_switch_t_us": Value::Null,
+        "pose": pose.unwrap_or(Value::Null),
+        "camera": params(false),
+        "vehicle": params(true),
+        "landmarks": landmarks,
+        "localized_t_us": end.localized_t_us,
+        "lamps_missing": end.lamps_missing,
+        "new_lamps": new_lamps,
+        "frames_processed": end.frames_processed,
+        "localized_frames": end.localized_frames,
+        "lost_by_reason": {"gap": end.lost[0], "no_odometry": end.lost[1],
+                           "innovations": end.lost[2], "uncertain": end.lost[3]},
+        "hypotheses": end.hypotheses,
+        "warnings": end.warnings,
+        "truth": truth,
+    })
+}
+
+fn finite(v: f64) -> Value {
+    if v.is_finite() { json!(v) } else { Value::Null }
+}
+
+/// `TRAJ.csv` of a localisation run, written as the frames come: header
+/// `t_us,x,y,theta,localized`, the pose columns empty when there is no guess.
+#[derive(Debug)]
+pub struct LocalizedTrajectoryWriter {
+    path: PathBuf,
+    out: std::io::BufWriter<std::fs::File>,
+}
+
+impl LocalizedTrajectoryWriter {
+    /// Creates the file and writes the header.
+    pub fn create(path: &Path) -> Result<Self, Error> {
+        let io = |e| Error::Output {
+            file: "TRAJ.csv",
+            path: path.to_path_buf(),
+            source: e,
+        };
+        let file = std::fs::File::create(path).map_err(io)?;
+        let mut out = std::io::BufWriter::new(file);
+        writeln!(out, "t_us,x,y,theta,localized").map_err(io)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            out,
+        })
+    }
+
+    /// One row.
+    pub fn frame(&mut self, f: &LocalizedFrame) -> Result<(), Error> {
+        let l = u8::from(f.localized);
+        let r = match f.pose {
+            Some([x, y, th]) => writeln!(self.out, "{},{x},{y},{th},{l}", f.t_us),
+            None => writeln!(self.out, "{},,,,{l}", f.t_us),
+        };
+        r.map_err(|e| Error::Output {
+            file: "TRAJ.csv",
+            path: self.path.clone(),
+            source: e,
+        })
+    }
+
+    /// Flushes the file.
+    pub fn finish(mut self) -> Result<(), Error> {
+        self.out.flush().map_err(|e| Error::Output {
+            file: "TRAJ.csv",
+            path: self.path.clone(),
+            source: e,
+        })
+    }
+}
+
+/// The map with the run's new lamps added (ids after the map's largest), as a new version of
+/// it made from `log`; the missing lamps stay (a dark lamp is usually repaired).
+pub fn map_with_new_lamps(map: &Map, end: &LocalizeEnd, log: &Path) -> Map {
+    let mut out = map.clone();
+    let first = map
+        .landmarks
+        .iter()
+        .map(|l| l.id)
+        .max()
+        .map_or(0, |m| m + 1);
+    for (id, l) in (first..).zip(&end.new_lamps) {
+        out.landmarks.push(MapLandmark {
+            id,
+            position: [l.position.x, l.position.y, l.position.z],
+            covariance: std::array::from_fn(|r| std::array::from_fn(|c| l.covariance[(r, c)])),
+            observations: u64::from(l.observations),
+        });
+    }
+    for p in &mut out.parameters {
+        if let Some(e) = end.parameters.iter().find(|e| e.param == p.param)
+            && p.param.is_vehicle()
+        {
+            p.value = e.value;
+            p.sigma = e.sigma;
+        }
+    }
+    out.source_log = log.display().to_string();
+    out.created_unix_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    out
+}
