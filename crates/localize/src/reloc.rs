@@ -93,6 +93,10 @@ pub struct Relocalizer {
     hypotheses: Vec<Hypothesis>,
     frames_since_generation: u32,
     scratch: Vec<u32>,
+    /// Frames during which no decision is taken because the set of hypotheses was cut
+    /// (a generation hit its cap, or the set was truncated): a hypothesis that is unique only
+    /// among those kept proves nothing.
+    incomplete: usize,
     /// Hypotheses generated over the relocaliser's life.
     pub generated: u64,
 }
@@ -105,6 +109,7 @@ impl Relocalizer {
             hypotheses: Vec::new(),
             frames_since_generation: u32::MAX,
             scratch: Vec::new(),
+            incomplete: 0,
             generated: 0,
         }
     }
@@ -113,6 +118,7 @@ impl Relocalizer {
     pub fn clear(&mut self) {
         self.hypotheses.clear();
         self.frames_since_generation = u32::MAX;
+        self.incomplete = 0;
     }
 
     /// The live hypotheses.
@@ -162,6 +168,7 @@ impl Relocalizer {
                 }
             }
         }
+        self.incomplete = self.incomplete.saturating_sub(1);
         self.frames_since_generation = self.frames_since_generation.saturating_add(1);
         if self.frames_since_generation >= s.generate_every_frames
             && observations.len() >= s.min_observations
@@ -241,14 +248,22 @@ impl Relocalizer {
                             })
                             .count();
                         let others = order.len() - 2;
-                        if support >= s.min_support.min(others) && support * 2 >= others {
+                        if support >= s.min_support.min(others)
+                            && support * 2 >= others
+                            && !candidates.iter().any(|c| same_pose(c, &pose, &s))
+                        {
                             candidates.push(pose);
                         }
                     }
                 }
                 if candidates.len() > s.max_candidates {
+                    // The rest of the pairs are not tried: the set may miss the true pose.
+                    self.incomplete = s.window_frames;
                     break;
                 }
+            }
+            if candidates.len() > s.max_candidates {
+                break;
             }
         }
         let sigma_xy = s.initial_sigma_m;
@@ -279,9 +294,11 @@ impl Relocalizer {
             {
                 continue;
             }
+            // Its birth frame is not in its score: it was associated with the seed's loose
+            // covariance, which the score's normalisation penalises against hypotheses that
+            // have converged (a true pose born late was dropped at once for it). With no
+            // common frame it neither is compared nor lets another be declared unique.
             let mut h = Hypothesis::new(filter);
-            h.age = 1;
-            h.history.push_back(scored.llr);
             h.matched = scored.matched.len();
             h.expected = scored.expected;
             h.mean_nis = scored.mean_nis;
@@ -343,7 +360,10 @@ impl Relocalizer {
             let starved = h.age >= 3 && h.matched < s.min_matched.min(h.expected.max(1));
             behind <= s.prune_margin && !starved
         });
-        kept.truncate(s.max_hypotheses);
+        if kept.len() > s.max_hypotheses {
+            kept.truncate(s.max_hypotheses);
+            self.incomplete = s.window_frames;
+        }
         self.hypotheses = kept;
     }
 
@@ -359,7 +379,8 @@ impl Relocalizer {
         else {
             return Decision::Undecided;
         };
-        if best.age < s.min_frames
+        if self.incomplete > 0
+            || best.age < s.min_frames
             || best.matched < s.min_matched
             || best.distinct.len() < s.min_distinct_lamps
             || best.mean_nis > s.max_mean_nis

@@ -117,19 +117,20 @@ pub fn localizer_for(
             covariance: Matrix3::from_fn(|r, c| l.covariance[r][c]),
         })
         .collect();
-    let reach = settings.max_reach_m;
-    let index = LampMap::new(lamps, reach.min(2.0 * pair_radius(&camera, &rig)))
-        .map_err(|e| Error::Localize(e.to_string()))?;
+    let highest = lamps.iter().map(|l| l.position.z).fold(f64::MIN, f64::max);
+    let pair_radius = pair_radius(&camera, &rig, highest).min(settings.max_reach_m);
+    let index = LampMap::new(lamps, pair_radius).map_err(|e| Error::Localize(e.to_string()))?;
     Localizer::new(index, rig, camera, &sigma, settings).map_err(|e| Error::Localize(e.to_string()))
 }
 
-/// The widest horizontal distance two lamps seen in one frame can be apart, metres: twice the
-/// footprint radius of the image's half-diagonal at the typical ceiling distance (10 m
-/// above the cameras at most, for the pair table).
-fn pair_radius(c: &CameraParams, rig: &Rig) -> f64 {
+/// The widest horizontal distance two lamps seen in one frame can be apart, metres: the
+/// diameter of the image's footprint on the ceiling at the highest lamp (the image's
+/// half-diagonal off the optical axis, tilted by the mount).
+fn pair_radius(c: &CameraParams, rig: &Rig, highest_m: f64) -> f64 {
     let half = f64::from(rig.width).hypot(f64::from(rig.height)) / 2.0;
-    let angle = (half / c.f).atan().min(1.2);
-    10.0 * angle.tan()
+    let tilt = c.mount.pitch.abs() + c.mount.roll.abs();
+    let angle = ((half / c.f).atan() + tilt).min(1.3);
+    2.0 * (highest_m - c.mount.z).max(0.5) * angle.tan()
 }
 
 /// Runs the log at `path` on `map`; `trajectory` gets every frame; `progress` is called with
