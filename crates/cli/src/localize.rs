@@ -155,11 +155,12 @@ fn human_summary(log: &std::path::Path, r: &LocalizeEnd, took: Duration) -> Stri
     if let Some(t) = &r.truth {
         let _ = writeln!(
             s,
-            "against the log's truth: error RMS {:.2} mm (max {:.2} mm) over {} localised frames, heading RMS {:.3} deg, {} frames localised more than {:.2} m off",
+            "against the log's truth: error RMS {:.2} mm (max {:.2} mm) over {} localised frames, heading RMS {:.3} deg, pose NEES {:.2} (3 is honest), {} frames localised more than {:.2} m off",
             t.ate_rms_m * 1e3,
             t.ate_max_m * 1e3,
             t.localized_frames,
             t.heading_rms_rad.to_degrees(),
+            t.pose_nees,
             t.wrong_frames,
             replay::WRONG_FIX_M
         );

@@ -65,7 +65,12 @@ fn a_log_localises_on_the_map_its_replay_saved() {
     for p in PARAMETERS {
         assert!(doc["camera"][p]["value"].is_f64(), "camera.{p}");
     }
-    for p in ["odom_scale", "odom_yaw_scale", "odom_yaw_bias", "time_offset"] {
+    for p in [
+        "odom_scale",
+        "odom_yaw_scale",
+        "odom_yaw_bias",
+        "time_offset",
+    ] {
         assert!(doc["vehicle"][p]["sigma"].is_f64(), "vehicle.{p}");
     }
     assert_eq!(doc["landmarks"].as_array().unwrap().len(), 5);

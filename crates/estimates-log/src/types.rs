@@ -272,6 +272,11 @@ pub struct ReplayEnd {
     pub warnings: Vec<String>,
     /// What the log lost to damage, when it is damaged (`None`: every record was read).
     pub log_damage: Option<vehicle_log::Damage>,
+    /// The error the final map's landmarks share, from the filter's joint covariance: the
+    /// covariance of a rigid motion `(tx, ty, tz, yaw)` of the whole map about the point
+    /// `(x, y)` (the landmarks' centroid), as `(point, covariance)`; `None` without a map of
+    /// at least two landmarks (crate `map-file`'s `CommonError`, docs/maps.md).
+    pub map_common_error: Option<([f64; 2], [[f64; 4]; 4])>,
 }
 
 /// A whole log replayed.

@@ -20,6 +20,9 @@ pub enum Error {
         /// Its id.
         id: u64,
     },
+    /// The map's common error is not a finite symmetric covariance.
+    #[error("the map's common error is not a finite symmetric 4x4 covariance")]
+    BadCommonError,
     /// A setting out of range.
     #[error("localiser setting {name} = {value} is out of range")]
     Settings {

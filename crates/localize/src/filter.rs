@@ -100,6 +100,24 @@ impl PoseFilter {
         }
     }
 
+    /// Starts estimating `V` from here: its standard deviations `v_sigma` (uncorrelated with
+    /// the pose) and its random walk; the pose, its covariance and the cross-covariances stay.
+    pub fn release_vehicle(&mut self, v: &Vehicle, v_sigma: [f64; 4], vehicle_walk: [f64; 4]) {
+        let va = v.to_array();
+        for k in 0..4 {
+            self.x[3 + k] = va[k];
+            for j in 0..STATE_DIM {
+                self.p[(3 + k, j)] = 0.0;
+                self.p[(j, 3 + k)] = 0.0;
+            }
+            self.p[(3 + k, 3 + k)] = v_sigma[k] * v_sigma[k];
+            for (_, c, _) in &mut self.considered {
+                c.row_mut(3 + k).fill(0.0);
+            }
+        }
+        self.vehicle_walk = vehicle_walk;
+    }
+
     /// The pose.
     pub fn pose(&self) -> Pose2 {
         Pose2::new(self.x[0], self.x[1], self.x[2])

@@ -195,6 +195,8 @@ impl NewLamps {
         self.candidates
             .iter()
             .filter(|c| c.observations >= min_observations)
+            // Seen over 2 s at least: not the last frames of a pose that was going wrong.
+            .filter(|c| c.seen_us.1.saturating_sub(c.seen_us.0) >= 2_000_000)
             .filter_map(|c| {
                 let (p, cov) = c.estimate()?;
                 let sigma = libm::sqrt(cov[(0, 0)].max(cov[(1, 1)]).max(cov[(2, 2)]).max(0.0));

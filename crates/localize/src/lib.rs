@@ -46,5 +46,5 @@ pub mod view;
 pub use error::Error;
 pub use hall::NewLamp;
 pub use localizer::{FrameResult, Localizer, LocalizerStats, LostReason, Status};
-pub use map::{LampMap, MapLamp};
+pub use map::{CommonError, LampMap, MapLamp};
 pub use settings::{LocalizerSettings, RelocSettings};

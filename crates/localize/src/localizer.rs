@@ -56,7 +56,8 @@ pub struct FrameResult {
     /// The pose: the filter's while localised; while lost, the best hypothesis's, or the last
     /// pose carried on by the odometry, or nothing.
     pub pose: Option<Pose2>,
-    /// Its covariance (the filter's, or the hypothesis's).
+    /// Its covariance (the filter's, or the hypothesis's), with the map's common error added
+    /// when the map has one: the pose's uncertainty in the world the map was made in.
     pub pose_covariance: Matrix3<f64>,
     /// Map lamps associated, by id, with their NIS (localised only).
     pub matched: Vec<(u64, f64)>,
@@ -414,19 +415,16 @@ impl Localizer {
             if let Decision::Unique(i) = decision
                 && let Some(h) = self.reloc.hypotheses().get(i)
             {
-                let pose = h.pose();
-                let cov = h.filter.pose_covariance();
+                // The hypothesis's filter goes on (its pose, covariance and the
+                // cross-covariances with the lamps and the map's common error); from here it
+                // refines V too.
+                let mut filter = h.filter.clone();
                 let (v, vs) = match &self.guess {
                     Some(g) => (g.vehicle(), g.vehicle_sigma()),
                     None => (self.vehicle, self.vehicle_sigma),
                 };
-                self.filter = Some(PoseFilter::new(
-                    pose,
-                    &cov,
-                    &v,
-                    vs,
-                    self.settings.vehicle_walk,
-                ));
+                filter.release_vehicle(&v, vs, self.settings.vehicle_walk);
+                self.filter = Some(filter);
                 self.status = Status::Localized;
                 self.localized_t_us.push(t_us);
                 self.reloc.clear();
@@ -451,6 +449,11 @@ impl Localizer {
                 result.pose_covariance = g.pose_covariance();
             }
             (None, None, None) => {}
+        }
+        // The pose in the world the map was made in: its uncertainty relative to the map and
+        // the map's own common error.
+        if let (Some(p), Some(c)) = (&result.pose, self.map.common_error()) {
+            result.pose_covariance += c.pose_covariance(p.x, p.y);
         }
         if self.status == Status::Localized {
             self.stats.localized_frames += 1;
@@ -554,8 +557,11 @@ impl Localizer {
             self.lose(LostReason::Uncertain, result);
             return;
         }
-        // The hall's changes, judged from a pose known well (never the pose from them).
-        if sigma < 0.1 {
+        // The hall's changes, judged from a pose known well and a frame that fits (never the
+        // pose from them): a frame whose lamps stop fitting is the start of a loss, and its
+        // unassociated lamps would be placed where they are not.
+        let fits = scored.matched.len() >= 3 && 2 * scored.matched.len() >= scored.expected;
+        if sigma < 0.1 && fits {
             self.counts.add(&scored.expected_lamps, &scored.matched);
             let mut taken = alloc::vec![false; observations.len()];
             for &(_, o) in &scored.matched {

@@ -4,7 +4,7 @@
 
 use alloc::vec::Vec;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
 use crate::error::Error;
 
@@ -18,6 +18,64 @@ pub struct MapLamp {
     /// Covariance of the position, m^2 (the mapping run's marginal; cross-covariances between
     /// lamps are not used: see [`crate::filter`]).
     pub covariance: Matrix3<f64>,
+}
+
+/// The error the map's lamps share: a small rigid motion `d = (tx, ty, tz, yaw)` of the whole
+/// map about `origin`, with covariance `covariance` (the mapping run's drift of its frame).
+/// A lamp at `p` moves by `A(p) d`, [`CommonError::jacobian`]. It does not average out over
+/// the lamps in view: a pose found from the map's lamps moves with the map. The filter works
+/// in the map's frame (the lamps' errors relative to it); the localiser adds the common part
+/// to the pose covariance it reports ([`CommonError::pose_covariance`]), so that the reported
+/// sigma is the pose's uncertainty in the world the map was made in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommonError {
+    /// The point the yaw turns about, `(x, y)`, metres.
+    pub origin: (f64, f64),
+    /// Covariance of `(tx, ty, tz, yaw)`.
+    pub covariance: Matrix4<f64>,
+}
+
+impl CommonError {
+    /// The covariance the common error adds to a planar pose at `(x, y)`: the pose moves with
+    /// the map, `(x, y, theta)` by `J d`, `J = [[1, 0, 0, -(y - o.y)], [0, 1, 0, x - o.x],
+    /// [0, 0, 0, 1]]`.
+    pub fn pose_covariance(&self, x: f64, y: f64) -> Matrix3<f64> {
+        let (ox, oy) = self.origin;
+        let j = Matrix3x4::new(
+            1.0,
+            0.0,
+            0.0,
+            -(y - oy),
+            0.0,
+            1.0,
+            0.0,
+            x - ox,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        );
+        j * self.covariance * j.transpose()
+    }
+
+    /// `A(p)`: how a lamp at `p` moves with `(tx, ty, tz, yaw)`.
+    pub fn jacobian(&self, p: &Vector3<f64>) -> Matrix3x4<f64> {
+        let (ox, oy) = self.origin;
+        Matrix3x4::new(
+            1.0,
+            0.0,
+            0.0,
+            -(p.y - oy),
+            0.0,
+            1.0,
+            0.0,
+            p.x - ox,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+        )
+    }
 }
 
 /// Pairs of lamps by their horizontal distance, for relocalisation: every pair closer than the
@@ -51,6 +109,7 @@ pub struct LampMap {
     cell_lamps: Vec<u32>,
     pairs: Vec<LampPair>,
     pair_radius_m: f64,
+    common: Option<CommonError>,
 }
 
 impl LampMap {
@@ -110,6 +169,7 @@ impl LampMap {
             cell_lamps: Vec::new(),
             pairs: Vec::new(),
             pair_radius_m: pair_radius_m.max(0.0),
+            common: None,
         };
         map.build_cells();
         map.build_pairs();
@@ -192,6 +252,26 @@ impl LampMap {
         }
         pairs.sort_by(|p, q| p.distance.total_cmp(&q.distance));
         self.pairs = pairs;
+    }
+
+    /// Takes `common` as the error the lamps share ([`crate::Localizer`] adds it to the pose
+    /// covariance it reports). Errors: a non-finite or asymmetric common covariance.
+    pub fn with_common_error(mut self, common: CommonError) -> Result<Self, Error> {
+        let c = common.covariance;
+        if !(c.iter().all(|v| v.is_finite())
+            && common.origin.0.is_finite()
+            && common.origin.1.is_finite()
+            && (c - c.transpose()).amax() <= 1e-9 * c.amax().max(f64::MIN_POSITIVE))
+        {
+            return Err(Error::BadCommonError);
+        }
+        self.common = Some(common);
+        Ok(self)
+    }
+
+    /// The error the lamps share, when the map gave one.
+    pub fn common_error(&self) -> Option<CommonError> {
+        self.common
     }
 
     /// The lamps, in the order they were given.

@@ -59,6 +59,21 @@ pub struct MapParam {
     pub sigma: f64,
 }
 
+/// The error the map's landmarks share: a small rigid motion of the whole map (the mapping
+/// run's drift of its frame, which every landmark carries), as the covariance of `(tx, ty, tz,
+/// yaw)` about a point of the floor plan. A landmark at `p` moves by `A(p) d` for a motion
+/// `d`, `A(p) = [[1, 0, 0, -(p.y - o.y)], [0, 1, 0, p.x - o.x], [0, 0, 1, 0]]`; its marginal
+/// covariance in [`MapLandmark::covariance`] includes `A C A^T`. A localiser that treats the
+/// landmarks' errors as independent must consider this part once, for all of them: it does
+/// not average out over the lamps in view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommonError {
+    /// The point `o` the yaw turns about, `(x, y)`, metres (the landmarks' centroid).
+    pub origin: [f64; 2],
+    /// Covariance of `(tx, ty, tz, yaw)`, metres and radians.
+    pub covariance: [[f64; 4]; 4],
+}
+
 /// A saved map: the lamps, the calibration, the rig it was made with, and where it came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Map {
@@ -72,6 +87,9 @@ pub struct Map {
     pub source_log: String,
     /// When the map was written, seconds since the Unix epoch.
     pub created_unix_s: u64,
+    /// The error the landmarks share (key `common_error`, optional: `None` in maps written
+    /// before it, read as unknown).
+    pub common_error: Option<CommonError>,
 }
 
 impl Map {
@@ -189,10 +207,21 @@ impl Map {
                 });
             }
         }
+        if let Some(c) = &self.common_error
+            && !c
+                .origin
+                .iter()
+                .chain(c.covariance.iter().flatten())
+                .all(|v| v.is_finite())
+        {
+            return Err(Error::Invalid {
+                detail: "the common error is not finite".to_string(),
+            });
+        }
         let rig: Value = serde_json::from_str(&self.rig.to_json()).map_err(|e| Error::Invalid {
             detail: format!("the rig's JSON form: {e}"),
         })?;
-        Ok(json!({
+        let mut body = json!({
             "format": MAGIC,
             "version": VERSION,
             "created_unix_s": self.created_unix_s,
@@ -209,7 +238,14 @@ impl Map {
                 "covariance": l.covariance,
                 "observations": l.observations,
             })).collect::<Vec<_>>(),
-        }))
+        });
+        if let (Some(c), Some(obj)) = (&self.common_error, body.as_object_mut()) {
+            obj.insert(
+                "common_error".to_string(),
+                json!({"origin": c.origin, "covariance": c.covariance}),
+            );
+        }
+        Ok(body)
     }
 }
 
@@ -325,7 +361,44 @@ fn parse_body(value: &Value, source_name: &str) -> Result<Map, Error> {
             )?,
         });
     }
+    let common_error = match top.get("common_error") {
+        None | Some(Value::Null) => None,
+        Some(v) => {
+            let at = "common_error: ";
+            let obj = v
+                .as_object()
+                .ok_or_else(|| content(format!("{at}not an object")))?;
+            let origin = array_of(key(obj, at, "origin")?, &format!("{at}'origin'"))?;
+            let rows = array_of(key(obj, at, "covariance")?, &format!("{at}'covariance'"))?;
+            if origin.len() != 2 || rows.len() != 4 {
+                return Err(content(format!(
+                    "{at}'origin' must hold 2 numbers and 'covariance' 4 rows"
+                )));
+            }
+            let mut o = [0.0; 2];
+            for (a, x) in o.iter_mut().zip(&origin) {
+                *a = f64_of(x, &format!("{at}'origin'"))?;
+            }
+            let mut c = [[0.0; 4]; 4];
+            for (row, v) in c.iter_mut().zip(rows) {
+                let v = array_of(v, &format!("{at}'covariance' row"))?;
+                if v.len() != 4 {
+                    return Err(content(format!(
+                        "{at}a 'covariance' row must hold 4 numbers"
+                    )));
+                }
+                for (a, x) in row.iter_mut().zip(&v) {
+                    *a = f64_of(x, &format!("{at}'covariance'"))?;
+                }
+            }
+            Some(CommonError {
+                origin: o,
+                covariance: c,
+            })
+        }
+    };
     Ok(Map {
+        common_error,
         landmarks,
         parameters,
         rig,

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use map_file::{Error, Map, MapLandmark, MapParam};
+use map_file::{CommonError, Error, Map, MapLandmark, MapParam};
 use rig_model::Param;
 use rig_model::config::Rig;
 
@@ -31,7 +31,24 @@ fn map() -> Map {
         rig,
         source_log: "fixtures/logs/paper-experiment.mcap".to_string(),
         created_unix_s: 1_796_000_000,
+        common_error: Some(CommonError {
+            origin: [0.2, -1.0 / 3.0],
+            covariance: std::array::from_fn(|r| {
+                std::array::from_fn(|c| if r == c { 1e-5 / 3.0 } else { 1e-7 })
+            }),
+        }),
     }
+}
+
+/// A map written before the common error (no `common_error` key) still reads.
+#[test]
+fn a_map_without_the_common_error_reads() {
+    let m = Map {
+        common_error: None,
+        ..map()
+    };
+    let back = Map::from_bytes(&m.to_bytes().unwrap(), "old.map").unwrap();
+    assert_eq!(back, m);
 }
 
 #[test]

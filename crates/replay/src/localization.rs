@@ -8,9 +8,11 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use localize::{FrameResult, LampMap, Localizer, LocalizerSettings, MapLamp, NewLamp, Status};
+use localize::{
+    CommonError, FrameResult, LampMap, Localizer, LocalizerSettings, MapLamp, NewLamp, Status,
+};
 use map_file::{Map, MapLandmark};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix4, Vector3};
 use rig_model::Param;
 use rig_model::camera::{CameraParams, wrap_angle};
 use rig_model::config::Rig;
@@ -52,6 +54,10 @@ pub struct LocalizeTruth {
     pub heading_rms_rad: f64,
     /// Localised frames with a position error over [`WRONG_FIX_M`].
     pub wrong_frames: u64,
+    /// Mean NEES of the localised pose `(x, y, theta)` against the truth (3 for an honest
+    /// covariance; the map's own error is in the truth's error, so a map that is right but
+    /// uncertain gives less).
+    pub pose_nees: f64,
 }
 
 /// A localised frame this far from the truth counts as a wrong fix, metres (the acceptance
@@ -119,7 +125,15 @@ pub fn localizer_for(
         .collect();
     let highest = lamps.iter().map(|l| l.position.z).fold(f64::MIN, f64::max);
     let pair_radius = pair_radius(&camera, &rig, highest).min(settings.max_reach_m);
-    let index = LampMap::new(lamps, pair_radius).map_err(|e| Error::Localize(e.to_string()))?;
+    let mut index = LampMap::new(lamps, pair_radius).map_err(|e| Error::Localize(e.to_string()))?;
+    if let Some(c) = &map.common_error {
+        index = index
+            .with_common_error(CommonError {
+                origin: (c.origin[0], c.origin[1]),
+                covariance: Matrix4::from_fn(|r, k| c.covariance[r][k]),
+            })
+            .map_err(|e| Error::Localize(e.to_string()))?;
+    }
     Localizer::new(index, rig, camera, &sigma, settings).map_err(|e| Error::Localize(e.to_string()))
 }
 
@@ -172,7 +186,7 @@ pub fn localize_log(
                 first_t.get_or_insert(f.t_us);
                 let row = frame_row(&result);
                 if let Some(t) = stream.truth.pose_at(f.t_us) {
-                    truth.add(&row, [t.x, t.y, t.theta]);
+                    truth.add(&row, [t.x, t.y, t.theta], &result.pose_covariance);
                 }
                 stream.truth.forget_before(f.t_us);
                 trajectory(&row)?;
@@ -272,14 +286,24 @@ struct TruthSums {
     sq_heading: f64,
     max: f64,
     wrong: u64,
+    nees: f64,
+    nees_frames: u64,
 }
 
 impl TruthSums {
-    fn add(&mut self, row: &LocalizedFrame, truth: [f64; 3]) {
+    fn add(&mut self, row: &LocalizedFrame, truth: [f64; 3], cov: &Matrix3<f64>) {
         self.frames += 1;
         if let (true, Some(p)) = (row.localized, row.pose) {
             let e = (p[0] - truth[0]).hypot(p[1] - truth[1]);
             let h = wrap_angle(p[2] - truth[2]);
+            let d = Vector3::new(p[0] - truth[0], p[1] - truth[1], h);
+            if let Some(inv) = cov.try_inverse() {
+                let nees = (d.transpose() * inv * d)[(0, 0)];
+                if nees.is_finite() {
+                    self.nees += nees;
+                    self.nees_frames += 1;
+                }
+            }
             self.localized += 1;
             self.sq += e * e;
             self.sq_heading += h * h;
@@ -312,6 +336,12 @@ impl TruthSums {
                 f64::NAN
             },
             wrong_frames: self.wrong,
+            #[allow(clippy::cast_precision_loss)]
+            pose_nees: if self.nees_frames > 0 {
+                self.nees / self.nees_frames as f64
+            } else {
+                f64::NAN
+            },
         }
     }
 }
@@ -367,6 +397,7 @@ pub fn localize_summary_json(end: &LocalizeEnd) -> Value {
             "ate_max_m": finite(t.ate_max_m),
             "heading_rms_rad": finite(t.heading_rms_rad),
             "wrong_frames": t.wrong_frames,
+            "pose_nees": finite(t.pose_nees),
             "wrong_fix_m": WRONG_FIX_M,
         })
     });

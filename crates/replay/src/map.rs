@@ -3,7 +3,7 @@
 use std::path::Path;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use map_file::{Map, MapLandmark, MapParam};
+use map_file::{CommonError, Map, MapLandmark, MapParam};
 use rig_model::config::Rig;
 
 use crate::ReplayEnd;
@@ -31,6 +31,9 @@ pub fn saved_map(end: &ReplayEnd, rig: &Rig, log: &Path) -> Map {
                 sigma: p.sigma,
             })
             .collect(),
+        common_error: end
+            .map_common_error
+            .map(|(origin, covariance)| CommonError { origin, covariance }),
         rig: rig.clone(),
         source_log: log.display().to_string(),
         created_unix_s: SystemTime::now()

@@ -58,6 +58,63 @@ fn map_of(navigator: &Navigator) -> Vec<LandmarkEstimate> {
     out
 }
 
+/// The error the filter's landmarks share: the least-squares rigid motion `d = (tx, ty, tz,
+/// yaw)` about their centroid `o` that their errors `e_i` imply, `d = N^-1 sum A_i^T e_i`
+/// with `A_i = [[1, 0, 0, -(y_i - o_y)], [0, 1, 0, x_i - o_x], [0, 0, 1, 0]]` and
+/// `N = sum A_i^T A_i`, has the covariance `N^-1 (sum_ij A_i^T P_ij A_j) N^-1` from the joint
+/// covariance `P` of the landmarks. `None` with fewer than two landmarks (a yaw needs two).
+fn common_error(ekf: &vslam_ekf::Ekf) -> Option<([f64; 2], [[f64; 4]; 4])> {
+    use nalgebra::{Matrix3x4, Matrix4};
+    let lamps: Vec<(usize, nalgebra::Vector3<f64>)> = ekf
+        .landmarks()
+        .filter_map(|l| ekf.landmark_state_index(l.id).map(|i| (i, l.position)))
+        .collect();
+    if lamps.len() < 2 {
+        return None;
+    }
+    #[allow(clippy::cast_precision_loss)]
+    let n = lamps.len() as f64;
+    let (ox, oy) = (
+        lamps.iter().map(|(_, p)| p.x).sum::<f64>() / n,
+        lamps.iter().map(|(_, p)| p.y).sum::<f64>() / n,
+    );
+    let a = |p: &nalgebra::Vector3<f64>| {
+        Matrix3x4::new(
+            1.0,
+            0.0,
+            0.0,
+            -(p.y - oy),
+            0.0,
+            1.0,
+            0.0,
+            p.x - ox,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+        )
+    };
+    let normal: Matrix4<f64> = lamps.iter().map(|(_, p)| a(p).transpose() * a(p)).sum();
+    let n_inv = normal.try_inverse()?;
+    let p = ekf.covariance();
+    let mut middle = Matrix4::zeros();
+    for (i, pi) in &lamps {
+        let ai = a(pi);
+        for (j, pj) in &lamps {
+            let block = p.fixed_view::<3, 3>(*i, *j).into_owned();
+            middle += ai.transpose() * block * a(pj);
+        }
+    }
+    let c = n_inv * middle * n_inv;
+    let c = 0.5 * (c + c.transpose());
+    c.iter().all(|v| v.is_finite()).then(|| {
+        (
+            [ox, oy],
+            std::array::from_fn(|r| std::array::from_fn(|k| c[(r, k)])),
+        )
+    })
+}
+
 /// Where a streaming replay's series go as they are final: the estimate of each frame, the
 /// camera samples and the map snapshots, in data-time order (a frame, then the camera
 /// sample and the map taken after it). [`ReplayCollector`] keeps them (a [`Replay`]);
@@ -465,6 +522,7 @@ impl Replayer {
             truth,
             warnings,
             log_damage,
+            map_common_error: navigator.ekf().and_then(common_error),
         })
     }
 
