@@ -257,3 +257,67 @@ fn other_failures_are_one_line_too() {
         "/nonexistent/dir/t.json: cannot write the truth file",
     );
 }
+
+#[test]
+fn the_localising_drive_starts_in_the_hall_and_is_carried_blind() {
+    let scenario = fixture("hall-localize.toml");
+    let (log, truth) = (scratch("hall-localize.mcap"), scratch("hall-localize.json"));
+    ok(&stereonav(&[
+        "simulate",
+        s(&scenario),
+        "--out",
+        s(&log),
+        "--truth",
+        s(&truth),
+    ]));
+    let read = vehicle_log::read_log(&log).unwrap();
+    let mut odom_t = Vec::new();
+    let mut poses = Vec::new();
+    let mut landmarks = Vec::new();
+    let mut stream = Vec::new();
+    for r in &read.records {
+        match r {
+            Record::Odom(o) => odom_t.push(o.t_us),
+            Record::TruthPose(p) => poses.push(*p),
+            Record::TruthLandmarks(l) => landmarks.clone_from(l),
+            Record::Features { bytes, .. } => stream.extend_from_slice(bytes),
+            _ => {}
+        }
+    }
+    // The truth is the hall's: the start pose, the lit lamps with the hall's ids, the added
+    // lamps after them.
+    let first = poses[0];
+    assert_eq!((first.x, first.y), (12.0, 6.0));
+    assert!((first.theta - 120f64.to_radians()).abs() < 1e-12);
+    let ids: Vec<u32> = landmarks.iter().map(|l| l.id).collect();
+    assert_eq!(ids.len(), 66);
+    for dark in [13, 24, 25, 37, 43, 46, 56] {
+        assert!(!ids.contains(&dark), "dark lamp {dark} in the truth");
+    }
+    assert_eq!(&ids[63..], [70, 71, 72]);
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    assert_eq!(json["landmarks"].as_array().unwrap().len(), 66);
+    // 8 s without odometry (the vehicle computer was off) and without frames; the board's
+    // counter jumps over the frames it did not send.
+    let gap = |t: &[u64]| t.windows(2).map(|w| w[1] - w[0]).max().unwrap();
+    assert!(gap(&odom_t) >= 8_000_000, "{}", gap(&odom_t));
+    let pose_t: Vec<u64> = poses.iter().map(|p| p.t_us).collect();
+    assert!(gap(&pose_t) >= 8_000_000);
+    let mut decoder = fpga_link::Decoder::new();
+    let mut rest = stream.as_slice();
+    let mut frames = 0;
+    loop {
+        let (used, event) = decoder.decode(rest);
+        rest = &rest[used..];
+        match event {
+            Some(fpga_link::Event::Frame(_)) => frames += 1,
+            Some(_) => {}
+            None => break,
+        }
+    }
+    assert_eq!(frames, poses.len());
+    // 8 s at 20 Hz: the exposures strictly inside it (159 or 160, as the carry falls
+    // against the camera's clock).
+    let lost = decoder.stats().lost;
+    assert!((159..=160).contains(&lost), "{lost}");
+}

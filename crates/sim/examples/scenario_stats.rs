@@ -40,14 +40,16 @@ fn main() -> ExitCode {
         #[allow(clippy::cast_precision_loss)]
         let mean = counts.iter().sum::<usize>() as f64 / n as f64;
         let below = |k: usize| counts.iter().filter(|&&c| c < k).count();
+        // Driven, not carried: frames on both sides of a "moved" segment are not consecutive.
         let mut length = 0.0;
-        let mut prev: Option<rig_model::Pose2> = None;
+        let mut prev: Option<&sim::FrameTruth> = None;
         for f in &run.frames {
-            if let Some(p) = prev {
-                length += (f.pose.x - p.x).hypot(f.pose.y - p.y);
+            if let Some(p) = prev.filter(|p| p.index + 1 == f.index) {
+                length += (f.pose.x - p.pose.x).hypot(f.pose.y - p.pose.y);
             }
-            prev = Some(f.pose);
+            prev = Some(f);
         }
+        let lit = run.landmarks.iter().filter(|l| l.lit).count();
         let duration_s = run
             .frames
             .last()
@@ -74,7 +76,7 @@ fn main() -> ExitCode {
             hist[c] += 1;
         }
         println!(
-            "{}: {} lamps, {} frames, {:.1} s, path {:.1} m; lamps in both views per frame: min {min} mean {mean:.2} max {max}; frames with <2: {}, <3: {}; histogram {:?}",
+            "{}: {} lamps ({lit} lit), {} frames, {:.1} s, path {:.1} m; lamps in both views per frame: min {min} mean {mean:.2} max {max}; frames with <2: {}, <3: {}; histogram {:?}",
             run.name,
             run.landmarks.len(),
             run.frames.len(),

@@ -133,8 +133,8 @@ pub fn in_candidate_area(u: f64, v: f64, width: usize, height: usize) -> bool {
     (lo..=hi_x).contains(&x) && (lo..=hi_y).contains(&y)
 }
 
-/// The lamps seen from `pose`: in front of both cameras and inside the candidate area of at
-/// least one, with their exact projections by [`rig_model::project`].
+/// The lamps seen from `pose`: lit, in front of both cameras and inside the candidate area of
+/// at least one, with their exact projections by [`rig_model::project`].
 pub fn lamp_views(
     c: &CameraParams,
     pose: &Pose2,
@@ -150,7 +150,7 @@ pub fn lamp_views(
     let (v_lo, v_hi) = ((-margin - c.cy) / c.f, (h + margin - c.cy) / c.f);
     let half_b = c.baseline / 2.0;
     let mut out = Vec::new();
-    for lamp in lamps {
+    for lamp in lamps.iter().filter(|l| l.lit) {
         let p = rig_from_world.apply(&lamp.position);
         if p.z <= 1e-6 {
             continue;

@@ -12,8 +12,10 @@
 //!
 //! * [`scenario`]: scenario files (TOML): world, path, rates, noise, true `C`, seed, board
 //!   registers, clutter, link faults, and the nominal rig file.
-//! * [`world`]: point lamps, from lists and jittered grids.
-//! * [`motion`]: paths of segments with bounded speed and acceleration, odometry samples
+//! * [`world`]: point lamps, from lists and jittered grids (a hall of its own seed), panels,
+//!   lamps added to a hall and lamps dark in a drive.
+//! * [`motion`]: paths of segments with bounded speed and acceleration from a start pose in
+//!   the hall, the vehicle carried while the camera is blind, odometry samples
 //!   held until the next (vehicle-interfaces.md section 2) with white noise, scale error and
 //!   yaw-rate bias; [`integrate`] is the exact integration of one held sample.
 //! * [`features`]: the fast mode (project, noise, clutter, Q12.4, the board's order and cap).

@@ -30,7 +30,7 @@ pub enum PacketFate {
 /// One stereo frame's packet.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Packet {
-    /// Index of the stereo frame in the run.
+    /// The stereo frame's [`crate::FrameTruth::index`].
     pub frame_index: usize,
     /// The packet's frame counter.
     pub frame_counter: u32,

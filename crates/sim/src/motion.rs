@@ -5,13 +5,18 @@
 //! is cut into odometry intervals: each sample's velocity is the interval's mean velocity,
 //! held constant until the next sample, so that integrating the true samples with
 //! [`integrate`] gives the true trajectory exactly (it *is* the true trajectory), and the
-//! segments' lengths and angles come out exact.
+//! segments' lengths and angles come out exact. The path starts at `path.start`.
+//!
+//! A `"moved"` segment is the exception: the vehicle is carried while its wheels stand still.
+//! Its ticks hold zero velocities (what the wheels did), the pose stays where it was until the
+//! segment's last tick and is then the segment's target: the camera is blind in between, so
+//! nobody sees the pose there.
 
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rig_model::Pose2;
 
-use crate::scenario::{PathSpec, Segment, SegmentKind};
+use crate::scenario::{MovedOdometry, PathSpec, Segment, SegmentKind};
 
 /// One odometry sample (vehicle-log's type): robot-frame velocities held from `t_us` until
 /// the next sample.
@@ -87,15 +92,31 @@ pub(crate) fn tick_us(start_t_us: u64, phase_us: u64, hz: f64, i: usize) -> u64 
 /// The robot's true motion: odometry ticks and the pose at each.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Motion {
-    /// True odometry samples (the last one at rest, held forever).
+    /// True odometry samples (the last one at rest, held forever): what the wheels did.
     pub samples: Vec<OdomSample>,
     /// The true pose at each sample's time (theta not wrapped).
     pub poses: Vec<Pose2>,
+    /// The `"moved"` segments, in time order.
+    pub carries: Vec<Carry>,
+}
+
+/// One `"moved"` segment as driven: odometry ticks `first..end` (the pose is the target from
+/// tick `end` on).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Carry {
+    /// Its first odometry tick.
+    pub first: usize,
+    /// The tick after its last: the vehicle stands at the target.
+    pub end: usize,
+    /// Where it is left, world frame (theta not wrapped).
+    pub to: Pose2,
+    /// What the odometry sends during it.
+    pub odometry: MovedOdometry,
 }
 
 impl Motion {
-    /// Builds the motion: at rest from `start_t_us` until the first tick at or after
-    /// `first_frame_us`, then the path, then one last sample at rest.
+    /// Builds the motion: at rest at `path.start` from `start_t_us` until the first tick at
+    /// or after `first_frame_us`, then the path, then one last sample at rest.
     pub(crate) fn new(
         path: &PathSpec,
         start_t_us: u64,
@@ -104,19 +125,37 @@ impl Motion {
     ) -> Self {
         let dt = 1.0 / odometry_hz;
         let mut velocities: Vec<(f64, f64)> = Vec::new();
+        let mut carries = Vec::new();
         let t = |i| tick_us(start_t_us, 0, odometry_hz, i);
-        // At rest until the first frame, so that the world frame is the start of the path.
+        // At rest until the first frame, so that the start pose is the pose at the first frame.
         while t(velocities.len()) < first_frame_us {
             velocities.push((0.0, 0.0));
         }
         for _ in 0..path.repeat {
             for seg in &path.segments {
-                segment_velocities(path, seg, dt, &mut velocities);
+                if seg.kind == SegmentKind::Moved {
+                    let first = velocities.len();
+                    velocities.extend(std::iter::repeat_n((0.0, 0.0), ticks(seg, dt).max(1)));
+                    let value = |x: Option<f64>| x.unwrap_or(0.0); // validated: present
+                    carries.push(Carry {
+                        first,
+                        end: velocities.len(),
+                        to: Pose2::new(
+                            value(seg.x_m),
+                            value(seg.y_m),
+                            value(seg.yaw_deg).to_radians(),
+                        ),
+                        odometry: seg.odometry.unwrap_or_default(),
+                    });
+                } else {
+                    segment_velocities(path, seg, dt, &mut velocities);
+                }
             }
         }
         let mut samples = Vec::with_capacity(velocities.len() + 1);
         let mut poses = Vec::with_capacity(velocities.len() + 1);
-        let mut pose = Pose2::default();
+        let mut pose = path.start.pose();
+        let mut next_carry = carries.iter().peekable();
         for (i, &(v, w)) in velocities.iter().enumerate() {
             let (t0, t1) = (t(i), t(i + 1));
             samples.push(OdomSample {
@@ -127,6 +166,11 @@ impl Motion {
             });
             poses.push(pose);
             pose = integrate(&pose, v, 0.0, w, us_to_s(t1 - t0));
+            // Put down at the target at the end of a carry (two carries never end together:
+            // each is at least one tick long).
+            if let Some(c) = next_carry.next_if(|c| c.end == i + 1) {
+                pose = c.to;
+            }
         }
         samples.push(OdomSample {
             t_us: t(velocities.len()),
@@ -135,7 +179,30 @@ impl Motion {
             vtheta: 0.0,
         });
         poses.push(pose);
-        Self { samples, poses }
+        Self {
+            samples,
+            poses,
+            carries,
+        }
+    }
+
+    /// Whether the camera is blind at `t_us`: strictly inside a carry (at its first tick the
+    /// vehicle still stands where it was, at its end where it was put down).
+    pub(crate) fn blind_at(&self, t_us: u64) -> bool {
+        self.carries.iter().any(|c| {
+            let (Some(a), Some(b)) = (self.samples.get(c.first), self.samples.get(c.end)) else {
+                return false;
+            };
+            a.t_us < t_us && t_us < b.t_us
+        })
+    }
+
+    /// Whether the odometry sends sample `i`: not during a carry with `odometry = "none"`.
+    pub(crate) fn sends(&self, i: usize) -> bool {
+        !self
+            .carries
+            .iter()
+            .any(|c| c.odometry == MovedOdometry::None && (c.first..c.end).contains(&i))
     }
 
     /// The true pose at `t_us` (at or after the first sample).
@@ -157,31 +224,44 @@ impl Motion {
         self.samples.last().map_or(0, |s| s.t_us)
     }
 
-    /// The measured odometry: `(1 + scale) v + white noise`, `(1 + yaw scale) w + bias + white
-    /// noise`.
+    /// The true samples the odometry sends (not those of a carry with `odometry = "none"`).
+    pub(crate) fn sent_truth(&self) -> Vec<OdomSample> {
+        self.samples
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| self.sends(i))
+            .map(|(_, s)| *s)
+            .collect()
+    }
+
+    /// The measured odometry as sent: `(1 + scale) v + white noise`,
+    /// `(1 + yaw scale) w + bias + white noise`. Every sample draws its noise, sent or not, so
+    /// that a sample's noise does not depend on what the odometry did before it.
     pub(crate) fn measured(
         &self,
         noise: &crate::scenario::NoiseSpec,
         rng: &mut impl Rng,
     ) -> Vec<OdomSample> {
-        self.samples
-            .iter()
-            .map(|s| {
-                let (nx, ny, nw): (f64, f64, f64) = (
-                    StandardNormal.sample(rng),
-                    StandardNormal.sample(rng),
-                    StandardNormal.sample(rng),
-                );
-                let scale = 1.0 + noise.velocity_scale_error;
-                OdomSample {
-                    t_us: s.t_us,
-                    vx: scale * s.vx + noise.velocity_mps * nx,
-                    vy: scale * s.vy + noise.velocity_mps * ny,
-                    vtheta: (1.0 + noise.yaw_rate_scale_error) * s.vtheta
-                        + noise.yaw_rate_bias_radps
-                        + noise.yaw_rate_radps * nw,
-                }
-            })
+        let measured = self.samples.iter().map(|s| {
+            let (nx, ny, nw): (f64, f64, f64) = (
+                StandardNormal.sample(rng),
+                StandardNormal.sample(rng),
+                StandardNormal.sample(rng),
+            );
+            let scale = 1.0 + noise.velocity_scale_error;
+            OdomSample {
+                t_us: s.t_us,
+                vx: scale * s.vx + noise.velocity_mps * nx,
+                vy: scale * s.vy + noise.velocity_mps * ny,
+                vtheta: (1.0 + noise.yaw_rate_scale_error) * s.vtheta
+                    + noise.yaw_rate_bias_radps
+                    + noise.yaw_rate_radps * nw,
+            }
+        });
+        measured
+            .enumerate()
+            .filter(|&(i, _)| self.sends(i))
+            .map(|(_, s)| s)
             .collect()
     }
 }
@@ -241,8 +321,16 @@ fn profile(path: &PathSpec, seg: &Segment) -> Option<Profile> {
                 per_unit: (1.0, angle_deg.signum() / radius_m),
             })
         }
-        SegmentKind::Wait => None,
+        SegmentKind::Wait | SegmentKind::Moved => None,
     }
+}
+
+/// The odometry ticks of a wait or a carry: its duration rounded to whole ticks.
+fn ticks(seg: &Segment, dt: f64) -> usize {
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+    // validated: 0..=1e5 s, so the tick count is small and positive
+    let n = (seg.duration_s.unwrap_or(0.0) / dt).round() as usize;
+    n
 }
 
 /// How long the path takes, seconds (before rounding each segment to whole odometry ticks).
@@ -269,12 +357,7 @@ fn segment_velocities(path: &PathSpec, seg: &Segment, dt: f64, out: &mut Vec<(f6
                 out.push((speed * p.per_unit.0, speed * p.per_unit.1));
             }
         }
-        None => {
-            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-            // validated: 0..=1e5 s, so the tick count is small and positive
-            let n = (seg.duration_s.unwrap_or(0.0) / dt).round() as usize;
-            out.extend(std::iter::repeat_n((0.0, 0.0), n));
-        }
+        None => out.extend(std::iter::repeat_n((0.0, 0.0), ticks(seg, dt))),
     }
 }
 
@@ -387,6 +470,61 @@ mod tests {
         let a = integrate(&start, vx, vy, 1e-7, dt);
         let b = integrate(&start, vx, vy, 0.0, dt);
         assert!((a.x - b.x).abs() < 1e-6 && (a.y - b.y).abs() < 1e-6);
+    }
+
+    fn path(segments: Vec<Segment>) -> PathSpec {
+        PathSpec {
+            max_speed_mps: 1.0,
+            max_accel_mps2: 1.0,
+            max_yaw_rate_degps: 90.0,
+            max_yaw_accel_degps2: 90.0,
+            max_lateral_accel_mps2: 1.0,
+            repeat: 1,
+            start: crate::scenario::PoseSpec {
+                x_m: 2.0,
+                y_m: 3.0,
+                yaw_deg: 90.0,
+            },
+            segments,
+        }
+    }
+
+    #[test]
+    fn a_carry_puts_the_vehicle_down_at_its_target_and_blinds_the_camera_between() {
+        let p = path(vec![
+            Segment::straight(1.0),
+            Segment::moved(0.5, -4.0, 1.0, 180.0, MovedOdometry::None),
+            Segment::straight(2.0),
+        ]);
+        let m = Motion::new(&p, 0, 100.0, 0);
+        // From the start pose: 1 m along +y.
+        assert_eq!(m.poses[0], Pose2::new(2.0, 3.0, 90f64.to_radians()));
+        let c = m.carries[0];
+        assert_eq!(c.end - c.first, 50);
+        let before = m.poses[c.first];
+        assert!((before.x - 2.0).abs() < 1e-12 && (before.y - 4.0).abs() < 1e-12);
+        // Standing still until put down at the target.
+        assert_eq!(m.poses[c.end - 1], before);
+        assert_eq!(m.poses[c.end], Pose2::new(-4.0, 1.0, std::f64::consts::PI));
+        let end = m.poses.last().copied().unwrap_or_default();
+        assert!((end.x + 6.0).abs() < 1e-9 && (end.y - 1.0).abs() < 1e-9);
+        // Blind strictly inside; the odometry silent on the carry's ticks.
+        let (t0, t1) = (m.samples[c.first].t_us, m.samples[c.end].t_us);
+        assert!(!m.blind_at(t0) && m.blind_at(t0 + 1) && m.blind_at(t1 - 1) && !m.blind_at(t1));
+        assert!(m.sends(c.first - 1) && !m.sends(c.first) && !m.sends(c.end - 1) && m.sends(c.end));
+        assert_eq!(m.sent_truth().len(), m.samples.len() - 50);
+        // A carry shorter than a tick is one tick.
+        let p = path(vec![Segment::moved(
+            1e-4,
+            0.0,
+            0.0,
+            0.0,
+            MovedOdometry::Zero,
+        )]);
+        let m = Motion::new(&p, 0, 100.0, 0);
+        assert_eq!(m.carries[0].end - m.carries[0].first, 1);
+        assert_eq!(m.sent_truth().len(), m.samples.len());
+        assert_eq!(m.poses.last().copied(), Some(Pose2::default()));
     }
 
     #[test]

@@ -84,7 +84,7 @@ impl Renderer {
         }
     }
 
-    /// The lamps drawn.
+    /// The lamps (those not `lit` are not drawn).
     pub fn lamps(&self) -> &[Lamp] {
         &self.lamps
     }
@@ -205,7 +205,8 @@ impl Renderer {
             Side::Right => -c.baseline / 2.0,
         };
         let mut panels_drawn: Vec<u32> = Vec::new();
-        for lamp in &self.lamps {
+        // A dark panel's points are all dark (scenario validation): it is not drawn.
+        for lamp in self.lamps.iter().filter(|l| l.lit) {
             if let Some(panel) = &lamp.panel {
                 if !panels_drawn.contains(&panel.index) {
                     panels_drawn.push(panel.index);

@@ -41,9 +41,12 @@ impl Mode {
 /// One stereo frame: when, where the robot truly was, what it saw and what the board sent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameTruth {
-    /// Index in the run, from 0.
+    /// Index of the exposure in the run, from 0: the camera clock's tick. Frames are not sent
+    /// while the vehicle is carried (a `"moved"` segment), so the indices jump across one.
     pub index: usize,
-    /// The packet's frame counter.
+    /// The packet's frame counter: `rates.first_frame` plus `index` (wrapping). It jumps
+    /// across a `"moved"` segment as a board that ran on would count, while nothing reached
+    /// the vehicle computer: a receiver sees the blind frames as lost.
     pub frame_counter: u32,
     /// Mid-exposure timestamp, microseconds.
     pub t_us: u64,
@@ -98,13 +101,17 @@ pub struct SimRun {
     pub rig: Rig,
     /// The board's registers.
     pub registers: Registers,
-    /// The lamps (landmarks), in the world frame.
+    /// Every lamp of the hall and the added ones, in the world frame, `landmarks[i].id == i`;
+    /// the dark ones are here with `lit` false (the truth's landmarks leave them out).
     pub landmarks: Vec<Lamp>,
-    /// Odometry as measured (noise, scale error, bias), as logged.
+    /// Odometry as measured (noise, scale error, bias), as logged; nothing during a
+    /// `"moved"` segment with `odometry = "none"`.
     pub odometry: Vec<OdomSample>,
-    /// The true odometry: integrated, it gives the true trajectory.
+    /// The true odometry at the same times, what the wheels did: integrated, it gives the
+    /// true trajectory, except across a `"moved"` segment (the vehicle was carried; the truth
+    /// poses say where to).
     pub odometry_truth: Vec<OdomSample>,
-    /// The stereo frames.
+    /// The stereo frames (none while the vehicle is carried).
     pub frames: Vec<FrameTruth>,
     /// One packet per stereo frame, as encoded, with its fate on the link.
     pub packets: Vec<Packet>,
@@ -147,9 +154,16 @@ pub fn simulate_with_progress(
     );
     let odometry = motion.measured(&spec.noise, &mut stream_rng(seed, Stream::Odometry, 0));
     let end_us = motion.end_us();
-    let times: Vec<u64> = (0..)
-        .map(|k| tick_us(rates.start_t_us, rates.camera_phase_us, rates.camera_hz, k))
-        .take_while(|&t| t <= end_us)
+    // The exposures (index, time), without those of a blind camera (a carried vehicle).
+    let times: Vec<(usize, u64)> = (0..)
+        .map(|k| {
+            (
+                k,
+                tick_us(rates.start_t_us, rates.camera_phase_us, rates.camera_hz, k),
+            )
+        })
+        .take_while(|&(_, t)| t <= end_us)
+        .filter(|&(_, t)| !motion.blind_at(t))
         .collect();
     let renderer = match mode {
         Mode::Rendered => Some(Renderer::new(camera, &regs, spec.render, landmarks.clone())),
@@ -215,11 +229,10 @@ pub fn simulate_with_progress(
     };
     let mut frames = Vec::with_capacity(times.len());
     progress(0, times.len());
-    for (b, batch) in times.chunks(BATCH).enumerate() {
-        let base = b * BATCH;
+    for batch in times.chunks(BATCH) {
         if threads <= 1 {
-            for (i, &t) in batch.iter().enumerate() {
-                frames.push(one_frame(base + i, t)?);
+            for &(k, t) in batch {
+                frames.push(one_frame(k, t)?);
             }
         } else {
             let results: Vec<Result<FrameTruth>> = std::thread::scope(|s| {
@@ -232,7 +245,7 @@ pub fn simulate_with_progress(
                                 .enumerate()
                                 .skip(w)
                                 .step_by(threads)
-                                .map(|(i, &t)| (i, one_frame(base + i, t)))
+                                .map(|(i, &(k, t))| (i, one_frame(k, t)))
                                 .collect::<Vec<_>>()
                         })
                     })
@@ -257,6 +270,10 @@ pub fn simulate_with_progress(
     let mut encoder = Encoder::starting_at(rates.first_frame);
     let mut packets = Vec::with_capacity(frames.len());
     for f in &frames {
+        if encoder.next_frame() != f.frame_counter {
+            // Across a carry: the counter jumps over the frames that were never sent.
+            encoder = Encoder::starting_at(f.frame_counter);
+        }
         let mut bytes = Vec::new();
         let frame_counter = encoder.next_frame();
         encoder
@@ -297,7 +314,7 @@ pub fn simulate_with_progress(
         registers: regs,
         landmarks,
         odometry,
-        odometry_truth: motion.samples,
+        odometry_truth: motion.sent_truth(),
         frames,
         packets,
         chunks,
@@ -387,10 +404,13 @@ impl SimRun {
             .collect()
     }
 
-    /// The landmarks as vehicle-log's truth messages.
+    /// The landmarks as vehicle-log's truth messages: every lit lamp with its id (dark lamps
+    /// are left out: nothing of them can be seen in this drive, and a replay judges the map
+    /// against every truth landmark in view).
     pub fn truth_landmarks(&self) -> Vec<TruthLandmark> {
         self.landmarks
             .iter()
+            .filter(|l| l.lit)
             .map(|l| TruthLandmark {
                 id: l.id,
                 x: l.position.x,
@@ -415,7 +435,8 @@ impl SimRun {
 
     /// The ground truth as JSON: `{"scenario", "seed", "mode", "camera": {"f", ..., "mount_yaw"},
     /// "landmarks": [{"id", "x", "y", "z"}], "trajectory": [{"frame", "t_us", "x", "y", "theta"}]}`
-    /// (world frame, metres and radians; `camera` keyed like a replay summary).
+    /// (world frame, metres and radians; `camera` keyed like a replay summary; the landmarks
+    /// are those of [`Self::truth_landmarks`]).
     pub fn truth_json(&self) -> String {
         let camera: serde_json::Map<String, serde_json::Value> = Param::ALL
             .iter()
@@ -424,6 +445,7 @@ impl SimRun {
         let landmarks: Vec<serde_json::Value> = self
             .landmarks
             .iter()
+            .filter(|l| l.lit)
             .map(|l| {
                 serde_json::json!({"id": l.id, "x": l.position.x, "y": l.position.y, "z": l.position.z})
             })

@@ -188,8 +188,11 @@ fn default_response_spread() -> f64 {
     0.4
 }
 
-/// The lamps: an explicit list and grids with jitter. Ids count from 0 in this order: the
-/// list, then each grid row by row.
+/// The lamps: an explicit list, grids with jitter, panels, and lamps added for this drive.
+/// Ids count from 0 in this order: the list, then each grid row by row, then each panel's
+/// points (four corners, or a tube's two ends), then `added`. `dark` turns lamps off without
+/// renumbering the others, and `seed` fixes the grids' jitter apart from the run's noise, so
+/// that scenarios with other noise seeds, dark lamps and added lamps can share one hall.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct World {
@@ -212,6 +215,34 @@ pub struct World {
     /// Lamps that are not points: rectangular panels and tubes, flat on the ceiling.
     #[serde(default)]
     pub panels: Vec<PanelSpec>,
+    /// Lamps fitted since the hall was mapped (`added = [{ x_m = 3.75, y_m = 2.5, z_m = 7.0 }]`,
+    /// the keys of `lamps`): appended after every other lamp, so their ids follow the last
+    /// id of the hall and the hall's lamps keep theirs.
+    #[serde(default)]
+    pub added: Vec<LampSpec>,
+    /// Ids of lamps that are there but off in this drive (`dark = [3, 17]`): never seen by
+    /// the cameras, never drawn in rendered images, absent from the truth's landmarks; the
+    /// other lamps keep their ids. A panel goes dark whole: list all its points.
+    #[serde(default)]
+    pub dark: Vec<u32>,
+    /// Seed of the grids' jitter only (default: the scenario's `seed`): scenarios with the
+    /// same grids and `world.seed` have their lamps in the same places, whatever their own
+    /// seeds.
+    #[serde(default)]
+    pub seed: Option<u64>,
+}
+
+impl PanelSpec {
+    /// How many landmarks the panel is: a tube's two ends or a panel's four corners (as
+    /// [`crate::world::Panel::is_tube`] decides).
+    pub fn point_count(&self) -> usize {
+        // 7 (w / 2) < l / 2 exactly when 7 w < l: halving is exact.
+        if 7.0 * self.width_m < self.length_m {
+            2
+        } else {
+            4
+        }
+    }
 }
 
 /// A rectangular lamp flat on the ceiling (a panel, or a tube when it is narrow): rendered as
@@ -313,8 +344,37 @@ pub struct PathSpec {
     /// How many times the segments are driven.
     #[serde(default = "default_repeat")]
     pub repeat: usize,
+    /// The robot's pose at the first stereo frame, in the world frame
+    /// (`start = { x_m = 12.0, y_m = 6.0, yaw_deg = 120.0 }`; default: all zero). The lamps
+    /// and every truth pose (`/truth/pose`, the truth file) are in the world frame. With the
+    /// default the world frame is the robot's frame at the first frame, as in the method
+    /// (vehicle-interfaces.md section 1); with a start pose it is the hall's frame, the
+    /// frame the lamps are given in, in which a vehicle that starts anywhere in a mapped hall
+    /// can be judged. Replay compares its trajectory with the truth without aligning the two,
+    /// so judge a run that starts away from zero with a localiser, not replay.
+    #[serde(default)]
+    pub start: PoseSpec,
     /// The segments.
     pub segments: Vec<Segment>,
+}
+
+/// A planar pose in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSpec {
+    /// Metres.
+    pub x_m: f64,
+    /// Metres.
+    pub y_m: f64,
+    /// Heading from the world's x axis, degrees (counter-clockwise).
+    pub yaw_deg: f64,
+}
+
+impl PoseSpec {
+    /// As the rig model's pose (theta in radians, not wrapped).
+    pub fn pose(&self) -> rig_model::Pose2 {
+        rig_model::Pose2::new(self.x_m, self.y_m, self.yaw_deg.to_radians())
+    }
 }
 
 fn default_lateral_accel() -> f64 {
@@ -338,6 +398,36 @@ pub enum SegmentKind {
     Arc,
     /// Stand still (`duration_s`).
     Wait,
+    /// Carried while the camera is blind (pushed, towed, lifted): over `duration_s` the
+    /// vehicle goes to the absolute world pose `x_m, y_m, yaw_deg`, and the board sends no
+    /// packets; its frame counter jumps over the frames it did not send, as a board that ran
+    /// on while the vehicle computer was off or the camera covered (a receiver counts them
+    /// lost). `odometry` says what the odometry sends meanwhile (default `"none"`). The path
+    /// goes on from the new pose.
+    Moved,
+}
+
+/// What the odometry sends while the vehicle is carried (a `"moved"` segment).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MovedOdometry {
+    /// Nothing: the vehicle computer was off (a gap in `/odom`; the sample before the gap
+    /// is the vehicle at rest before it was switched off).
+    #[default]
+    None,
+    /// Samples at the odometry rate reporting rest (the wheels did not turn): the truth is
+    /// zero velocities, measured like any sample at rest (white noise and yaw-rate bias).
+    Zero,
+}
+
+impl MovedOdometry {
+    /// The name in scenario files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Zero => "zero",
+        }
+    }
 }
 
 impl SegmentKind {
@@ -348,6 +438,7 @@ impl SegmentKind {
             Self::Turn => "turn",
             Self::Arc => "arc",
             Self::Wait => "wait",
+            Self::Moved => "moved",
         }
     }
 
@@ -358,13 +449,16 @@ impl SegmentKind {
             Self::Turn => (&["angle_deg"], &["yaw_rate_degps"]),
             Self::Arc => (&["radius_m", "angle_deg"], &["speed_mps"]),
             Self::Wait => (&["duration_s"], &[]),
+            Self::Moved => (&["duration_s", "x_m", "y_m", "yaw_deg"], &["odometry"]),
         }
     }
 }
 
 /// One piece of the path: `{ kind = "straight", length_m = 2.0 }`,
 /// `{ kind = "turn", angle_deg = 90.0 }`, `{ kind = "arc", radius_m = 3.0, angle_deg = 180.0 }`,
-/// `{ kind = "wait", duration_s = 1.0 }`; each from rest to rest.
+/// `{ kind = "wait", duration_s = 1.0 }`,
+/// `{ kind = "moved", duration_s = 8.0, x_m = 4.0, y_m = 9.0, yaw_deg = -30.0, odometry = "none" }`;
+/// each from rest to rest.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Segment {
@@ -376,12 +470,20 @@ pub struct Segment {
     pub angle_deg: Option<f64>,
     /// Arc: metres.
     pub radius_m: Option<f64>,
-    /// Wait: seconds.
+    /// Wait and moved: seconds.
     pub duration_s: Option<f64>,
     /// Straight and arc: speed limit of this segment, m/s (at most the path's).
     pub speed_mps: Option<f64>,
     /// Turn: yaw-rate limit of this segment, degrees/s (at most the path's).
     pub yaw_rate_degps: Option<f64>,
+    /// Moved: where to, world frame, metres.
+    pub x_m: Option<f64>,
+    /// Moved: where to, world frame, metres.
+    pub y_m: Option<f64>,
+    /// Moved: the heading it is left at, world frame, degrees.
+    pub yaw_deg: Option<f64>,
+    /// Moved: what the odometry sends meanwhile (default `"none"`).
+    pub odometry: Option<MovedOdometry>,
 }
 
 impl Segment {
@@ -394,6 +496,10 @@ impl Segment {
             duration_s: None,
             speed_mps: None,
             yaw_rate_degps: None,
+            x_m: None,
+            y_m: None,
+            yaw_deg: None,
+            odometry: None,
         }
     }
 
@@ -430,14 +536,38 @@ impl Segment {
         }
     }
 
-    fn given(&self) -> [(&'static str, Option<f64>); 6] {
+    /// Carried over `duration_s` to the world pose `(x_m, y_m, yaw_deg)` while the camera is
+    /// blind, the odometry sending what `odometry` says.
+    pub fn moved(
+        duration_s: f64,
+        x_m: f64,
+        y_m: f64,
+        yaw_deg: f64,
+        odometry: MovedOdometry,
+    ) -> Self {
+        Self {
+            duration_s: Some(duration_s),
+            x_m: Some(x_m),
+            y_m: Some(y_m),
+            yaw_deg: Some(yaw_deg),
+            odometry: Some(odometry),
+            ..Self::empty(SegmentKind::Moved)
+        }
+    }
+
+    /// Which keys the segment has.
+    fn given(&self) -> [(&'static str, bool); 10] {
         [
-            ("length_m", self.length_m),
-            ("angle_deg", self.angle_deg),
-            ("radius_m", self.radius_m),
-            ("duration_s", self.duration_s),
-            ("speed_mps", self.speed_mps),
-            ("yaw_rate_degps", self.yaw_rate_degps),
+            ("length_m", self.length_m.is_some()),
+            ("angle_deg", self.angle_deg.is_some()),
+            ("radius_m", self.radius_m.is_some()),
+            ("duration_s", self.duration_s.is_some()),
+            ("speed_mps", self.speed_mps.is_some()),
+            ("yaw_rate_degps", self.yaw_rate_degps.is_some()),
+            ("x_m", self.x_m.is_some()),
+            ("y_m", self.y_m.is_some()),
+            ("yaw_deg", self.yaw_deg.is_some()),
+            ("odometry", self.odometry.is_some()),
         ]
     }
 }
@@ -857,27 +987,14 @@ impl ScenarioSpec {
             1.0,
             f64::from(i32::MAX),
         );
-        if w.lamps.is_empty() && w.grids.is_empty() && w.panels.is_empty() {
+        if w.lamps.is_empty() && w.grids.is_empty() && w.panels.is_empty() && w.added.is_empty() {
             v.fail(
                 "world",
-                "no lamps: give world.lamps, world.grids or world.panels".to_string(),
+                "no lamps: give world.lamps, world.grids, world.panels or world.added".to_string(),
             );
         }
         for (i, l) in w.lamps.iter().enumerate() {
-            v.finite(&format!("world.lamps[{i}].x_m"), l.x_m);
-            v.finite(&format!("world.lamps[{i}].y_m"), l.y_m);
-            v.finite(&format!("world.lamps[{i}].z_m"), l.z_m);
-            if let Some(r) = l.radius_m {
-                v.within(
-                    &format!("world.lamps[{i}].radius_m"),
-                    r,
-                    1e-5,
-                    MAX_LAMP_RADIUS_M,
-                );
-            }
-            if let Some(r) = l.radiance_dn {
-                v.positive(&format!("world.lamps[{i}].radiance_dn"), r);
-            }
+            v.lamp(&format!("world.lamps[{i}]"), l);
         }
         let mut total = w.lamps.len();
         for (i, g) in w.grids.iter().enumerate() {
@@ -910,10 +1027,21 @@ impl ScenarioSpec {
             if let Some(r) = q.radiance_dn {
                 v.positive(&k("radiance_dn"), r);
             }
-            total = total.saturating_add(4);
+            total = total.saturating_add(q.point_count());
         }
-        if total > 1_000_000 {
-            v.fail("world", format!("{total} lamps; at most 1000000"));
+        for (i, l) in w.added.iter().enumerate() {
+            v.lamp(&format!("world.added[{i}]"), l);
+        }
+        if total.saturating_add(w.added.len()) > 1_000_000 {
+            v.fail(
+                "world",
+                format!(
+                    "{} lamps; at most 1000000",
+                    total.saturating_add(w.added.len())
+                ),
+            );
+        } else {
+            check_dark(v, w, total);
         }
         let p = &self.path;
         v.within("path.max_speed_mps", p.max_speed_mps, 1e-3, 20.0);
@@ -932,22 +1060,25 @@ impl ScenarioSpec {
             20.0,
         );
         v.range_usize("path.repeat", p.repeat, 1, 10_000);
+        v.within("path.start.x_m", p.start.x_m, -MAX_WORLD_M, MAX_WORLD_M);
+        v.within("path.start.y_m", p.start.y_m, -MAX_WORLD_M, MAX_WORLD_M);
+        v.within("path.start.yaw_deg", p.start.yaw_deg, -360.0, 360.0);
         if p.segments.is_empty() {
             v.fail("path.segments", "no segments".to_string());
         }
         for (i, s) in p.segments.iter().enumerate() {
             let k = |name: &str| format!("path.segments[{i}].{name}");
             let (needed, optional) = s.kind.keys();
-            for (name, value) in s.given() {
-                if value.is_none() && needed.contains(&name) {
+            for (name, present) in s.given() {
+                if !present && needed.contains(&name) {
                     v.fail(
                         &k(name),
                         format!("missing key (a \"{}\" segment needs it)", s.kind.name()),
                     );
                 }
             }
-            for (name, value) in s.given() {
-                if value.is_some() && !needed.contains(&name) && !optional.contains(&name) {
+            for (name, present) in s.given() {
+                if present && !needed.contains(&name) && !optional.contains(&name) {
                     let keys: Vec<&str> = needed.iter().chain(optional).copied().collect();
                     v.fail(
                         &k(name),
@@ -969,7 +1100,19 @@ impl ScenarioSpec {
                 v.within(&k("radius_m"), x, 1e-2, 10_000.0);
             }
             if let Some(x) = s.duration_s {
+                if s.kind == SegmentKind::Moved {
+                    // Carrying the vehicle takes time.
+                    v.positive(&k("duration_s"), x);
+                }
                 v.within(&k("duration_s"), x, 0.0, 100_000.0);
+            }
+            for (name, x) in [("x_m", s.x_m), ("y_m", s.y_m)] {
+                if let Some(x) = x {
+                    v.within(&k(name), x, -MAX_WORLD_M, MAX_WORLD_M);
+                }
+            }
+            if let Some(x) = s.yaw_deg {
+                v.within(&k("yaw_deg"), x, -360.0, 360.0);
             }
             if let Some(x) = s.speed_mps {
                 v.within(&k("speed_mps"), x, 1e-3, p.max_speed_mps);
@@ -1048,8 +1191,66 @@ impl ScenarioSpec {
     }
 }
 
+/// `world.dark`: every id is a lamp of the hall (not an added one), listed once, and a panel's
+/// points are dark together (the renderer draws a panel whole or not at all). `hall` is the
+/// number of lamps before `world.added`.
+fn check_dark(v: &mut Validator<'_>, w: &World, hall: usize) {
+    // The id ranges of the panels' points: after the list and the grids.
+    let mut panels = Vec::with_capacity(w.panels.len());
+    let mut first = hall - w.panels.iter().map(PanelSpec::point_count).sum::<usize>();
+    for q in &w.panels {
+        panels.push(first..first + q.point_count());
+        first += q.point_count();
+    }
+    for (i, &id) in w.dark.iter().enumerate() {
+        let key = format!("world.dark[{i}]");
+        let index = usize::try_from(id).unwrap_or(usize::MAX);
+        if index >= hall {
+            let known = if hall == 0 {
+                "there are none before world.added".to_string()
+            } else {
+                format!("the hall's lamps are 0..={}", hall - 1)
+            };
+            let added = if index < hall + w.added.len() {
+                format!(
+                    " (lamp {id} is world.added[{}]: leave it out instead)",
+                    index - hall
+                )
+            } else {
+                String::new()
+            };
+            v.fail(&key, format!("no lamp {id}: {known}{added}"));
+            continue;
+        }
+        if let Some(j) = w
+            .dark
+            .get(..i)
+            .and_then(|b| b.iter().position(|&d| d == id))
+        {
+            v.fail(&key, format!("lamp {id} is already dark (world.dark[{j}])"));
+        }
+        if let Some((p, ids)) = panels.iter().enumerate().find(|(_, r)| r.contains(&index))
+            && let Some(missing) = ids
+                .clone()
+                .find(|&m| !w.dark.iter().any(|&d| d as usize == m))
+        {
+            v.fail(
+                &key,
+                format!(
+                    "lamp {id} is a point of world.panels[{p}] (lamps {}..={}), which goes dark whole: lamp {missing} is not listed",
+                    ids.start,
+                    ids.end - 1
+                ),
+            );
+        }
+    }
+}
+
 /// Largest lamp radius, metres: the simulator's lamps are points, drawn as small disks.
 pub const MAX_LAMP_RADIUS_M: f64 = 0.5;
+
+/// Largest world coordinate of a start pose or a move, metres (a hall is far smaller).
+pub const MAX_WORLD_M: f64 = 100_000.0;
 
 /// Longest path a scenario may have, seconds (12 hours: a long shift; the simulator holds
 /// the whole run in memory, about 3 MiB per simulated minute of the warehouse).
@@ -1093,6 +1294,19 @@ impl Validator<'_> {
     fn within(&mut self, key: &str, x: f64, lo: f64, hi: f64) {
         if !(lo..=hi).contains(&x) {
             self.fail(key, format!("{x} is outside {lo}..={hi}"));
+        }
+    }
+
+    /// A lamp of `world.lamps` or `world.added`; `key` is its dotted path.
+    fn lamp(&mut self, key: &str, l: &LampSpec) {
+        self.finite(&format!("{key}.x_m"), l.x_m);
+        self.finite(&format!("{key}.y_m"), l.y_m);
+        self.finite(&format!("{key}.z_m"), l.z_m);
+        if let Some(r) = l.radius_m {
+            self.within(&format!("{key}.radius_m"), r, 1e-5, MAX_LAMP_RADIUS_M);
+        }
+        if let Some(r) = l.radiance_dn {
+            self.positive(&format!("{key}.radiance_dn"), r);
         }
     }
 
@@ -1149,6 +1363,16 @@ fn describe_serde_error(path: &str, message: &str) -> (String, String) {
         return (
             path.to_string(),
             format!("wrong type: expected {expected}, found {found}"),
+        );
+    }
+    if let Some(rest) = message.strip_prefix("invalid value: ") {
+        let (found, expected) = rest.split_once(", expected ").unwrap_or((rest, "?"));
+        return (
+            path.to_string(),
+            format!(
+                "impossible value: expected {expected}, found {}",
+                found.replace('`', "")
+            ),
         );
     }
     let key = if path == "." {

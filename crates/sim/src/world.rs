@@ -1,6 +1,8 @@
 //! The world: point lamps (LEDs, ceiling lights) and rectangular panels and tubes in the
-//! world frame `W` (the robot's frame at the first stereo frame). A panel is its corners as
-//! landmarks (a tube its ends): the points a corner detector finds on it.
+//! world frame `W` (the robot's frame at the first stereo frame, or the hall's frame when the
+//! path has a start pose: [`crate::scenario::PathSpec::start`]). A panel is its corners as
+//! landmarks (a tube its ends): the points a corner detector finds on it. Lamps that are dark
+//! in a drive stay in the list (ids are indices), marked off.
 
 use nalgebra::Vector3;
 use rand::RngExt;
@@ -72,12 +74,16 @@ pub struct Lamp {
     /// The panel this point is a corner (or a tube end) of: the renderer draws the panel, not
     /// a disk.
     pub panel: Option<Panel>,
+    /// On in this drive; a dark lamp (`world.dark`) is never seen nor drawn.
+    pub lit: bool,
 }
 
-/// The lamps of a scenario: the explicit list first, then each grid row by row (`y` outer,
-/// `x` inner), each grid lamp moved by uniform jitter drawn from the seed.
+/// The lamps of a scenario, with `id` their index: the explicit list first, then each grid
+/// row by row (`y` outer, `x` inner), each grid lamp moved by uniform jitter drawn from
+/// `world.seed` (or, without it, the scenario's `seed`), then the panels' points, then
+/// `world.added`. The lamps of `world.dark` are there with `lit` false.
 pub fn lamps(world: &World, seed: u64) -> Vec<Lamp> {
-    let mut rng = stream_rng(seed, Stream::World, 0);
+    let mut rng = stream_rng(world.seed.unwrap_or(seed), Stream::World, 0);
     let mut out = Vec::new();
     let mut push = |position: Vector3<f64>, radius: Option<f64>, radiance: Option<f64>| {
         let id = u32::try_from(out.len()).unwrap_or(u32::MAX);
@@ -87,6 +93,7 @@ pub fn lamps(world: &World, seed: u64) -> Vec<Lamp> {
             radius_m: radius.unwrap_or(world.lamp_radius_m),
             radiance_dn: radiance.unwrap_or(world.lamp_radiance_dn),
             panel: None,
+            lit: true,
         });
     };
     for l in &world.lamps {
@@ -126,8 +133,111 @@ pub fn lamps(world: &World, seed: u64) -> Vec<Lamp> {
                 radius_m: 0.0,
                 radiance_dn: panel.radiance_dn,
                 panel: Some(panel),
+                lit: true,
             });
         }
     }
+    for l in &world.added {
+        let id = u32::try_from(out.len()).unwrap_or(u32::MAX);
+        out.push(Lamp {
+            id,
+            position: Vector3::new(l.x_m, l.y_m, l.z_m),
+            radius_m: l.radius_m.unwrap_or(world.lamp_radius_m),
+            radiance_dn: l.radiance_dn.unwrap_or(world.lamp_radiance_dn),
+            panel: None,
+            lit: true,
+        });
+    }
+    for &id in &world.dark {
+        if let Some(lamp) = usize::try_from(id).ok().and_then(|i| out.get_mut(i)) {
+            lamp.lit = false;
+        }
+    }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::{GridSpec, LampSpec, PanelSpec};
+
+    fn lamp(x_m: f64) -> LampSpec {
+        LampSpec {
+            x_m,
+            y_m: 0.0,
+            z_m: 3.0,
+            radius_m: None,
+            radiance_dn: None,
+        }
+    }
+
+    fn world() -> World {
+        World {
+            lamp_radius_m: 0.003,
+            lamp_radiance_dn: 400.0,
+            lamp_response: 5.0e7,
+            lamps: vec![lamp(0.0)],
+            grids: vec![GridSpec {
+                x0_m: 0.0,
+                y0_m: 0.0,
+                z_m: 4.0,
+                nx: 3,
+                ny: 2,
+                dx_m: 1.0,
+                dy_m: 1.0,
+                jitter_xy_m: 0.1,
+                jitter_z_m: 0.1,
+                radius_m: None,
+                radiance_dn: None,
+            }],
+            panels: vec![PanelSpec {
+                x_m: 1.0,
+                y_m: 1.0,
+                z_m: 4.0,
+                length_m: 1.2,
+                width_m: 0.04,
+                yaw_deg: 0.0,
+                radiance_dn: None,
+            }],
+            added: Vec::new(),
+            dark: Vec::new(),
+            seed: None,
+        }
+    }
+
+    #[test]
+    fn ids_run_through_lamps_grids_panels_then_added_and_dark_ones_stay() {
+        let plain = lamps(&world(), 1);
+        assert_eq!(plain.len(), 1 + 6 + 2);
+        let mut w = world();
+        w.added = vec![lamp(7.0), lamp(8.0)];
+        w.dark = vec![3, 7, 8];
+        let l = lamps(&w, 1);
+        assert_eq!(l.len(), 11);
+        assert!(l.iter().enumerate().all(|(i, x)| x.id as usize == i));
+        assert_eq!(
+            &l[..9].iter().map(|x| x.position).collect::<Vec<_>>(),
+            &plain.iter().map(|x| x.position).collect::<Vec<_>>()
+        );
+        assert_eq!((l[9].position.x, l[10].position.x), (7.0, 8.0));
+        let dark: Vec<u32> = l.iter().filter(|x| !x.lit).map(|x| x.id).collect();
+        assert_eq!(dark, [3, 7, 8]);
+        assert!(l[7].panel.is_some() && l[8].panel.is_some());
+    }
+
+    #[test]
+    fn world_seed_is_the_seed_of_the_jitter() {
+        let mut w = world();
+        let positions = |w: &World, seed: u64| {
+            lamps(w, seed)
+                .iter()
+                .map(|x| x.position)
+                .collect::<Vec<_>>()
+        };
+        let (a, b) = (positions(&w, 1), positions(&w, 2));
+        assert_ne!(a, b);
+        w.seed = Some(1);
+        assert_eq!(positions(&w, 2), a);
+        assert_eq!(positions(&w, 1), a);
+    }
 }

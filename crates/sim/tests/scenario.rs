@@ -231,3 +231,77 @@ fn syntax_errors_and_rig_problems_name_the_file() {
         .to_string();
     assert!(e.starts_with("/nonexistent/x.toml: cannot read"), "{e}");
 }
+
+fn hall_localize() -> String {
+    std::fs::read_to_string(common::scenario_path("hall-localize")).unwrap()
+}
+
+#[test]
+fn start_moved_dark_added_and_world_seed_are_checked() {
+    let moved = "{ kind = \"moved\", duration_s = 8.0, x_m = 27.0, y_m = 16.0, yaw_deg = -150.0, odometry = \"none\" }";
+    let start = "start = { x_m = 12.0, y_m = 6.0, yaw_deg = 120.0 }";
+    let dark = "dark = [13, 24, 25, 37, 43, 46, 56]";
+    let segment = hall_localize()
+        .lines()
+        .filter(|l| l.trim_start().starts_with("{ kind"))
+        .position(|l| l.contains("\"moved\""))
+        .unwrap();
+    let seg = |key: &str| format!("bad.toml: path.segments[{segment}].{key}");
+    for (from, to, expected) in [
+        (dark, "dark = [13, 70]", "bad.toml: world.dark[1]: no lamp 70: the hall's lamps are 0..=69 (lamp 70 is world.added[0]: leave it out instead)".to_string()),
+        (dark, "dark = [13, 99]", "bad.toml: world.dark[1]: no lamp 99: the hall's lamps are 0..=69".to_string()),
+        (dark, "dark = [13, 24, 13]", "bad.toml: world.dark[2]: lamp 13 is already dark (world.dark[0])".to_string()),
+        (dark, "dark = [-1]", "bad.toml: world.dark[0]: impossible value: expected u32, found integer -1 (line ".to_string()),
+        ("seed = 7070", "seed = \"hall\"", "bad.toml: world.seed: wrong type: expected u64".to_string()),
+        ("{ x_m = 12.0, y_m = 8.0, z_m = 7.0 }", "{ x_m = 12.0, y_m = 8.0, z_m = inf }", "bad.toml: world.added[0].z_m: inf is not a finite number".to_string()),
+        ("{ x_m = 12.0, y_m = 8.0, z_m = 7.0 }", "{ x_m = 12.0, y_m = 8.0 }", "bad.toml: world.added[0].z_m: missing key".to_string()),
+        (start, "start = { x_m = nan, y_m = 6.0, yaw_deg = 120.0 }", "bad.toml: path.start.x_m: NaN is outside -100000..=100000".to_string()),
+        (start, "start = { x_m = 12.0, y_m = 6.0, yaw_deg = 1e9 }", "bad.toml: path.start.yaw_deg: 1000000000 is outside -360..=360".to_string()),
+        (start, "start = { x_m = 12.0, y_m = 6.0 }", "bad.toml: path.start.yaw_deg: missing key".to_string()),
+        (start, "start = { x_m = 12.0, y_m = 6.0, yaw_deg = 120.0, z_m = 1.0 }", "bad.toml: path.start.z_m: unknown key (known: x_m, y_m, yaw_deg)".to_string()),
+        (moved, "{ kind = \"moved\", duration_s = 0.0, x_m = 27.0, y_m = 16.0, yaw_deg = -150.0 }", format!("{}: 0 must be positive", seg("duration_s"))),
+        (moved, "{ kind = \"moved\", duration_s = -8.0, x_m = 27.0, y_m = 16.0, yaw_deg = -150.0 }", format!("{}: -8 must be positive", seg("duration_s"))),
+        (moved, "{ kind = \"moved\", duration_s = 8.0, y_m = 16.0, yaw_deg = -150.0 }", format!("{}: missing key (a \"moved\" segment needs it)", seg("x_m"))),
+        (moved, "{ kind = \"moved\", duration_s = 8.0, x_m = inf, y_m = 16.0, yaw_deg = -150.0 }", format!("{}: inf is outside -100000..=100000", seg("x_m"))),
+        (moved, "{ kind = \"moved\", duration_s = 8.0, x_m = 27.0, y_m = 16.0, yaw_deg = nan }", format!("{}: NaN is outside -360..=360", seg("yaw_deg"))),
+        (moved, "{ kind = \"moved\", duration_s = 8.0, x_m = 27.0, y_m = 16.0, yaw_deg = -150.0, length_m = 1.0 }", format!("{}: not a key of a \"moved\" segment (its keys: kind, duration_s, x_m, y_m, yaw_deg, odometry)", seg("length_m"))),
+        (moved, "{ kind = \"moved\", duration_s = 8.0, x_m = 27.0, y_m = 16.0, yaw_deg = -150.0, odometry = \"some\" }", format!("{}: unknown value \"some\", expected \"none\" or \"zero\"", seg("odometry"))),
+        ("{ kind = \"wait\", duration_s = 2.0 }", "{ kind = \"wait\", duration_s = 2.0, odometry = \"zero\" }", "bad.toml: path.segments[0].odometry: not a key of a \"wait\" segment (its keys: kind, duration_s)".to_string()),
+        ("{ kind = \"wait\", duration_s = 2.0 }", "{ kind = \"wait\", duration_s = 2.0, x_m = 1.0 }", "bad.toml: path.segments[0].x_m: not a key of a \"wait\" segment (its keys: kind, duration_s)".to_string()),
+    ] {
+        let text = hall_localize().replacen(from, to, 1);
+        assert_ne!(text, hall_localize(), "{from}");
+        let e = error_of(&text);
+        assert!(e.starts_with(&expected), "{e}\nexpected {expected}");
+        assert!(!e.contains('\n'));
+    }
+    // A panel goes dark whole.
+    let real_lamps = std::fs::read_to_string(common::scenario_path("real-lamps")).unwrap();
+    let partial = real_lamps.replace("[world]\n", "[world]\ndark = [0, 2, 3, 5]\n");
+    assert_eq!(
+        error_of(&partial),
+        "bad.toml: world.dark[1]: lamp 2 is a point of world.panels[0] (lamps 2..=5), which goes dark whole: lamp 4 is not listed"
+    );
+    let tube = real_lamps.replace("[world]\n", "[world]\ndark = [16]\n");
+    assert_eq!(
+        error_of(&tube),
+        "bad.toml: world.dark[0]: lamp 16 is a point of world.panels[4] (lamps 16..=17), which goes dark whole: lamp 17 is not listed"
+    );
+    let whole = real_lamps.replace("[world]\n", "[world]\ndark = [5, 4, 3, 2, 16, 17]\n");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios");
+    let s = sim::Scenario::from_toml_str(&whole, "ok.toml", &dir).unwrap();
+    assert_eq!(s.spec.world.dark.len(), 6);
+    // Added lamps alone are a world; without them and the others there is none.
+    let paper = std::fs::read_to_string(common::scenario_path("paper-experiment")).unwrap();
+    let only_added = paper.replace("lamps = [", "added = [");
+    assert_ne!(only_added, paper);
+    let s = sim::Scenario::from_toml_str(&only_added, "ok.toml", &dir).unwrap();
+    assert_eq!(s.spec.world.added.len(), 5);
+    let start = paper.find("lamps = [").unwrap();
+    let end = start + paper[start..].find("]\n").unwrap() + 2;
+    let none = format!("{}added = []\n{}", &paper[..start], &paper[end..]);
+    assert_eq!(
+        error_of(&none),
+        "bad.toml: world: no lamps: give world.lamps, world.grids, world.panels or world.added"
+    );
+}
