@@ -30,9 +30,21 @@ impl LampCounts {
         }
     }
 
-    /// One localised frame: the lamps expected and the ones associated.
-    pub fn add(&mut self, expected: &[u32], seen: &[(u32, usize)]) {
+    /// One localised frame: the lamps expected and the ones associated. A lamp expected and
+    /// not seen while a map lamp within `twin_m` of it was seen is not counted: a map holds
+    /// some lamps twice (two landmarks for one lamp), and the observation goes to one of them.
+    pub fn add(&mut self, map: &LampMap, expected: &[u32], seen: &[(u32, usize)], twin_m: f64) {
+        let near = |a: u32, b: u32| match (map.lamp(a), map.lamp(b)) {
+            (Some(p), Some(q)) => {
+                libm::hypot(p.position.x - q.position.x, p.position.y - q.position.y) <= twin_m
+            }
+            _ => false,
+        };
         for &i in expected {
+            let taken = seen.iter().any(|&(j, _)| j == i);
+            if !taken && seen.iter().any(|&(j, _)| near(i, j)) {
+                continue;
+            }
             if let Some(n) = self.expected.get_mut(i as usize) {
                 *n += 1;
             }
@@ -192,7 +204,8 @@ impl NewLamps {
         min_separation_m: f64,
     ) -> Vec<NewLamp> {
         let mut scratch = Vec::new();
-        self.candidates
+        let mut found: Vec<NewLamp> = self
+            .candidates
             .iter()
             .filter(|c| c.observations >= min_observations)
             // Seen over 2 s at least: not the last frames of a pose that was going wrong.
@@ -216,6 +229,19 @@ impl NewLamps {
                     seen_us: c.seen_us,
                 })
             })
-            .collect()
+            .collect();
+        // Two candidates of one lamp (two tracks that never met): the better seen one stays.
+        found.sort_by_key(|l| core::cmp::Reverse(l.observations));
+        let mut kept: Vec<NewLamp> = Vec::with_capacity(found.len());
+        for l in found {
+            let twin = kept.iter().any(|k| {
+                libm::hypot(k.position.x - l.position.x, k.position.y - l.position.y)
+                    < min_separation_m
+            });
+            if !twin {
+                kept.push(l);
+            }
+        }
+        kept
     }
 }

@@ -231,7 +231,14 @@ impl Localizer {
                 self.settings.missing_max_seen_fraction,
             )
             .into_iter()
-            .filter_map(|i| self.map.lamp(i).map(|l| l.id))
+            .filter_map(|i| self.map.lamp(i))
+            // A lamp the map knows poorly may be missed where the map puts it and seen as
+            // another: not reported.
+            .filter(|l| {
+                let s = self.settings.missing_max_map_sigma_m;
+                (0..3).all(|k| l.covariance[(k, k)] <= s * s)
+            })
+            .map(|l| l.id)
             .collect()
     }
 
@@ -562,7 +569,12 @@ impl Localizer {
         // unassociated lamps would be placed where they are not.
         let fits = scored.matched.len() >= 3 && 2 * scored.matched.len() >= scored.expected;
         if sigma < 0.1 && fits {
-            self.counts.add(&scored.expected_lamps, &scored.matched);
+            self.counts.add(
+                &self.map,
+                &scored.expected_lamps,
+                &scored.matched,
+                self.settings.new_lamp_min_separation_m * 2.0,
+            );
             let mut taken = alloc::vec![false; observations.len()];
             for &(_, o) in &scored.matched {
                 if let Some(t) = taken.get_mut(o) {

@@ -120,8 +120,11 @@ pub struct LocalizerSettings {
     pub vehicle_walk: [f64; 4],
     /// A map lamp is reported missing when it was expected in view at least this often...
     pub missing_min_expected: u32,
-    /// ...and seen in at most this fraction of those frames.
+    /// ...and seen in at most this fraction of those frames, if the map knows it to this
+    /// (standard deviation on every axis, metres).
     pub missing_max_seen_fraction: f64,
+    /// See [`Self::missing_max_seen_fraction`].
+    pub missing_max_map_sigma_m: f64,
     /// A lamp not in the map is reported after this many observations...
     pub new_lamp_min_observations: u32,
     /// ...with its position known to this (largest standard deviation, metres)...
@@ -150,6 +153,7 @@ impl Default for LocalizerSettings {
             vehicle_walk: [1e-8, 1e-8, 1e-10, 1e-10],
             missing_min_expected: 20,
             missing_max_seen_fraction: 0.1,
+            missing_max_map_sigma_m: 0.1,
             new_lamp_min_observations: 20,
             new_lamp_max_sigma_m: 0.15,
             new_lamp_min_separation_m: 0.5,

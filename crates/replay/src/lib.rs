@@ -63,8 +63,8 @@ pub use estimates_log::{
     end_summary_json, read_estimates, summary_json,
 };
 pub use localization::{
-    LocalizeEnd, LocalizeTruth, LocalizedFrame, LocalizedTrajectoryWriter, WRONG_FIX_M,
-    localize_log, localize_summary_json, localizer_for, map_with_new_lamps,
+    LocalizeEnd, LocalizeTruth, LocalizedFrame, LocalizedTrajectoryWriter, MAX_LAMP_SIGMA_M,
+    WRONG_FIX_M, localize_log, localize_summary_json, localizer_for, map_with_new_lamps,
 };
 pub use localize::{LocalizerSettings, RelocSettings};
 pub use map::saved_map;

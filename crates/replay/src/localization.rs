@@ -97,6 +97,9 @@ pub struct LocalizeEnd {
     pub truth: Option<LocalizeTruth>,
 }
 
+/// A map landmark known worse than this (standard deviation on any axis, metres) is not used.
+pub const MAX_LAMP_SIGMA_M: f64 = 0.25;
+
 /// The localiser for a map: its lamps indexed, the camera from the map's parameters.
 ///
 /// Errors: a map without lamps or with a bad one, settings out of range.
@@ -114,9 +117,12 @@ pub fn localizer_for(
             *s = p.sigma;
         }
     }
+    // A landmark the mapping run barely knew (seen twice, its depth unknown to metres) would
+    // only mislead the association and the relocalisation's pairs: left out.
     let lamps: Vec<MapLamp> = map
         .landmarks
         .iter()
+        .filter(|l| (0..3).all(|i| l.covariance[i][i] <= MAX_LAMP_SIGMA_M * MAX_LAMP_SIGMA_M))
         .map(|l| MapLamp {
             id: l.id,
             position: Vector3::from(l.position),
@@ -211,6 +217,12 @@ pub fn localize_log(
     }
     if stream.counts.odometry == 0 {
         warnings.push("no odometry on /odom: the vehicle's motion is unknown".to_string());
+    }
+    let unused = map.landmarks.len() - localizer.map().len();
+    if unused > 0 {
+        warnings.push(format!(
+            "{unused} map landmarks known worse than {MAX_LAMP_SIGMA_M} m were not used"
+        ));
     }
     if localizer.localized_t_us().is_empty() && frames > 0 {
         warnings.push(

@@ -58,26 +58,36 @@ fn map_of(navigator: &Navigator) -> Vec<LandmarkEstimate> {
     out
 }
 
-/// The error the filter's landmarks share: the least-squares rigid motion `d = (tx, ty, tz,
-/// yaw)` about their centroid `o` that their errors `e_i` imply, `d = N^-1 sum A_i^T e_i`
-/// with `A_i = [[1, 0, 0, -(y_i - o_y)], [0, 1, 0, x_i - o_x], [0, 0, 1, 0]]` and
-/// `N = sum A_i^T A_i`, has the covariance `N^-1 (sum_ij A_i^T P_ij A_j) N^-1` from the joint
-/// covariance `P` of the landmarks. `None` with fewer than two landmarks (a yaw needs two).
+/// The error the filter's landmarks share: the weighted least-squares rigid motion `d = (tx,
+/// ty, tz, yaw)` about their centroid `o` that their errors `e_i` imply,
+/// `d = N^-1 sum A_i^T W_i e_i` with `A_i = [[1, 0, 0, -(y_i - o_y)], [0, 1, 0, x_i - o_x],
+/// [0, 0, 1, 0]]`, `W_i` the inverse of landmark `i`'s marginal covariance and
+/// `N = sum A_i^T W_i A_i`, has the covariance `N^-1 (sum_ij A_i^T W_i P_ij W_j A_j) N^-1`
+/// from the joint covariance `P` of the landmarks. The weights keep a landmark the filter
+/// barely knows (one seen twice, known to kilometres along its ray) from swamping it.
+/// `None` with fewer than two usable landmarks (a yaw needs two).
 fn common_error(ekf: &vslam_ekf::Ekf) -> Option<([f64; 2], [[f64; 4]; 4])> {
-    use nalgebra::{Matrix3x4, Matrix4};
-    let lamps: Vec<(usize, nalgebra::Vector3<f64>)> = ekf
+    use nalgebra::{Matrix3, Matrix3x4, Matrix4};
+    let lamps: Vec<(usize, nalgebra::Vector3<f64>, Matrix3<f64>)> = ekf
         .landmarks()
-        .filter_map(|l| ekf.landmark_state_index(l.id).map(|i| (i, l.position)))
+        .filter_map(|l| {
+            let w = l.covariance.try_inverse()?;
+            let i = ekf.landmark_state_index(l.id)?;
+            w.iter()
+                .all(|v| v.is_finite())
+                .then_some((i, l.position, w))
+        })
         .collect();
     if lamps.len() < 2 {
         return None;
     }
-    #[allow(clippy::cast_precision_loss)]
-    let n = lamps.len() as f64;
-    let (ox, oy) = (
-        lamps.iter().map(|(_, p)| p.x).sum::<f64>() / n,
-        lamps.iter().map(|(_, p)| p.y).sum::<f64>() / n,
-    );
+    let total: Matrix3<f64> = lamps.iter().map(|(_, _, w)| w).sum();
+    let centre = total.try_inverse()?
+        * lamps
+            .iter()
+            .map(|(_, p, w)| w * p)
+            .sum::<nalgebra::Vector3<f64>>();
+    let (ox, oy) = (centre.x, centre.y);
     let a = |p: &nalgebra::Vector3<f64>| {
         Matrix3x4::new(
             1.0,
@@ -94,15 +104,19 @@ fn common_error(ekf: &vslam_ekf::Ekf) -> Option<([f64; 2], [[f64; 4]; 4])> {
             0.0,
         )
     };
-    let normal: Matrix4<f64> = lamps.iter().map(|(_, p)| a(p).transpose() * a(p)).sum();
+    let normal: Matrix4<f64> = lamps
+        .iter()
+        .map(|(_, p, w)| a(p).transpose() * w * a(p))
+        .sum();
     let n_inv = normal.try_inverse()?;
     let p = ekf.covariance();
+    let weighted: Vec<nalgebra::Matrix4x3<f64>> =
+        lamps.iter().map(|(_, q, w)| a(q).transpose() * w).collect();
     let mut middle = Matrix4::zeros();
-    for (i, pi) in &lamps {
-        let ai = a(pi);
-        for (j, pj) in &lamps {
+    for ((i, _, _), ai) in lamps.iter().zip(&weighted) {
+        for ((j, _, _), aj) in lamps.iter().zip(&weighted) {
             let block = p.fixed_view::<3, 3>(*i, *j).into_owned();
-            middle += ai.transpose() * block * a(pj);
+            middle += ai * block * aj.transpose();
         }
     }
     let c = n_inv * middle * n_inv;
