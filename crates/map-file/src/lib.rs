@@ -191,6 +191,19 @@ impl Map {
         parse_body(&value, source_name)
     }
 
+    /// The JSON body (docs/maps.md: the object under the header line) that [`Map::to_bytes`]
+    /// writes. Refuses non-finite values. For bindings that hand the map to another language.
+    pub fn to_json(&self) -> Result<Value, Error> {
+        self.body()
+    }
+
+    /// A map from a body already parsed, checked as [`Map::from_bytes`] checks a file's body
+    /// (a missing key or a wrong type is refused naming the key); `source_name` names it in
+    /// errors.
+    pub fn from_json(body: &Value, source_name: &str) -> Result<Self, Error> {
+        parse_body(body, source_name)
+    }
+
     fn body(&self) -> Result<Value, Error> {
         for l in &self.landmarks {
             let mut values = l.position.iter().chain(l.covariance.iter().flatten());

@@ -65,6 +65,23 @@ fn a_map_reads_back_as_written_bit_for_bit() {
     std::fs::remove_file(&path).ok();
 }
 
+#[test]
+fn the_json_body_reads_back_as_the_map() {
+    let m = map();
+    let body = m.to_json().unwrap();
+    assert_eq!(Map::from_json(&body, "m").unwrap(), m);
+    let bytes = m.to_bytes().unwrap();
+    let text = bytes.splitn(2, |&b| b == b'\n').nth(1).unwrap();
+    assert_eq!(
+        serde_json::from_slice::<serde_json::Value>(text).unwrap(),
+        body
+    );
+    let mut missing = body.clone();
+    missing.as_object_mut().unwrap().remove("landmarks");
+    let e = Map::from_json(&missing, "m").expect_err("no landmarks");
+    assert_eq!(e.to_string(), "m: missing key 'landmarks'");
+}
+
 fn refused(bytes: &[u8]) -> Error {
     Map::from_bytes(bytes, "m.map").expect_err("refused")
 }

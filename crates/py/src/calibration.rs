@@ -1154,6 +1154,13 @@ fn pair_settings(stride: usize, pairing: &str) -> Result<PairSettings, CalibInpu
 /// refused the file, its `OSError` (with the errno: `FileNotFoundError`, `PermissionError`,
 /// ...) is the exception's `__cause__`.
 pub(crate) fn replay_error(py: Python<'_>, err: &replay::Error) -> PyErr {
+    file_error(py, err)
+}
+
+/// `stereonav.InputError` with the message of `err` (one line naming the file and the
+/// problem: a log, a map, an output), the `OSError` of the first I/O error among its sources
+/// as the `__cause__`.
+pub(crate) fn file_error(py: Python<'_>, err: &(dyn std::error::Error + 'static)) -> PyErr {
     let py_err = input_error(py, err.to_string());
     let mut source: Option<&(dyn std::error::Error + 'static)> = Some(err);
     while let Some(e) = source {

@@ -16,7 +16,9 @@
 
 mod calibration;
 mod filter;
+mod localization;
 mod logs;
+mod maps;
 mod montecarlo;
 mod navigator;
 mod rig;
@@ -33,6 +35,10 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyType;
+
+/// Any error of a run that reads and writes files (a log, a map, an output), for
+/// [`calibration::file_error`] to turn into `stereonav.InputError`.
+pub(crate) type FileError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Bytes of one packed feature record: `x_q4` u16, `y_q4` u16, `r` i32, little-endian, as in
 /// the board's feature stream (`board-icd.md` section 3).
@@ -257,6 +263,12 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<logs::LogDamage>()?;
     m.add_class::<logs::LostSpan>()?;
     m.add_function(wrap_pyfunction!(logs::read_log, m)?)?;
+    m.add("MAP_VERSION", map_file::VERSION)?;
+    m.add_function(wrap_pyfunction!(maps::read_map, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::write_map, m)?)?;
+    m.add_class::<localization::LocalizeResult>()?;
+    m.add_class::<localization::LocalizedFrames>()?;
+    m.add_function(wrap_pyfunction!(localization::localize_log, m)?)?;
     Ok(())
 }
 

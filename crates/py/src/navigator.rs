@@ -31,16 +31,17 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReado
 use pyo3::prelude::*;
 use replay::{
     CameraSample, FrameEstimate, LandmarkEstimate, NavSettings, ParamEstimate, Phase, Replay,
+    ReplayCollector, Replayer,
 };
 use rig_model::N_CAMERA;
 use rig_model::odometry::OdomSample;
 use selfcal::smoother::SmootherSettings;
 use track::Pixel;
 
-use crate::calibration::replay_error;
+use crate::calibration::{file_error, replay_error};
 use crate::filter::stereonav_error;
-use crate::input_error;
 use crate::rig::PyRig;
+use crate::{FileError, input_error};
 
 /// The phases in the order of their codes in the per-frame arrays (`phase[i]` indexes this).
 pub(crate) const PHASES: [Phase; 2] = [Phase::Calibrating, Phase::Navigating];
@@ -275,11 +276,17 @@ pub(crate) fn phase_names() -> Vec<&'static str> {
 /// `rig` None uses the log's `/rig` message. `skip_phase1` starts phase 2 at the first frame from the rig's
 /// nominal values and priors; `phase1_frames` bounds phase 1's batch (default when None);
 /// `consider_camera` keeps phase 2 from refining the camera parameters
-/// (`vslam_ekf::CameraUpdate::Consider`). Raises `stereonav.InputError` for a log that cannot be read or is not
-/// a vehicle log, a bad rig or a setting out of range; a log cut short is replayed as far as
-/// it goes, with a warning. The GIL is released during the run.
+/// (`vslam_ekf::CameraUpdate::Consider`). `save_map` writes the map the run built (its
+/// landmarks with their covariance, the calibrated C and V, the rig) as `--save-map` does
+/// (`replay::saved_map`, docs/maps.md). Raises `stereonav.InputError` for a log that cannot be
+/// read or is not a vehicle log, a bad rig, a setting out of range or a map that cannot be
+/// written; a log cut short is replayed as far as it goes, with a warning. The GIL is released
+/// during the run.
 #[pyfunction]
-#[pyo3(name = "replay", signature = (log_path, rig, skip_phase1, phase1_frames, consider_camera))]
+#[pyo3(
+    name = "replay",
+    signature = (log_path, rig, skip_phase1, phase1_frames, consider_camera, save_map)
+)]
 pub(crate) fn replay_log(
     py: Python<'_>,
     log_path: PathBuf,
@@ -287,13 +294,29 @@ pub(crate) fn replay_log(
     skip_phase1: bool,
     phase1_frames: Option<usize>,
     consider_camera: bool,
+    save_map: Option<PathBuf>,
 ) -> PyResult<ReplayResult> {
     let settings = nav_settings(skip_phase1, phase1_frames, consider_camera)
         .map_err(|e| input_error(py, e.to_string()))?;
     let rig = rig.map(|r| r.rig.clone());
+    // `replay::replay_log`, keeping the rig used and the run's end for the saved map.
     let replay = py
-        .detach(|| replay::replay_log(&log_path, rig, &settings, &mut |_, _| {}))
-        .map_err(|e| replay_error(py, &e))?;
+        .detach(|| -> Result<Replay, FileError> {
+            let replayer = Replayer::open(&log_path, rig, &settings)?;
+            let rig_used = replayer.rig().clone();
+            let mut collected = ReplayCollector::default();
+            let end = replayer.run(&mut collected, &mut |_, _| {})?;
+            if let Some(path) = &save_map {
+                replay::saved_map(&end, &rig_used, &log_path).save(path)?;
+            }
+            Ok(Replay::from_parts(
+                end,
+                collected.frames,
+                collected.camera,
+                collected.maps,
+            ))
+        })
+        .map_err(|e| file_error(py, &*e))?;
     Ok(ReplayResult { replay })
 }
 

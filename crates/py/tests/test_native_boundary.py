@@ -92,3 +92,19 @@ def test_decoded_frames_are_frozen_native_objects() -> None:
     assert (frame.frame, frame.t_us, frame.left_overflow, frame.right_overflow) == (7, 1000, False, True)
     with pytest.raises(AttributeError):
         frame.t_us = 0  # type: ignore[misc]
+
+
+def test_localisation_results_are_frozen_native_objects(tmp_path: pathlib.Path) -> None:
+    log = ROOT / "fixtures" / "logs" / "paper-experiment.mcap"
+    saved = tmp_path / "experiment.map"
+    stereonav.replay(log, skip_phase1=True, save_map=saved)
+    native = _native.localize(str(log), str(saved), None, None)
+    assert isinstance(native, _native.LocalizeResult)
+    frames = native.frames
+    assert isinstance(frames, _native.LocalizedFrames) and frames.localized.dtype == np.bool_
+    assert frames.pose.shape == frames.sigma.shape == (len(frames.t_us), 3)
+    with pytest.raises(AttributeError):
+        frames.t_us = frames.t_us  # type: ignore[misc]
+    with pytest.raises(AttributeError):
+        native.warnings = []  # type: ignore[misc]
+    assert isinstance(_native.read_map(str(saved)), str) and _native.MAP_VERSION == 1

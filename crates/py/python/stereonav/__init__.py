@@ -35,6 +35,18 @@ board's frames (:meth:`Navigator.push_odometry`, :meth:`Navigator.push_frame`);
 :class:`Replay` with the summary (``SUMMARY.json``), the trajectory, the map, the camera
 parameters over time and the writers of ``EST.mcap``, ``SUMMARY.json`` and ``TRAJ.csv``.
 
+Saved maps and runs on them (:mod:`stereonav.localization`, ``docs/maps.md``): ``replay(...,
+save_map=path)`` saves the map a replay built, as ``stereonav replay --save-map`` does;
+:func:`localize` runs a vehicle log on a saved map, as ``stereonav localize`` does -- the
+vehicle may start anywhere in the map -- and returns a :class:`Localization` with the summary
+(``SUMMARY.json``), the trajectory in the map's frame (:data:`LOCALIZED_TRAJECTORY_DTYPE`,
+with whether the stack stood behind each pose), when it (re)gained its position
+(``localized_t_us``), the map's lamps it missed (``lamps_missing``) and the lamps new to the
+map (:data:`NEW_LAMP_DTYPE`). :func:`read_map` reads a map file into a dict (its JSON body:
+``format``, ``version``, ``created_unix_s``, ``source_log``, ``rig``, ``parameters``,
+``landmarks``) and :func:`write_map` writes such a dict as a map file, both through the Rust
+reader and writer of ``stereonav localize`` (the same checks; floats bit for bit).
+
 Vehicle logs for analysis (:mod:`stereonav.logs`): :func:`read_log` reads a log whole and
 returns a :class:`VehicleLog` with what was logged -- the board's byte stream and its decoded
 frames, the odometry, the ``/rig`` rig and, from the simulator, the truth (:class:`LogTruth`).
@@ -96,6 +108,15 @@ from .navigation import (
     Replay,
     replay,
 )
+from .localization import (
+    LOCALIZED_TRAJECTORY_DTYPE,
+    MAP_VERSION,
+    NEW_LAMP_DTYPE,
+    Localization,
+    localize,
+    read_map,
+    write_map,
+)
 from .logs import LogDamage, LogTruth, LostSpan, VehicleLog, read_log
 from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
@@ -111,6 +132,13 @@ from .rig import (
 )
 
 __all__ = [
+    "LOCALIZED_TRAJECTORY_DTYPE",
+    "MAP_VERSION",
+    "NEW_LAMP_DTYPE",
+    "Localization",
+    "localize",
+    "read_map",
+    "write_map",
     "LogDamage",
     "LogTruth",
     "LostSpan",

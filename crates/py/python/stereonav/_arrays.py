@@ -28,6 +28,30 @@ GATE_DTYPE = np.dtype([("id", "<u8"), ("nis", "<f8")])
 #: (``<u8``, the filter's landmark id).
 BINDING_DTYPE = np.dtype([("track", "<u8"), ("landmark", "<u8")])
 
+#: One stereo frame of a run on a saved map (:func:`stereonav.localize`; the rows of its
+#: ``TRAJ.csv``): ``t_us`` (``<u8``), the pose ``x``, ``y`` (``<f8``, metres) and ``theta``
+#: (``<f8``, radians) in the map's frame, NaN when the localiser has no guess, and
+#: ``localized`` (``?``): whether the localiser stands behind the pose.
+LOCALIZED_TRAJECTORY_DTYPE: Final[np.dtype[np.void]] = np.dtype(
+    [("t_us", "<u8"), ("x", "<f8"), ("y", "<f8"), ("theta", "<f8"), ("localized", "?")]
+)
+#: A lamp a run on a saved map saw that is not in the map: its position ``x, y, z`` (``<f8``,
+#: metres, the map's frame), per-axis 1-sigma ``sx, sy, sz`` (``<f8``, metres), its position
+#: ``covariance`` (``<f8``, shape (3, 3), m**2) and ``observations`` (``<u8``, fused). The
+#: rows of the localisation ``SUMMARY.json``'s ``new_lamps``, with the covariance.
+NEW_LAMP_DTYPE: Final[np.dtype[np.void]] = np.dtype(
+    [
+        ("x", "<f8"),
+        ("y", "<f8"),
+        ("z", "<f8"),
+        ("sx", "<f8"),
+        ("sy", "<f8"),
+        ("sz", "<f8"),
+        ("covariance", "<f8", (3, 3)),
+        ("observations", "<u8"),
+    ]
+)
+
 _F64 = npt.NDArray[np.float64]
 _U64 = npt.NDArray[np.uint64]
 

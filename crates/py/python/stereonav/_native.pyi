@@ -10,6 +10,12 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "MAP_VERSION",
+    "read_map",
+    "write_map",
+    "LocalizeResult",
+    "LocalizedFrames",
+    "localize",
     "LogContents",
     "LogDamage",
     "LostSpan",
@@ -775,9 +781,76 @@ def replay(
     skip_phase1: bool,
     phase1_frames: int | None,
     consider_camera: bool,
+    save_map: str | None,
 ) -> ReplayResult:
-    """The whole stack on a vehicle log; raises ``stereonav.InputError`` naming the file or
-    the setting."""
+    """The whole stack on a vehicle log, the map it built written to ``save_map`` (unless
+    None); raises ``stereonav.InputError`` naming the file or the setting."""
+
+#: The map format version written, and the newest read (docs/maps.md).
+MAP_VERSION: Final[int]
+
+def read_map(path: str) -> str:
+    """The JSON body of a map file after every check of ``map_file::Map::load``; raises
+    ``stereonav.InputError`` naming the file and the problem (the ``OSError`` as
+    ``__cause__`` when the OS refused the file)."""
+
+def write_map(body: str, path: str) -> None:
+    """Write the map whose JSON body is ``body``, checked as a file's body (and for the
+    version and unknown keys); raises ``stereonav.InputError`` naming the key or the file."""
+
+@final
+class LocalizedFrames:
+    """Every frame of a localisation run, as columns (F frames)."""
+
+    @property
+    def t_us(self) -> _U64:
+        """``(F,)``: the frame's time."""
+    @property
+    def pose(self) -> _F64:
+        """``(F, 3)``: the pose ``X, Y, theta`` in the map's frame, NaN without a guess."""
+    @property
+    def sigma(self) -> _F64:
+        """``(F, 3)``: its 1-sigma, NaN without a pose."""
+    @property
+    def localized(self) -> npt.NDArray[np.bool_]:
+        """``(F,)``: the localiser stands behind the pose."""
+    @property
+    def matched(self) -> npt.NDArray[np.uint32]:
+        """``(F,)``: map lamps associated at the frame."""
+    @property
+    def hypotheses(self) -> npt.NDArray[np.uint32]:
+        """``(F,)``: live relocalisation hypotheses."""
+
+@final
+class LocalizeResult:
+    """A vehicle log run on a saved map (see ``stereonav.Localization``)."""
+
+    def summary_json(self) -> str:
+        """``SUMMARY.json`` of ``stereonav localize`` as JSON text."""
+    @property
+    def frames(self) -> LocalizedFrames: ...
+    @property
+    def localized_t_us(self) -> list[int]: ...
+    @property
+    def lamps_missing(self) -> list[int]: ...
+    @property
+    def new_lamps(self) -> tuple[_F64, _F64, _U64]:
+        """``(positions (K, 3), covariances (K, 3, 3), observations (K,))``."""
+    @property
+    def counts(self) -> list[tuple[str, int]]: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    def write_summary(self, path: str) -> None:
+        """Write ``SUMMARY.json``; raises ``stereonav.InputError``."""
+    def write_trajectory(self, path: str) -> None:
+        """Write ``TRAJ.csv``; raises ``stereonav.InputError``."""
+
+def localize(
+    log_path: str, map_path: str, rig: Rig | None, save_map: str | None
+) -> LocalizeResult:
+    """A vehicle log on the saved map at ``map_path``, the map with the run's new lamps
+    written to ``save_map`` (unless None); raises ``stereonav.InputError`` naming the file
+    and the problem."""
 
 @final
 class Navigator:

@@ -478,6 +478,7 @@ def replay(
     skip_phase1: bool = False,
     phase1_frames: Optional[int] = None,
     consider_camera: bool = False,
+    save_map: Optional[Union[str, "os.PathLike[str]"]] = None,
 ) -> Replay:
     """Run the whole stack on a vehicle log, as ``stereonav replay`` does.
 
@@ -506,6 +507,11 @@ def replay(
         Keep phase 2 from refining the camera parameters: their covariance is carried into
         the pose and landmark sigmas, their values stay phase 1's (Schmidt-Kalman; for drives
         on which refining them is over-confident, ``docs/phase2.md``).
+    save_map : str or os.PathLike, keyword-only
+        Write the map the run built to this file, as ``stereonav replay --save-map`` does: the
+        final landmarks with their covariance, the calibrated camera and vehicle parameters
+        and the rig, in the project's map format (``docs/maps.md``), for
+        :func:`stereonav.localize` and :func:`stereonav.read_map`. Written after the run.
 
     Returns
     -------
@@ -520,8 +526,9 @@ def replay(
         names it, and the ``OSError`` is the ``__cause__``), is not an MCAP file, is an MCAP
         file without the vehicle topics, or has a malformed vehicle message; there is no rig
         (none given and no ``/rig`` in the log) or it is not valid (the file, the key and the
-        problem are named); ``phase1_frames`` is out of range. A log cut short is not an error: it
-        is replayed as far as it goes, and :attr:`Replay.warnings` says so.
+        problem are named); ``phase1_frames`` is out of range; the map cannot be written (the
+        message names the file, the ``OSError`` is the ``__cause__``). A log cut short is not
+        an error: it is replayed as far as it goes, and :attr:`Replay.warnings` says so.
 
     Examples
     --------
@@ -538,6 +545,7 @@ def replay(
         _flag("skip_phase1", skip_phase1),
         _phase1_frames(phase1_frames),
         _flag("consider_camera", consider_camera),
+        None if save_map is None else _path("save_map", save_map),
     )
     return Replay._from_native(native)
 
