@@ -127,7 +127,12 @@ mod tests {
             created_unix_s: 1,
             common_error: Some(map_file::CommonError {
                 origin: [0.5, 0.25],
-                covariance: [[1e-6, 0.0, 0.0, 0.0], [0.0, 1e-6, 0.0, 0.0], [0.0, 0.0, 1e-6, 0.0], [0.0, 0.0, 0.0, 1e-8]],
+                covariance: [
+                    [1e-6, 0.0, 0.0, 0.0],
+                    [0.0, 1e-6, 0.0, 0.0],
+                    [0.0, 0.0, 1e-6, 0.0],
+                    [0.0, 0.0, 0.0, 1e-8],
+                ],
             }),
         };
         map.to_json().expect("finite")
