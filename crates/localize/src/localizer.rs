@@ -573,7 +573,7 @@ impl Localizer {
                 &self.map,
                 &scored.expected_lamps,
                 &scored.matched,
-                self.settings.new_lamp_min_separation_m * 2.0,
+                self.settings.missing_twin_m,
             );
             let mut taken = alloc::vec![false; observations.len()];
             for &(_, o) in &scored.matched {

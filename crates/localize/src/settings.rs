@@ -125,6 +125,9 @@ pub struct LocalizerSettings {
     pub missing_max_seen_fraction: f64,
     /// See [`Self::missing_max_seen_fraction`].
     pub missing_max_map_sigma_m: f64,
+    /// Two map lamps closer than this (metres) are one lamp mapped twice: the one not seen
+    /// while its twin is does not count as missing.
+    pub missing_twin_m: f64,
     /// A lamp not in the map is reported after this many observations...
     pub new_lamp_min_observations: u32,
     /// ...with its position known to this (largest standard deviation, metres)...
@@ -154,6 +157,7 @@ impl Default for LocalizerSettings {
             missing_min_expected: 20,
             missing_max_seen_fraction: 0.1,
             missing_max_map_sigma_m: 0.1,
+            missing_twin_m: 0.3,
             new_lamp_min_observations: 20,
             new_lamp_max_sigma_m: 0.15,
             new_lamp_min_separation_m: 0.5,

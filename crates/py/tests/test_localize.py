@@ -45,7 +45,7 @@ SECTION_5_KEYS = {
     "frames", "corrupt", "lost", "phase_switch_t_us", "pose", "camera", "vehicle", "landmarks",
     "localized_t_us", "lamps_missing",
 }
-MAP_KEYS = {"format", "version", "created_unix_s", "source_log", "rig", "parameters", "landmarks"}
+MAP_KEYS = {"common_error", "format", "version", "created_unix_s", "source_log", "rig", "parameters", "landmarks"}
 
 
 @pytest.fixture(scope="module")
