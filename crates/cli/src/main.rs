@@ -55,7 +55,9 @@ enum Command {
     Rig(rig_import::Args),
     /// The viewer: a vehicle log (replayed on the fly) or an estimates file, with the image
     /// planes, the map, the camera parameters and the NIS over time and a timeline;
-    /// `--screenshot OUT.png` renders it headless to PNG and exits.
+    /// `--map MAP` localises the log on a saved map instead and shows where it was localised
+    /// or lost, the pose's uncertainty and the lamps missing and new; `--screenshot OUT.png`
+    /// renders it headless to PNG and exits.
     View(view::Args),
 }
 

@@ -1,6 +1,7 @@
-//! `stereonav view LOG.mcap [--rig RIG.toml] [--skip-phase1] [--phase1-frames N] [--screenshot OUT.png]
-//! [--time SECONDS] [--size WxH]`: the viewer (crate `viewer`) on a vehicle log, replayed on
-//! the fly, or on an estimates file written by `stereonav replay --out`.
+//! `stereonav view LOG.mcap [--rig RIG.toml] [--skip-phase1] [--phase1-frames N] [--map MAP]
+//! [--screenshot OUT.png] [--time SECONDS] [--size WxH]`: the viewer (crate `viewer`) on a
+//! vehicle log, replayed on the fly or, with `--map`, localised on a saved map as
+//! `stereonav localize` does; or on an estimates file written by `stereonav replay --out`.
 //!
 //! With `--screenshot` it renders the viewer headless (on the CPU: no display, GPU or driver
 //! needed) at the end of the log or at `--time`, writes the PNG and exits; otherwise it opens a
@@ -18,13 +19,19 @@ use selfcal::smoother::SmootherSettings;
 /// Arguments of `stereonav view`.
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
-    /// A vehicle log (MCAP, vehicle-interfaces.md section 4), replayed when it is opened, or an
-    /// estimates file written by `stereonav replay --out`.
+    /// A vehicle log (MCAP, vehicle-interfaces.md section 4), replayed (or, with --map,
+    /// localised) when it is opened, or an estimates file written by `stereonav replay --out`.
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
-    /// The rig file (TOML, section 3); without it, the log's /rig message.
+    /// The rig file (TOML, section 3); without it, the log's /rig message (with --map, the rig
+    /// the map was made with).
     #[arg(long, value_name = "RIG.toml")]
     rig: Option<PathBuf>,
+    /// A saved map (`stereonav replay --save-map`): localise the log on it, as `stereonav
+    /// localize` does, and show the run: localised or lost over time, the pose and its
+    /// uncertainty, the map's lamps with those missing, and the new lamps found.
+    #[arg(long, value_name = "MAP", conflicts_with_all = ["skip_phase1", "phase1_frames"])]
+    map: Option<PathBuf>,
     /// Skip phase 1: start phase 2 at the first frame from the rig's nominal values and priors.
     #[arg(long)]
     skip_phase1: bool,
@@ -68,9 +75,17 @@ pub(crate) fn run(args: &Args) -> Result<()> {
         // Before the replay: a missing display should not wait for a long log.
         viewer::check_display()?;
     }
-    let options = viewer::LoadOptions { rig, settings };
+    let options = viewer::LoadOptions {
+        rig,
+        settings,
+        map: args.map.clone(),
+    };
 
-    let mut bar = ByteProgress::new("replaying");
+    let mut bar = ByteProgress::new(if args.map.is_some() {
+        "localising"
+    } else {
+        "replaying"
+    });
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let loaded = viewer::load(&args.log, &options, &mut progress);
     bar.finish();

@@ -17,6 +17,21 @@ pub enum Error {
     /// The estimates file could not be read (estimates-log's message).
     #[error(transparent)]
     Estimates(#[from] estimates_log::ReadError),
+    /// The saved map could not be read (map-file's message names the file and the problem).
+    #[error(transparent)]
+    Map(#[from] map_file::Error),
+    /// A map was given with a file that is not a vehicle log (an estimates file, say).
+    #[error(
+        "{} is not a vehicle log (/fpga/features, /odom): only a vehicle log can be localised on the map {}",
+        path.display(),
+        map.display()
+    )]
+    MapNeedsVehicleLog {
+        /// The file.
+        path: PathBuf,
+        /// The map given.
+        map: PathBuf,
+    },
     /// The log's `/rig` message is not a usable rig.
     #[error(transparent)]
     Rig(#[from] rig_model::RigFileError),

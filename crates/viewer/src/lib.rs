@@ -1,5 +1,6 @@
-//! The stereonav viewer (`stereonav view`): a vehicle log replayed through the stack, or an
-//! estimates file written by `stereonav replay`, shown in egui.
+//! The stereonav viewer (`stereonav view`): a vehicle log replayed through the stack, or
+//! localised on a saved map ([`LoadOptions::map`], [`model::Localization`]), or an estimates
+//! file written by `stereonav replay`, shown in egui.
 //!
 //! - **Images**: the left and right image planes with the board's features at the current
 //!   frame, marked by landmark association (recovered by projecting the map, see
@@ -11,6 +12,11 @@
 //! - **Plots** over time: every estimated camera parameter with its 3-sigma band and the phase
 //!   switch marked (the paper's Figs. 4, 5, 9), and the NIS against its bound.
 //! - **Timeline**: scrub, play, step frame by frame.
+//!
+//! A localisation run is shown in the same panels: its status (localised, or lost with the
+//! hypotheses alive) in the header and on a strip under the timeline, the trajectory coloured
+//! by status, the map's missing lamps ringed and the new lamps crossed, and plots of the pose's
+//! uncertainty, the lamps matched and the hypotheses in place of the camera parameters.
 //!
 //! The data model ([`model`]) is plain data computed once at load time ([`load`]); the drawing
 //! ([`Viewer::ui`]) costs what one frame shows. The same drawing runs in a window

@@ -1,10 +1,11 @@
 //! Loading a file into a [`Model`]: a vehicle log is replayed through the stack
-//! (`replay::replay_log`) and its board stream decoded again for the features of every frame;
+//! (`replay::replay_log`), or run on a saved map (`replay::localize_log`, with
+//! [`LoadOptions::map`]), and its board stream decoded again for the features of every frame;
 //! an estimates file is read back (`estimates_log::read_estimates`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use replay::NavSettings;
+use replay::{LocalizerSettings, NavSettings};
 use rig_model::camera::CameraParams;
 use rig_model::config::Rig;
 use vehicle_log::Record;
@@ -18,17 +19,26 @@ type DecodedFrame = (u64, Vec<ImagePoint>, Vec<ImagePoint>);
 /// How a vehicle log is replayed.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct LoadOptions {
-    /// The rig file's content; without it, the log's `/rig` message.
+    /// The rig file's content; without it, the log's `/rig` message (or, on a map, the rig
+    /// the map was made with).
     pub rig: Option<Rig>,
-    /// The navigator's settings (phase 1 skipped or not, the size of phase 1's batch).
+    /// The navigator's settings (phase 1 skipped or not, the size of phase 1's batch); not
+    /// used on a map.
     pub settings: NavSettings,
+    /// A saved map (`stereonav replay --save-map`): the log is localised on it
+    /// (`replay::localize_log`, default settings) instead of replayed.
+    pub map: Option<PathBuf>,
 }
 
 /// Loads `path`: a vehicle log (replayed with `options`; `progress` is called with
 /// `(bytes read, bytes in the file)`) or an estimates file written by `stereonav replay`.
 ///
+/// With [`LoadOptions::map`], the vehicle log is localised on the map instead
+/// ([`Model::localization`]); the map is read first.
+///
 /// Errors: the file cannot be read or is not MCAP, it is an MCAP file of neither kind, a
-/// vehicle message is malformed, or the replay fails (no rig, bad settings). A log cut short
+/// vehicle message is malformed, or the replay fails (no rig, bad settings); with a map, the
+/// map cannot be read or cannot localise, or the file is not a vehicle log. A log cut short
 /// is shown as far as it goes, with a warning in [`Model::warnings`].
 pub fn load(
     path: impl AsRef<Path>,
@@ -36,7 +46,22 @@ pub fn load(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Model, Error> {
     let path = path.as_ref();
+    // Before the log: a bad map should not wait for a long read.
+    let map = options
+        .map
+        .as_deref()
+        .map(|p| map_file::Map::load(p).map(|m| (p, m)))
+        .transpose()?;
     let log = vehicle_log::read_log(path)?;
+    if let Some((map_path, map)) = map {
+        if !log.has_vehicle_topics() {
+            return Err(Error::MapNeedsVehicleLog {
+                path: path.to_path_buf(),
+                map: map_path.to_path_buf(),
+            });
+        }
+        return localize(path, map_path, &map, &log.records, options, progress);
+    }
     if log.has_vehicle_topics() {
         let logged_rig = log.records.iter().find_map(|r| match r {
             Record::Rig(text) => Some(text.as_str()),
@@ -94,6 +119,42 @@ pub fn load(
         topics: log.ignored_topics,
         truncated: log.truncated,
     })
+}
+
+/// The vehicle log at `path` (its records read) run on `map` (read from `map_path`).
+fn localize(
+    path: &Path,
+    map_path: &Path,
+    map: &map_file::Map,
+    records: &[Record],
+    options: &LoadOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Model, Error> {
+    let features = decode_features(records);
+    let (truth, _) = truth_of(records);
+    let rig = options.rig.clone().unwrap_or_else(|| map.rig.clone());
+    let nominal = (rig.nominal, [f64::from(rig.width), f64::from(rig.height)]);
+    let mut frames = Vec::new();
+    let end = replay::localize_log(
+        path,
+        map,
+        options.rig.clone(),
+        LocalizerSettings::default(),
+        &mut |f| {
+            frames.push(*f);
+            Ok(())
+        },
+        progress,
+    )?;
+    Ok(Model::from_localization(
+        path.to_path_buf(),
+        map_path.to_path_buf(),
+        frames,
+        end,
+        features,
+        truth,
+        nominal,
+    ))
 }
 
 /// The board's stream (the `/fpga/features` chunks concatenated in log order) decoded into

@@ -1,6 +1,7 @@
 //! What the viewer shows, as plain data: a vehicle log replayed (or an estimates file read
-//! back), the board's features per frame, the simulator's truth, and the series that the plots
-//! draw, all computed once at load time ([`Model::from_replay`]). Nothing here draws; the
+//! back, or a log localised on a saved map), the board's features per frame, the simulator's
+//! truth, and the series that the plots draw, all computed once at load time
+//! ([`Model::from_replay`], [`Model::from_localization`]). Nothing here draws; the
 //! queries at one instant ([`Model::frame_at`], [`Model::map_at`], [`Model::marks`],
 //! [`Model::field_of_view`]) are binary searches and work in proportion to what one frame
 //! shows, never to the length of the log, so that scrubbing a long log stays smooth.
@@ -10,7 +11,10 @@ use std::ops::Range;
 use std::path::PathBuf;
 
 use nalgebra::Vector3;
-use replay::{FrameEstimate, LandmarkEstimate, Phase, Replay};
+use replay::{
+    CameraSample, FrameEstimate, LandmarkEstimate, LocalizeEnd, LocalizeTruth, LocalizedFrame,
+    MapSnapshot, Phase, Replay,
+};
 use rig_model::camera::{CameraParams, Param, Pose2};
 
 /// A feature is marked as an observation of a landmark when it lies within this distance of
@@ -210,6 +214,179 @@ pub struct Model {
     pub bounds: [f64; 4],
     /// Things the viewer noticed while loading, one line each (the replay's warnings first).
     pub warnings: Vec<String>,
+    /// The localisation run, when the log was run on a saved map ([`Model::from_localization`]).
+    pub localization: Option<Localization>,
+}
+
+/// A lamp a localisation run saw that is not in the map (`localize::NewLamp`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewLampMark {
+    /// Position in the map's frame, metres.
+    pub position: [f64; 3],
+    /// Its covariance, row-major, square metres.
+    pub covariance: [[f64; 3]; 3],
+    /// Observations fused.
+    pub observations: u32,
+}
+
+/// A stretch of the trajectory with one status, drawn in one colour: `(frame index, [x, y])`,
+/// thinned. A stretch that follows another without a frame between them starts at the
+/// other's last point, so that the line is unbroken; frames without a pose break it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackRun {
+    /// Localised (else lost: the localiser's best guess).
+    pub localized: bool,
+    /// The points, frame indices ascending.
+    pub points: Vec<(usize, [f64; 2])>,
+}
+
+/// Consecutive frames with one status: indices into [`Localization::frames`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct StatusRun {
+    /// The frames.
+    pub frames: Range<usize>,
+    /// Localised (else lost).
+    pub localized: bool,
+}
+
+/// The localisation run's series over time, thinned to about [`PLOT_POINTS`] (every change of
+/// status and of having a pose kept, so that no stretch vanishes); NaN where a frame has no
+/// pose (a break in the line).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LocalizationSeries {
+    /// Seconds from the log's start.
+    pub t_s: Vec<f64>,
+    /// The frames kept, indices into [`Localization::frames`].
+    pub frame: Vec<usize>,
+    /// The frame was localised.
+    pub localized: Vec<bool>,
+    /// Position 1-sigma, `sqrt(sigma_x^2 + sigma_y^2)`, millimetres.
+    pub position_sigma_mm: Vec<f64>,
+    /// Heading 1-sigma, degrees.
+    pub heading_sigma_deg: Vec<f64>,
+    /// Map lamps associated at the frame.
+    pub matched: Vec<f64>,
+    /// Live relocalisation hypotheses.
+    pub hypotheses: Vec<f64>,
+    /// Distance of the pose from the log's true pose at the frame, millimetres (empty when the
+    /// log has no truth).
+    pub error_mm: Vec<f64>,
+}
+
+/// A vehicle log run on a saved map (`replay::localize_log`): what the localiser said at every
+/// frame and at the end, with what the map, the plots and the timeline draw of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Localization {
+    /// The saved map.
+    pub map_path: PathBuf,
+    /// Every frame as the localiser gave it, at the indices of [`Model::replay`]'s frames.
+    pub frames: Vec<LocalizedFrame>,
+    /// The map's landmarks with the times each was associated in this run, ids ascending.
+    pub seen: Vec<(u64, u32)>,
+    /// Map landmarks that should have been seen often and were not, ids ascending.
+    pub missing: Vec<u64>,
+    /// Lamps seen that are not in the map.
+    pub new_lamps: Vec<NewLampMark>,
+    /// Each time the position was (re)gained, microseconds.
+    pub fixes_t_us: Vec<u64>,
+    /// Frames localised, as the localiser counts them.
+    pub localized_frames: u64,
+    /// Times lost, by reason: after a gap, without odometry, when the lamps stopped fitting,
+    /// too uncertain.
+    pub lost_by_reason: [u64; 4],
+    /// Errors against the log's truth, when it has one.
+    pub truth: Option<LocalizeTruth>,
+    /// The trajectory (frames with a pose) in stretches of one status.
+    pub track: Vec<TrackRun>,
+    /// Every frame in stretches of one status, for the timeline.
+    pub status: Vec<StatusRun>,
+    /// The series the plots draw.
+    pub series: LocalizationSeries,
+}
+
+impl Localization {
+    /// The frame at an index.
+    pub fn frame(&self, index: usize) -> Option<&LocalizedFrame> {
+        self.frames.get(index)
+    }
+
+    /// Whether map landmark `id` was reported missing.
+    pub fn is_missing(&self, id: u64) -> bool {
+        self.missing.binary_search(&id).is_ok()
+    }
+}
+
+/// A frame's pose in the plane, when it has a finite one.
+fn planar(f: &LocalizedFrame) -> Option<[f64; 2]> {
+    f.pose
+        .map(|p| [p[0], p[1]])
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+}
+
+/// The frames kept when a localisation run is thinned: those of [`thin_by_time`], and both
+/// frames of every change of status or of having a pose.
+fn localization_keep(frames: &[LocalizedFrame], t_s: &[f64], max: usize) -> Vec<usize> {
+    let mut keep = thin_by_time(t_s, max);
+    let kind = |f: &LocalizedFrame| (f.localized, planar(f).is_some());
+    for (i, w) in frames.windows(2).enumerate() {
+        if let [a, b] = w
+            && kind(a) != kind(b)
+        {
+            keep.extend([i, i + 1]);
+        }
+    }
+    keep.sort_unstable();
+    keep.dedup();
+    keep
+}
+
+/// The trajectory of `frames` at the kept indices, in stretches of one status (see
+/// [`TrackRun`]).
+fn track_runs(frames: &[LocalizedFrame], keep: &[usize]) -> Vec<TrackRun> {
+    let mut runs: Vec<TrackRun> = Vec::new();
+    // A kept frame without a pose since the last point: the next point starts afresh. Every
+    // change of having a pose is kept, so no such frame is thinned away.
+    let mut broken = true;
+    for &i in keep {
+        let Some(f) = frames.get(i) else { continue };
+        let Some(xy) = planar(f) else {
+            broken = true;
+            continue;
+        };
+        let last = runs.last_mut();
+        match last {
+            Some(run) if !broken && run.localized == f.localized => run.points.push((i, xy)),
+            Some(run) if !broken => {
+                let mut points = run.points.last().copied().into_iter().collect::<Vec<_>>();
+                points.push((i, xy));
+                runs.push(TrackRun {
+                    localized: f.localized,
+                    points,
+                });
+            }
+            _ => runs.push(TrackRun {
+                localized: f.localized,
+                points: vec![(i, xy)],
+            }),
+        }
+        broken = false;
+    }
+    runs
+}
+
+/// Every frame in stretches of one status.
+fn status_runs(frames: &[LocalizedFrame]) -> Vec<StatusRun> {
+    let mut runs: Vec<StatusRun> = Vec::new();
+    for (i, f) in frames.iter().enumerate() {
+        match runs.last_mut() {
+            Some(run) if run.localized == f.localized => run.frames.end = i + 1,
+            _ => runs.push(StatusRun {
+                frames: i..i + 1,
+                localized: f.localized,
+            }),
+        }
+    }
+    runs
 }
 
 /// The display unit and scale of a parameter.
@@ -377,7 +554,175 @@ impl Model {
             bounds,
             warnings,
             replay,
+            localization: None,
         }
+    }
+
+    /// Builds the model of a localisation run: the log at `path` run on the saved map at
+    /// `map_path` (`replay::localize_log`), `frames` as it gave them, with the board's
+    /// features, the log's truth (taken to be in the map's frame, as the localiser's report
+    /// takes it) and the rig it ran with (the nominal camera and the image size).
+    ///
+    /// The map is shown as the run's only map snapshot, the camera as the map's (with the
+    /// vehicle parameters as the run refined them), the poses with the localiser's 1-sigma;
+    /// frames without a pose have a NaN pose (left out of the trajectory). No parameter is
+    /// plotted (the camera is the map's, fixed): the plots are the run's
+    /// ([`LocalizationSeries`]).
+    #[allow(clippy::too_many_arguments)] // each is a separate thing the run is shown with
+    pub fn from_localization(
+        path: PathBuf,
+        map_path: PathBuf,
+        frames: Vec<LocalizedFrame>,
+        end: LocalizeEnd,
+        features: Features,
+        truth: Option<Truth>,
+        nominal: (CameraParams, [f64; 2]),
+    ) -> Self {
+        let landmark_count = end.landmarks.len();
+        let mut landmarks: Vec<LandmarkEstimate> = end
+            .landmarks
+            .iter()
+            .map(|(l, _)| LandmarkEstimate {
+                id: l.id,
+                position: l.position,
+                covariance: l.covariance,
+                observations: l.observations,
+            })
+            .collect();
+        // The map's queries find a landmark by binary search on its id.
+        landmarks.sort_by_key(|l| l.id);
+        let mut seen: Vec<(u64, u32)> = end.landmarks.iter().map(|(l, n)| (l.id, *n)).collect();
+        seen.sort_unstable();
+        let mut missing = end.lamps_missing.clone();
+        missing.sort_unstable();
+        let estimates: Vec<FrameEstimate> = frames
+            .iter()
+            .map(|f| {
+                let [sx, sy, st] = f.sigma;
+                let mut pose_covariance = [[0.0; 3]; 3];
+                for (k, s) in [sx, sy, st].into_iter().enumerate() {
+                    if let Some(row) = pose_covariance.get_mut(k)
+                        && let Some(v) = row.get_mut(k)
+                    {
+                        *v = s * s;
+                    }
+                }
+                FrameEstimate {
+                    t_us: f.t_us,
+                    phase: Phase::Navigating,
+                    pose: f.pose.unwrap_or([f64::NAN; 3]),
+                    pose_covariance,
+                    observed: Vec::new(),
+                    nis: Vec::new(),
+                    rejected: 0,
+                    landmarks: landmark_count,
+                }
+            })
+            .collect();
+        let t0_us = frames
+            .first()
+            .map(|f| f.t_us)
+            .or(end.first_t_us)
+            .unwrap_or(0);
+        let replay = Replay {
+            frames: estimates,
+            camera: vec![CameraSample {
+                t_us: t0_us,
+                phase: Phase::Navigating,
+                params: end.parameters.clone(),
+            }],
+            maps: vec![MapSnapshot {
+                t_us: t0_us,
+                landmarks: landmarks.clone(),
+            }],
+            landmarks,
+            final_camera: end.parameters.clone(),
+            phase_switch_t_us: None,
+            phase1_skipped: false,
+            counts: end.counts,
+            truth: None,
+            warnings: end.warnings.clone(),
+            log_damage: None,
+        };
+        let new_lamps: Vec<NewLampMark> = end
+            .new_lamps
+            .iter()
+            .map(|l| NewLampMark {
+                position: [l.position.x, l.position.y, l.position.z],
+                covariance: std::array::from_fn(|r| {
+                    std::array::from_fn(|c| l.covariance.get((r, c)).copied().unwrap_or(f64::NAN))
+                }),
+                observations: l.observations,
+            })
+            .collect();
+        let mut model = Self::from_replay(
+            path,
+            SourceKind::VehicleLog,
+            replay,
+            features,
+            truth,
+            Some(nominal),
+            None,
+        );
+        model.params.clear();
+        for l in &new_lamps {
+            let [x, y, _] = l.position;
+            if x.is_finite() && y.is_finite() {
+                let b = &mut model.bounds;
+                *b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+            }
+        }
+
+        let t_s: Vec<f64> = frames.iter().map(|f| model.seconds(f.t_us)).collect();
+        let keep = localization_keep(&frames, &t_s, PLOT_POINTS.max(PATH_POINTS));
+        let track = track_runs(&frames, &keep);
+        let status = status_runs(&frames);
+        let truth_pose = |t_us: u64| -> Option<[f64; 3]> {
+            let poses = &model.truth.as_ref()?.poses;
+            let i = poses.binary_search_by_key(&t_us, |(t, _)| *t).ok()?;
+            poses.get(i).map(|(_, p)| *p)
+        };
+        let has_truth = model.truth.as_ref().is_some_and(|t| !t.poses.is_empty());
+        let mut series = LocalizationSeries::default();
+        for &i in &keep {
+            let (Some(f), Some(&t)) = (frames.get(i), t_s.get(i)) else {
+                continue;
+            };
+            let [sx, sy, st] = if planar(f).is_some() {
+                f.sigma
+            } else {
+                [f64::NAN; 3]
+            };
+            series.t_s.push(t);
+            series.frame.push(i);
+            series.localized.push(f.localized);
+            series.position_sigma_mm.push(sx.hypot(sy) * 1e3);
+            series.heading_sigma_deg.push(st.to_degrees());
+            series.matched.push(f64::from(f.matched));
+            series.hypotheses.push(f64::from(f.hypotheses));
+            if has_truth {
+                let error = match (planar(f), truth_pose(f.t_us)) {
+                    (Some([x, y]), Some([tx, ty, _])) => (x - tx).hypot(y - ty) * 1e3,
+                    _ => f64::NAN,
+                };
+                series.error_mm.push(error);
+            }
+        }
+        model.localization = Some(Localization {
+            map_path,
+            frames,
+            seen,
+            missing,
+            new_lamps,
+            fixes_t_us: end.localized_t_us.clone(),
+            localized_frames: end.localized_frames,
+            lost_by_reason: end.lost,
+            truth: end.truth,
+            track,
+            status,
+            series,
+        });
+        model
     }
 }
 
@@ -393,7 +738,7 @@ fn param_series(
         .iter()
         .filter_map(|&param| {
             let estimate_of =
-                |c: &replay::CameraSample| c.params.iter().find(|e| e.param == param).copied();
+                |c: &CameraSample| c.params.iter().find(|e| e.param == param).copied();
             let estimated = replay
                 .camera
                 .iter()
@@ -722,7 +1067,7 @@ fn associate(features: &mut [FeatureMark], projections: &[Projection]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use replay::{CameraSample, Counts, MapSnapshot, ParamEstimate};
+    use replay::{Counts, ParamEstimate};
     use rig_model::camera::Mount;
 
     fn camera(pitch: f64) -> CameraParams {
@@ -826,6 +1171,146 @@ mod tests {
             Some((c, [752.0, 480.0])),
             None,
         )
+    }
+
+    fn localized(t_us: u64, pose: Option<[f64; 3]>, localized: bool) -> LocalizedFrame {
+        LocalizedFrame {
+            t_us,
+            pose,
+            sigma: if pose.is_some() {
+                [1e-3, 2e-3, 1e-4]
+            } else {
+                [f64::NAN; 3]
+            },
+            localized,
+            matched: u32::from(localized) * 3,
+            hypotheses: u32::from(!localized) * 2,
+        }
+    }
+
+    /// 10,000 frames: lost with a pose (0-99), lost without one (100-101), lost with a pose
+    /// again (102-4999), localised (5000-9998), lost again at the last frame.
+    fn run() -> Vec<LocalizedFrame> {
+        (0..10_000_u64)
+            .map(|i| {
+                let pose = (!(100..102).contains(&i)).then_some([i as f64 * 1e-3, 0.0, 0.0]);
+                localized(i * 50_000, pose, (5000..9999).contains(&i))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_localisation_run_thinned_keeps_every_change_of_status_and_pose() {
+        let frames = run();
+        let t: Vec<f64> = frames.iter().map(|f| f.t_us as f64 * 1e-6).collect();
+        let keep = localization_keep(&frames, &t, 100);
+        assert!(keep.len() < 120, "{}", keep.len());
+        for i in [99, 100, 101, 102, 4999, 5000, 9998, 9999] {
+            assert!(keep.contains(&i), "{i}");
+        }
+        assert!(keep.windows(2).all(|w| w[0] < w[1]));
+
+        let track = track_runs(&frames, &keep);
+        let shape: Vec<(bool, usize, usize)> = track
+            .iter()
+            .map(|r| {
+                let first = r.points.first().map_or(0, |p| p.0);
+                let last = r.points.last().map_or(0, |p| p.0);
+                (r.localized, first, last)
+            })
+            .collect();
+        // Broken where there is no pose; unbroken (the next starts at the last point) where
+        // only the status changes.
+        assert_eq!(
+            shape,
+            [
+                (false, 0, 99),
+                (false, 102, 4999),
+                (true, 4999, 9998),
+                (false, 9998, 9999)
+            ]
+        );
+
+        let status: Vec<(Range<usize>, bool)> = status_runs(&frames)
+            .into_iter()
+            .map(|r| (r.frames, r.localized))
+            .collect();
+        assert_eq!(
+            status,
+            [(0..5000, false), (5000..9999, true), (9999..10_000, false)]
+        );
+    }
+
+    #[test]
+    fn a_localisation_model_holds_the_run_and_its_series() {
+        let c = camera(0.0);
+        let frames = run();
+        let lamp = |id: u64, x: f64| {
+            (
+                map_file::MapLandmark {
+                    id,
+                    position: [x, 0.5, 3.0],
+                    covariance: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
+                    observations: 10,
+                },
+                5,
+            )
+        };
+        let end = LocalizeEnd {
+            counts: Counts::default(),
+            frames_processed: frames.len() as u64,
+            localized_frames: 4999,
+            localized_t_us: vec![5000 * 50_000],
+            lamps_missing: vec![7],
+            new_lamps: Vec::new(),
+            last_frame: frames.last().copied(),
+            first_t_us: Some(0),
+            parameters: params(&c, 1e-4),
+            landmarks: vec![lamp(7, 1.0), lamp(3, 2.0)],
+            lost: [0, 0, 1, 0],
+            hypotheses: 4,
+            warnings: Vec::new(),
+            truth: None,
+        };
+        let m = Model::from_localization(
+            PathBuf::from("log.mcap"),
+            PathBuf::from("log.map"),
+            frames.clone(),
+            end,
+            Features::default(),
+            None,
+            (c, [752.0, 480.0]),
+        );
+        let loc = m.localization.as_ref().unwrap();
+        // (Compared by time and flag: a frame without a pose has a NaN sigma.)
+        assert!(
+            loc.frames.len() == frames.len()
+                && loc.frames.iter().zip(&frames).all(|(a, b)| a.t_us == b.t_us
+                    && a.localized == b.localized
+                    && a.pose == b.pose)
+        );
+        assert_eq!(m.replay.frames.len(), frames.len());
+        // No pose: NaN, left out of the trajectory; a pose: its sigma squared on the diagonal.
+        assert!(m.replay.frames[100].pose.iter().all(|v| v.is_nan()));
+        assert!((m.replay.frames[0].pose_covariance[1][1] - 4e-6).abs() < 1e-18);
+        assert!(loc.is_missing(7) && !loc.is_missing(3));
+        assert_eq!(loc.seen, [(3, 5), (7, 5)]);
+        // The map, sorted by id, is the only snapshot.
+        let ids: Vec<u64> = m.map_at(m.t0_us).iter().map(|l| l.id).collect();
+        assert_eq!(ids, [3, 7]);
+        assert!(m.params.is_empty());
+        assert_eq!(m.camera_at(m.t0_us).map(|c| c.f), Some(700.0));
+        let s = &loc.series;
+        assert_eq!(s.t_s.len(), s.frame.len());
+        assert!(s.error_mm.is_empty(), "no truth");
+        let k = s.frame.binary_search(&100).unwrap();
+        assert!(s.position_sigma_mm[k].is_nan());
+        let k = s.frame.binary_search(&5000).unwrap();
+        assert!((s.position_sigma_mm[k] - 5f64.sqrt()).abs() < 1e-9);
+        assert_eq!(
+            (s.matched[k], s.hypotheses[k], s.localized[k]),
+            (3.0, 0.0, true)
+        );
     }
 
     #[test]

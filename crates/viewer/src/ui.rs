@@ -1,7 +1,10 @@
 //! The viewer's drawing (egui): a header, the two image planes, the top-down map, the plots of
 //! the camera parameters and the NIS, and a timeline to scrub and play. [`Viewer::ui`] draws
 //! one frame from the [`Model`] at the current time; it is the same in the window and in a
-//! headless screenshot.
+//! headless screenshot. A localisation run on a saved map ([`Model::localization`]) is shown
+//! in the same panels: its status in the header and on a strip under the timeline, the
+//! trajectory coloured by status, the missing and new lamps on the map, and plots of its
+//! uncertainty, lamps matched and hypotheses instead of the camera parameters.
 //!
 //! Each frame costs what it shows: the current frame is found by binary search, the marks of
 //! the images are computed when the frame changes (and kept), the plots draw series built once
@@ -17,7 +20,7 @@ use egui::{
 use egui_plot::{HLine, LineStyle, Plot, VLine};
 use replay::Phase;
 
-use crate::model::{FrameMarks, Model, SourceKind};
+use crate::model::{FrameMarks, Localization, Model, SourceKind};
 use crate::plot_items::{Dots, Grid, Series, ThinBand, ThinLine};
 use crate::thin;
 
@@ -43,6 +46,22 @@ const NOW: Color32 = Color32::from_rgb(235, 235, 235);
 const ESTIMATE: Color32 = Color32::from_rgb(100, 180, 255);
 /// The 3-sigma band.
 const BAND: Color32 = Color32::from_rgba_premultiplied(25, 50, 90, 110);
+/// A localisation run's trajectory, robot and plots while lost (the localiser's best guess).
+const LOST: Color32 = Color32::from_rgb(255, 80, 170);
+/// A map lamp reported missing by a localisation run (a ring around it).
+const MISSING: Color32 = Color32::from_rgb(255, 50, 50);
+/// A lamp a localisation run found that is not in the map (a cross).
+const NEW_LAMP: Color32 = Color32::from_rgb(110, 235, 80);
+/// A localisation run's position fixes on its plots.
+const FIX: Color32 = Color32::from_rgb(110, 235, 80);
+/// Most fixes marked on a localisation run's plots (the first ones).
+const MAX_FIX_MARKERS: usize = 200;
+/// Height of the localisation status strip under the timeline, points.
+const STATUS_STRIP_HEIGHT: f32 = 8.0;
+/// Radius of the ring around a missing lamp, points.
+const MISSING_RING_RADIUS: f32 = 7.0;
+/// Half the width of a new lamp's cross, points.
+const CROSS_HALF_WIDTH: f32 = 4.5;
 /// The left and right cameras' fields of view on the map.
 const FOV: [Color32; 2] = [
     Color32::from_rgb(60, 180, 105),
@@ -85,6 +104,8 @@ pub struct Regions {
     pub right_image: Rect,
     /// The map.
     pub map: Rect,
+    /// The map's colour key (inside [`Regions::map`]).
+    pub map_legend: Rect,
     /// The plots, all of them.
     pub plots: Rect,
     /// The timeline.
@@ -101,6 +122,79 @@ struct ParamPlot {
     upper: Series,
     value: Series,
     truth: Option<f64>,
+}
+
+/// A localisation run's series, ready for the plots: those drawn by status split into the
+/// localised and the lost frames (NaN in the other's), each drawn in its status's colour.
+#[derive(Debug, Clone)]
+struct LocPlots {
+    /// Position 1-sigma, mm: `[localised, lost]`.
+    position_sigma: [Series; 2],
+    /// Heading 1-sigma, degrees: `[localised, lost]`.
+    heading_sigma: [Series; 2],
+    /// Distance from the truth, mm: `[localised, lost]`, when the log has truth.
+    error: Option<[Series; 2]>,
+    /// Map lamps matched.
+    matched: Series,
+    /// Relocalisation hypotheses.
+    hypotheses: Series,
+    /// The fixes, seconds (the first [`MAX_FIX_MARKERS`]).
+    fixes_s: Vec<f64>,
+}
+
+impl LocPlots {
+    fn new(model: &Model, loc: &Localization) -> Self {
+        let s = &loc.series;
+        let split = |values: &[f64]| split_by_status(&s.t_s, values, &s.localized);
+        let whole = |values: &[f64]| Series::new(s.t_s.iter().zip(values).map(|(t, v)| [*t, *v]));
+        Self {
+            position_sigma: split(&s.position_sigma_mm),
+            heading_sigma: split(&s.heading_sigma_deg),
+            error: (!s.error_mm.is_empty()).then(|| split(&s.error_mm)),
+            matched: whole(&s.matched),
+            hypotheses: whole(&s.hypotheses),
+            fixes_s: loc
+                .fixes_t_us
+                .iter()
+                .take(MAX_FIX_MARKERS)
+                .map(|t| model.seconds(*t))
+                .collect(),
+        }
+    }
+}
+
+/// A series at times `t_s` split by each sample's status: `[localised, lost]`, each with NaN
+/// (a break) where the other status holds.
+fn split_by_status(t_s: &[f64], values: &[f64], localized: &[bool]) -> [Series; 2] {
+    let part = |status: bool| {
+        let points = t_s.iter().zip(values).zip(localized);
+        Series::new(points.map(|((t, v), l)| [*t, if *l == status { *v } else { f64::NAN }]))
+    };
+    [part(true), part(false)]
+}
+
+/// One of a localisation run's plots, for one frame: its title (with the value now), its lines,
+/// and whether it is a count per frame (drawn as pixel columns, see [`ThinLine::columns`]).
+#[derive(Debug)]
+struct LocRow<'a> {
+    title: String,
+    lines: Vec<(&'a Series, Stroke)>,
+    columns: bool,
+}
+
+impl<'a> LocRow<'a> {
+    /// A series split by status (`[localised, lost]`), each in its status's colour.
+    fn by_status(title: String, series: &'a [Series; 2]) -> Self {
+        let [localized, lost] = series;
+        Self {
+            title,
+            lines: vec![
+                (localized, Stroke::new(1.5, TRAJECTORY)),
+                (lost, Stroke::new(1.5, LOST)),
+            ],
+            columns: false,
+        }
+    }
 }
 
 /// The map's view: world metres at the centre, metres per point.
@@ -124,6 +218,8 @@ pub struct Viewer {
     nis_frame: Series,
     nis_mean: Series,
     nis_bound: Series,
+    /// A localisation run's plots.
+    loc_plots: Option<LocPlots>,
     ellipse_scale: f64,
     /// `None`: fit the whole run.
     map_view: Option<MapView>,
@@ -146,6 +242,7 @@ impl Default for Regions {
             left_image: Rect::NOTHING,
             right_image: Rect::NOTHING,
             map: Rect::NOTHING,
+            map_legend: Rect::NOTHING,
             plots: Rect::NOTHING,
             timeline: Rect::NOTHING,
         }
@@ -178,7 +275,12 @@ impl Viewer {
             })
             .collect();
         let ellipse_scale = auto_ellipse_scale(&model);
+        let loc_plots = model
+            .localization
+            .as_ref()
+            .map(|loc| LocPlots::new(&model, loc));
         Self {
+            loc_plots,
             time_s: model.duration_s(),
             params,
             nis_frame: Series::new(model.nis.frame_mean.iter().copied()),
@@ -310,10 +412,11 @@ impl Viewer {
 
     fn header(&self, ui: &mut Ui) {
         let m = &self.model;
-        let name = m.path.file_name().map_or_else(
-            || m.path.display().to_string(),
-            |n| n.to_string_lossy().into_owned(),
-        );
+        let name = file_name(&m.path);
+        if let Some(loc) = &m.localization {
+            self.localization_header(ui, &name, loc);
+            return;
+        }
         let source = match (m.kind, m.replay.phase1_skipped) {
             (SourceKind::VehicleLog, true) => "vehicle log, replayed with phase 1 skipped",
             (SourceKind::VehicleLog, false) => "vehicle log, replayed",
@@ -351,9 +454,63 @@ impl Viewer {
         });
     }
 
+    /// The header of a localisation run: the status at the current frame (localised, with the
+    /// lamps matched; or lost, with the hypotheses), the map's lamps missing and new, the fixes.
+    fn localization_header(&self, ui: &mut Ui, name: &str, loc: &Localization) {
+        let m = &self.model;
+        let frame = m.frame_at(self.time_s);
+        ui.horizontal(|ui| {
+            ui.strong(name);
+            ui.label(format!(
+                "(vehicle log, localised on the map {})",
+                file_name(&loc.map_path)
+            ));
+            ui.separator();
+            ui.label(format!(
+                "frame {} of {}",
+                frame.map_or(0, |i| i + 1),
+                m.replay.frames.len()
+            ));
+            ui.separator();
+            let (text, colour) = localization_status(frame.and_then(|i| loc.frame(i)));
+            ui.colored_label(colour, text);
+            ui.separator();
+            ui.label(format!("{} map lamps,", loc.seen.len()));
+            ui.colored_label(MISSING, format!("{} missing,", loc.missing.len()));
+            ui.colored_label(NEW_LAMP, format!("{} new", loc.new_lamps.len()));
+            ui.separator();
+            let fixes: Vec<String> = loc
+                .fixes_t_us
+                .iter()
+                .take(3)
+                .map(|t| format!("{:.2} s", m.seconds(*t)))
+                .collect();
+            let more = loc.fixes_t_us.len().saturating_sub(fixes.len());
+            ui.label(match (fixes.is_empty(), more) {
+                (true, _) => "never localised".to_string(),
+                (false, 0) => format!("fixed at {}", fixes.join(", ")),
+                (false, n) => format!("fixed at {} and {n} more", fixes.join(", ")),
+            })
+            .on_hover_text(format!(
+                "{} of {} frames localised; lost {} times after a gap, {} without odometry, {} when the lamps stopped fitting, {} too uncertain",
+                loc.localized_frames,
+                loc.frames.len(),
+                loc.lost_by_reason[0],
+                loc.lost_by_reason[1],
+                loc.lost_by_reason[2],
+                loc.lost_by_reason[3],
+            ));
+            if !m.warnings.is_empty() {
+                ui.separator();
+                ui.colored_label(MAPPED, format!("{} warning(s)", m.warnings.len()))
+                    .on_hover_text(m.warnings.join("\n"));
+            }
+        });
+    }
+
     fn timeline(&mut self, ui: &mut Ui) {
         let end = self.model.duration_s().max(0.0);
-        ui.horizontal(|ui| {
+        let slider = ui.horizontal(|ui| {
             let label = if self.playing { "pause" } else { "play" };
             if ui.button(label).clicked() {
                 self.toggle_play();
@@ -404,6 +561,60 @@ impl Viewer {
                     Stroke::new(2.0, SWITCH),
                 );
             }
+            slider.rect
+        });
+        if let Some(loc) = &self.model.localization {
+            self.status_strip(ui, loc, slider.inner, end);
+        }
+    }
+
+    /// A localisation run's status over time under the timeline's slider (`slider`: its
+    /// rectangle), localised and lost in their colours, with the status at the current frame.
+    fn status_strip(&self, ui: &mut Ui, loc: &Localization, slider: Rect, end: f64) {
+        let m = &self.model;
+        ui.horizontal(|ui| {
+            let (text, colour) =
+                localization_status(m.frame_at(self.time_s).and_then(|i| loc.frame(i)));
+            ui.colored_label(colour, text);
+            let (row, _) = ui.allocate_exact_size(
+                vec2(ui.available_width(), STATUS_STRIP_HEIGHT),
+                Sense::hover(),
+            );
+            // Aligned with the slider's rail (inset by half its height at each end).
+            let inset = slider.height() / 2.0;
+            let (x0, x1) = (slider.left() + inset, slider.right() - inset);
+            if !(end > 0.0 && x1 > x0) {
+                return;
+            }
+            let x_at = |t_s: f64| x0 + (x1 - x0) * (t_s / end).clamp(0.0, 1.0) as f32;
+            let mut strip = egui::Mesh::default();
+            for (k, run) in loc.status.iter().enumerate() {
+                let start = loc
+                    .frame(run.frames.start)
+                    .map_or(0.0, |f| m.seconds(f.t_us));
+                // Up to the next stretch's first frame, the last to the end.
+                let stop = loc
+                    .status
+                    .get(k + 1)
+                    .and_then(|next| loc.frame(next.frames.start))
+                    .map_or(end, |f| m.seconds(f.t_us));
+                let (a, b) = (x_at(start).floor(), x_at(stop).floor());
+                let colour = if run.localized { TRAJECTORY } else { LOST };
+                strip.add_colored_rect(
+                    Rect::from_min_max(pos2(a, row.top()), pos2(b.max(a + 1.0), row.bottom())),
+                    colour,
+                );
+            }
+            ui.painter().add(strip);
+            let now = x_at(self.time_s).floor();
+            ui.painter().rect_filled(
+                Rect::from_min_max(
+                    pos2(now - 1.0, row.top() - 2.0),
+                    pos2(now + 1.0, row.bottom() + 2.0),
+                ),
+                0.0,
+                NOW,
+            );
         });
     }
 
@@ -506,10 +717,17 @@ impl Viewer {
                 ui.painter().circle_filled(r.center(), 3.5, colour);
                 ui.label(text);
             };
-            key(ui, UPDATED, "observation accepted");
-            key(ui, MAPPED, "near a landmark, not updated");
-            key(ui, UNASSOCIATED, "no landmark");
-            ui.label("(rings: landmarks projected)");
+            if self.model.localization.is_some() {
+                // The localiser reports how many lamps it matched, not which.
+                key(ui, MAPPED, "near a map lamp");
+                key(ui, UNASSOCIATED, "no map lamp");
+                ui.label("(rings: the map's lamps projected at the pose)");
+            } else {
+                key(ui, UPDATED, "observation accepted");
+                key(ui, MAPPED, "near a landmark, not updated");
+                key(ui, UNASSOCIATED, "no landmark");
+                ui.label("(rings: landmarks projected)");
+            }
         });
     }
 
@@ -632,8 +850,35 @@ impl Viewer {
             }
         }
 
-        // The estimated trajectory up to now.
-        if let Some(i) = frame {
+        // The estimated trajectory up to now: a localisation run's in stretches by status.
+        if let (Some(i), Some(loc)) = (frame, &m.localization) {
+            let current = m
+                .frame(i)
+                .filter(|f| f.pose[..2].iter().all(|v| v.is_finite()))
+                .map(|f| to_screen([f.pose[0], f.pose[1]]));
+            let drawn = loc
+                .track
+                .partition_point(|run| run.points.first().is_some_and(|(k, _)| *k <= i));
+            for (n, run) in loc.track.iter().take(drawn).enumerate() {
+                let upto = run.points.partition_point(|(k, _)| *k <= i);
+                let mut path: Vec<Pos2> = run
+                    .points
+                    .iter()
+                    .take(upto)
+                    .map(|(_, p)| to_screen(*p))
+                    .collect();
+                // The last stretch drawn reaches the current pose (see `TrackRun`).
+                if n + 1 == drawn
+                    && let Some(at) = current
+                {
+                    path.push(at);
+                }
+                let colour = if run.localized { TRAJECTORY } else { LOST };
+                if path.len() >= 2 {
+                    painter.add(Shape::line(thin_path(&path), Stroke::new(2.0, colour)));
+                }
+            }
+        } else if let Some(i) = frame {
             let upto = m.trajectory.partition_point(|(k, _)| *k <= i);
             let mut path: Vec<Pos2> = m
                 .trajectory
@@ -681,10 +926,58 @@ impl Viewer {
                 LANDMARK
             };
             square_marker(&mut markers, at, colour);
+            if m.localization
+                .as_ref()
+                .is_some_and(|loc| loc.is_missing(l.id))
+            {
+                painter.circle_stroke(at, MISSING_RING_RADIUS, Stroke::new(1.5, MISSING));
+                painter.text(
+                    at + vec2(MISSING_RING_RADIUS + 2.0, -MISSING_RING_RADIUS),
+                    Align2::LEFT_BOTTOM,
+                    format!("{} missing", l.id),
+                    FontId::proportional(10.0),
+                    MISSING,
+                );
+            }
         }
         painter.add(markers);
 
-        // The robot: its pose, heading and pose ellipse.
+        // A localisation run's new lamps, with their ellipses.
+        if let Some(loc) = &m.localization {
+            for l in &loc.new_lamps {
+                let centre = [l.position[0], l.position[1]];
+                if !centre.iter().all(|v| v.is_finite()) {
+                    continue;
+                }
+                let at = to_screen(centre);
+                if !visible.contains(at) {
+                    continue;
+                }
+                let cov = [
+                    [l.covariance[0][0], l.covariance[0][1]],
+                    [l.covariance[1][0], l.covariance[1][1]],
+                ];
+                if let Some(outline) = ellipse(centre, cov, SIGMAS * scale, view.m_per_pt) {
+                    let pts: Vec<Pos2> = outline.iter().map(|p| to_screen(*p)).collect();
+                    painter.add(Shape::closed_line(pts, Stroke::new(1.0, NEW_LAMP)));
+                }
+                cross(&painter, at, NEW_LAMP);
+                painter.text(
+                    at + vec2(CROSS_HALF_WIDTH + 2.0, -CROSS_HALF_WIDTH),
+                    Align2::LEFT_BOTTOM,
+                    "new",
+                    FontId::proportional(10.0),
+                    NEW_LAMP,
+                );
+            }
+        }
+
+        // The robot: its pose, heading and pose ellipse (a localisation run's in the colour of
+        // its status).
+        let robot = match (&m.localization, frame) {
+            (Some(loc), Some(i)) if !loc.frame(i).is_some_and(|f| f.localized) => LOST,
+            _ => TRAJECTORY,
+        };
         if let Some(f) = frame.and_then(|i| m.frame(i))
             && f.pose.iter().all(|v| v.is_finite())
         {
@@ -695,7 +988,7 @@ impl Viewer {
             ];
             if let Some(outline) = ellipse([x, y], cov, SIGMAS * scale, view.m_per_pt) {
                 let pts: Vec<Pos2> = outline.iter().map(|p| to_screen(*p)).collect();
-                painter.add(Shape::closed_line(pts, Stroke::new(1.0, TRAJECTORY)));
+                painter.add(Shape::closed_line(pts, Stroke::new(1.0, robot)));
             }
             let at = to_screen([x, y]);
             let (s, c) = (theta.sin() as f32, theta.cos() as f32);
@@ -708,19 +1001,128 @@ impl Viewer {
                     at - ahead * 6.0 + side * 6.0,
                     at - ahead * 6.0 - side * 6.0,
                 ],
-                TRAJECTORY,
+                robot,
                 Stroke::new(1.0, Color32::WHITE),
             ));
         }
 
-        legend(&painter, rect, m.truth.is_some());
+        self.regions.map_legend =
+            legend(&painter, rect, m.truth.is_some(), m.localization.is_some());
         response.on_hover_text_at_pointer(
             "drag to pan, scroll to zoom, double-click to fit the whole run",
         );
     }
 
+    /// A localisation run's plots over time: the pose's uncertainty, its distance from the
+    /// truth (when the log has it), the map lamps matched and the relocalisation hypotheses,
+    /// with the fixes (green, dashed) and the current time.
+    fn localization_plots(&mut self, ui: &mut Ui) {
+        let (Some(plots), Some(loc)) = (&self.loc_plots, &self.model.localization) else {
+            return;
+        };
+        let now = self.time_s;
+        let end = self.model.duration_s();
+        let current = self.model.frame_at(now).and_then(|i| loc.frame(i));
+        let pose = current.filter(|f| f.pose.is_some());
+        let value = |v: Option<f64>, decimals: usize| {
+            v.filter(|v| v.is_finite())
+                .map_or_else(|| "no pose".to_string(), |v| format!("{v:.decimals$}"))
+        };
+        let error_now = self.model.frame_at(now).and_then(|i| {
+            let k = loc.series.frame.binary_search(&i).ok()?;
+            loc.series.error_mm.get(k).copied()
+        });
+        let mut rows = vec![
+            LocRow::by_status(
+                format!(
+                    "position 1-sigma [mm]: {}",
+                    value(pose.map(|f| f.sigma[0].hypot(f.sigma[1]) * 1e3), 3)
+                ),
+                &plots.position_sigma,
+            ),
+            LocRow::by_status(
+                format!(
+                    "heading 1-sigma [deg]: {}",
+                    value(pose.map(|f| f.sigma[2].to_degrees()), 4)
+                ),
+                &plots.heading_sigma,
+            ),
+        ];
+        if let Some(error) = &plots.error {
+            rows.push(LocRow::by_status(
+                format!("distance from the truth [mm]: {}", value(error_now, 3)),
+                error,
+            ));
+        }
+        let count_now = |n: fn(&replay::LocalizedFrame) -> u32| {
+            current.map_or_else(|| "-".to_string(), |f| n(f).to_string())
+        };
+        rows.push(LocRow {
+            title: format!("map lamps matched: {}", count_now(|f| f.matched)),
+            lines: vec![(&plots.matched, Stroke::new(1.0, LANDMARK))],
+            columns: true,
+        });
+        rows.push(LocRow {
+            title: format!("relocalisation hypotheses: {}", count_now(|f| f.hypotheses)),
+            lines: vec![(&plots.hypotheses, Stroke::new(1.0, LOST))],
+            columns: true,
+        });
+        ui.label("localisation: localised (blue), lost (pink); fixes (green, dashed)");
+        let spacing = ui.spacing().item_spacing;
+        let title_height = ui.text_style_height(&egui::TextStyle::Body) + spacing.y;
+        let count = rows.len();
+        let height =
+            ((ui.available_height() - 8.0 - count as f32 * (title_height + 2.0 * spacing.y))
+                / count as f32)
+                .max(60.0);
+        let width = ui.available_width();
+        let link = ui.make_persistent_id("stereonav-plots-time");
+        let fixes = &plots.fixes_s;
+        let mut clicked: Option<f64> = None;
+        for (index, row) in rows.iter().enumerate() {
+            ui.label(&row.title);
+            let plot = time_plot(
+                ("stereonav-localization", index),
+                [width, height],
+                link,
+                end,
+            )
+            .show_x(true)
+            .include_y(0.0);
+            let response = plot.show(ui, |plot| {
+                plot.add(Grid::new(GRID_SPACING.into(), grid_steps));
+                for (k, (series, stroke)) in row.lines.iter().enumerate() {
+                    let line = ThinLine::new(&format!("{} {k}", row.title), series, *stroke);
+                    plot.add(if row.columns { line.columns() } else { line });
+                }
+                for t in fixes {
+                    plot.add(
+                        VLine::new("fix", *t)
+                            .color(FIX)
+                            .width(1.0)
+                            .style(LineStyle::dashed_dense()),
+                    );
+                }
+                time_markers(plot, now, None);
+            });
+            if response.response.clicked()
+                && let Some(pos) = response.response.interact_pointer_pos()
+            {
+                clicked = Some(response.transform.value_from_position(pos).x);
+            }
+        }
+        if let Some(t) = clicked {
+            self.set_time(t);
+            self.playing = false;
+        }
+    }
+
     /// The camera parameters and the NIS over time.
     fn plots(&mut self, ui: &mut Ui) {
+        if self.loc_plots.is_some() {
+            self.localization_plots(ui);
+            return;
+        }
         let count = self.params.len() + 1;
         let columns = if count > PLOTS_PER_COLUMN { 2 } else { 1 };
         let rows = count.div_ceil(columns);
@@ -1058,16 +1460,30 @@ fn format_m(v: f64, step: f64) -> String {
     format!("{v:.decimals$} m")
 }
 
-/// The map's colour key, top left.
-fn legend(painter: &egui::Painter, rect: Rect, truth: bool) {
-    let mut entries = vec![
-        (TRAJECTORY, "estimated trajectory and robot", Mark::Dot),
-        (LANDMARK, "landmark", Mark::Square),
-        (UPDATED, "landmark updated at this frame", Mark::Square),
-        (ELLIPSE, "uncertainty ellipse", Mark::Dot),
+/// The map's colour key, top left (a localisation run's when `localization`); returns where
+/// it was drawn.
+fn legend(painter: &egui::Painter, rect: Rect, truth: bool, localization: bool) -> Rect {
+    let mut entries = if localization {
+        vec![
+            (TRAJECTORY, "localised: trajectory and robot", Mark::Dot),
+            (LOST, "lost: the localiser's best guess", Mark::Dot),
+            (LANDMARK, "map lamp", Mark::Square),
+            (MISSING, "map lamp reported missing", Mark::Ring),
+            (NEW_LAMP, "new lamp, not in the map", Mark::Cross),
+            (ELLIPSE, "uncertainty ellipse", Mark::Dot),
+        ]
+    } else {
+        vec![
+            (TRAJECTORY, "estimated trajectory and robot", Mark::Dot),
+            (LANDMARK, "landmark", Mark::Square),
+            (UPDATED, "landmark updated at this frame", Mark::Square),
+            (ELLIPSE, "uncertainty ellipse", Mark::Dot),
+        ]
+    };
+    entries.extend([
         (FOV[0], "left camera's view on the lamp plane", Mark::Dot),
         (FOV[1], "right camera's view", Mark::Dot),
-    ];
+    ]);
     if truth {
         entries.push((TRUTH, "truth: trajectory, lamps (+)", Mark::Plus));
     }
@@ -1086,6 +1502,10 @@ fn legend(painter: &egui::Painter, rect: Rect, truth: bool) {
             }
             Mark::Square => square_marker(&mut keys, at, *colour),
             Mark::Plus => plus_marker(&mut keys, at, *colour),
+            Mark::Ring => {
+                painter.circle_stroke(at, 4.5, Stroke::new(1.5, *colour));
+            }
+            Mark::Cross => cross(painter, at, *colour),
         }
         painter.text(
             pos2(frame.left() + 20.0, y),
@@ -1096,6 +1516,7 @@ fn legend(painter: &egui::Painter, rect: Rect, truth: bool) {
         );
     }
     painter.add(keys);
+    frame
 }
 
 /// How a legend entry shows its colour.
@@ -1104,6 +1525,48 @@ enum Mark {
     Dot,
     Square,
     Plus,
+    Ring,
+    Cross,
+}
+
+/// A diagonal cross at `at` (a new lamp: few, so two anti-aliased strokes).
+fn cross(painter: &egui::Painter, at: Pos2, colour: Color32) {
+    let (d, e) = (
+        vec2(CROSS_HALF_WIDTH, CROSS_HALF_WIDTH),
+        vec2(CROSS_HALF_WIDTH, -CROSS_HALF_WIDTH),
+    );
+    let stroke = Stroke::new(1.5, colour);
+    painter.line_segment([at - d, at + d], stroke);
+    painter.line_segment([at - e, at + e], stroke);
+}
+
+/// A file's name for display (the whole path when it has none).
+fn file_name(path: &std::path::Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// What a localisation run's frame says, and its colour: localised (with the lamps matched) or
+/// lost (with the hypotheses alive).
+fn localization_status(frame: Option<&replay::LocalizedFrame>) -> (String, Color32) {
+    match frame {
+        None => ("no frames".to_string(), Color32::from_gray(160)),
+        Some(f) if f.localized => (
+            format!("localised: {} map lamps matched", f.matched),
+            TRAJECTORY,
+        ),
+        Some(f) => (
+            format!(
+                "lost: {} hypothes{}{}",
+                f.hypotheses,
+                if f.hypotheses == 1 { "is" } else { "es" },
+                if f.pose.is_some() { "" } else { ", no pose" }
+            ),
+            LOST,
+        ),
+    }
 }
 
 /// A 5x5-pixel square at `at`, aligned to the pixel grid, added to `mesh`: two triangles

@@ -26,6 +26,7 @@ pub(crate) fn load(path: &Path) -> Result<Model, String> {
         &LoadOptions {
             rig: None,
             settings,
+            map: None,
         },
         &mut |_, _| {},
     )
