@@ -1,7 +1,8 @@
-//! `stereonav view` end to end: headless screenshots of a vehicle log replayed on the fly and of
-//! an estimates file, and one-line errors on bad input, also for the window when there is no
-//! display. The screenshots are rasterised on the CPU: no display, GPU or system package is
-//! needed, so nothing here skips (but the foreign MCAP file when `shared/` lacks it).
+//! `stereonav view` end to end: headless screenshots of a vehicle log replayed on the fly, of
+//! one localised on a saved map and of an estimates file, and one-line errors on bad input,
+//! also for the window when there is no display. The screenshots are rasterised on the CPU: no
+//! display, GPU or system package is needed, so nothing here skips (but the foreign MCAP file
+//! when `shared/` lacks it).
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
 
@@ -71,6 +72,60 @@ fn an_estimates_file_is_rendered_at_a_time_and_size() {
         "1440x900",
     ]));
     assert_screenshot(&png, 1440, 900);
+}
+
+/// `--map`: the log localised on a map that `stereonav replay --save-map` made from it, shown
+/// while still lost and at the end; the map's one-line errors.
+#[test]
+fn a_log_on_a_saved_map_is_rendered_headless() {
+    let log = fixture("paper-experiment.mcap");
+    let map = scratch("pe.map");
+    let est = scratch("pe-est.mcap");
+    ok(&stereonav(&[
+        "replay",
+        s(&log),
+        "--rig",
+        s(&fixture("paper-experiment.rig.toml")),
+        "--save-map",
+        s(&map),
+        "--out",
+        s(&est),
+    ]));
+    for (time, name) in [
+        (None, "pe-localized-end.png"),
+        (Some("2"), "pe-localized-2s.png"),
+    ] {
+        let png = scratch(name);
+        let mut args = vec!["view", s(&log), "--map", s(&map), "--screenshot", s(&png)];
+        args.extend(time.map(|t| ["--time", t]).iter().flatten());
+        let out = stereonav(&args);
+        ok(&out);
+        assert!(out.stdout.is_empty() && out.stderr.is_empty());
+        assert_screenshot(&png, 1280, 800);
+    }
+    let png = scratch("x.png");
+    let out = stereonav(&["view", s(&est), "--map", s(&map), "--screenshot", s(&png)]);
+    assert_one_line_error(&out, "not a vehicle log");
+    let missing = scratch("no-such.map");
+    let out = stereonav(&[
+        "view",
+        s(&log),
+        "--map",
+        s(&missing),
+        "--screenshot",
+        s(&png),
+    ]);
+    assert_one_line_error(&out, "no-such.map");
+    let out = stereonav(&[
+        "view",
+        s(&log),
+        "--map",
+        s(&map),
+        "--skip-phase1",
+        "--screenshot",
+        s(&png),
+    ]);
+    assert_one_line_error(&out, "--skip-phase1");
 }
 
 #[test]
