@@ -101,7 +101,11 @@ fn localized(map: &map_file::Map, hall: &[sim::Lamp], seed: u64) -> Judged {
     assert_eq!(dark.len(), 7, "the scenario's dark lamps");
     let dark_reported = dark
         .iter()
-        .filter(|d| end.lamps_missing.iter().any(|&m| near(position(m), &d.position)))
+        .filter(|d| {
+            end.lamps_missing
+                .iter()
+                .any(|&m| near(position(m), &d.position))
+        })
         .count();
     let missing_wrong = end
         .lamps_missing
