@@ -201,8 +201,21 @@ impl Relocalizer {
             .map(|&i| observations.get(i).and_then(|o| view.on_height(o, z_mean)))
             .collect();
         let mut candidates: Vec<Pose2> = Vec::new();
-        for a in 0..order.len() {
-            for b in a + 1..order.len() {
+        // Disjoint pairs first ((0, 1), (2, 3), ...), then the others: the true pose is among
+        // the candidates of any pair of two mapped lamps tried whole, and disjoint pairs do
+        // not all fall with one observation that is clutter or a new lamp.
+        let n = order.len();
+        let mut pairs: Vec<(usize, usize)> = (0..n / 2).map(|k| (2 * k, 2 * k + 1)).collect();
+        for a in 0..n {
+            for b in a + 1..n {
+                if !(b == a + 1 && a % 2 == 0) {
+                    pairs.push((a, b));
+                }
+            }
+        }
+        let mut disjoint_done = 0;
+        for (pi, &(a, b)) in pairs.iter().enumerate() {
+            {
                 let (Some(pa), Some(pb)) = (
                     floor.get(a).copied().flatten(),
                     floor.get(b).copied().flatten(),
@@ -256,13 +269,16 @@ impl Relocalizer {
                         }
                     }
                 }
-                if candidates.len() > s.max_candidates {
-                    // The rest of the pairs are not tried: the set may miss the true pose.
-                    self.incomplete = s.window_frames;
-                    break;
-                }
+            }
+            if pi < n / 2 {
+                disjoint_done += 1;
             }
             if candidates.len() > s.max_candidates {
+                // The rest of the pairs are not tried. Unless three disjoint pairs were tried
+                // whole, the set may miss the true pose: no decision for a while.
+                if disjoint_done < 3.min(n / 2) {
+                    self.incomplete = s.window_frames;
+                }
                 break;
             }
         }
