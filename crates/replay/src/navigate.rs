@@ -67,7 +67,7 @@ fn map_of(navigator: &Navigator) -> Vec<LandmarkEstimate> {
 /// barely knows (one seen twice, known to kilometres along its ray) from swamping it.
 /// `None` with fewer than two usable landmarks (a yaw needs two).
 fn common_error(ekf: &vslam_ekf::Ekf) -> Option<([f64; 2], [[f64; 4]; 4])> {
-    use nalgebra::{Matrix3, Matrix3x4, Matrix4};
+    use nalgebra::{Matrix3, Matrix4};
     let lamps: Vec<(usize, nalgebra::Vector3<f64>, Matrix3<f64>)> = ekf
         .landmarks()
         .filter_map(|l| {
@@ -88,22 +88,12 @@ fn common_error(ekf: &vslam_ekf::Ekf) -> Option<([f64; 2], [[f64; 4]; 4])> {
             .map(|(_, p, w)| w * p)
             .sum::<nalgebra::Vector3<f64>>();
     let (ox, oy) = (centre.x, centre.y);
-    let a = |p: &nalgebra::Vector3<f64>| {
-        Matrix3x4::new(
-            1.0,
-            0.0,
-            0.0,
-            -(p.y - oy),
-            0.0,
-            1.0,
-            0.0,
-            p.x - ox,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-        )
+    // A(p) of the map file's common error, as the localiser reads it.
+    let motion = localize::CommonError {
+        origin: (ox, oy),
+        covariance: Matrix4::zeros(),
     };
+    let a = |p: &nalgebra::Vector3<f64>| motion.jacobian(p);
     let normal: Matrix4<f64> = lamps
         .iter()
         .map(|(_, p, w)| a(p).transpose() * w * a(p))
