@@ -484,26 +484,7 @@ impl Localizer {
 
     /// The frame's features through the lens and the front end: its stereo observations.
     fn observe(&mut self, t_us: u64, left: &[Pixel], right: &[Pixel]) -> Vec<Observation> {
-        let rectified = self.rig.lens.map(|lens| {
-            let c = &self.rig.nominal;
-            let mut dropped = 0;
-            let mut map = |lens: &rig_model::lens::Lens, side: &[Pixel]| -> Vec<Pixel> {
-                side.iter()
-                    .filter_map(|p| {
-                        let r = lens
-                            .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
-                            .map(|q| Pixel { u: q.x, v: q.y });
-                        if r.is_none() {
-                            dropped += 1;
-                        }
-                        r
-                    })
-                    .collect()
-            };
-            let l = map(&lens.left, left);
-            let r = map(&lens.right, right);
-            (l, r, dropped)
-        });
+        let rectified = track::rectify_features(&self.rig, left, right);
         let (left, right) = match &rectified {
             Some((l, r, dropped)) => {
                 self.stats.features_unmapped += dropped;

@@ -748,27 +748,7 @@ impl Navigator {
 
         // Real lenses (vehicle-interfaces.md 1.1): the board's raw features into the rectified
         // model; a feature that cannot be mapped is dropped and counted.
-        let rectified = self.rig.lens.map(|lens| {
-            let c = &self.rig.nominal;
-            let map =
-                |lens: &rig_model::lens::Lens, side: &[Pixel], dropped: &mut u64| -> Vec<Pixel> {
-                    side.iter()
-                        .filter_map(|p| {
-                            let r = lens
-                                .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
-                                .map(|q| Pixel { u: q.x, v: q.y });
-                            if r.is_none() {
-                                *dropped += 1;
-                            }
-                            r
-                        })
-                        .collect()
-                };
-            let mut dropped = 0;
-            let l = map(&lens.left, left, &mut dropped);
-            let r = map(&lens.right, right, &mut dropped);
-            (l, r, dropped)
-        });
+        let rectified = track::rectify_features(&self.rig, left, right);
         let (left, right) = match &rectified {
             Some((l, r, dropped)) => {
                 self.stats.features_unmapped += dropped;

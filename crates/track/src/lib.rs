@@ -67,7 +67,9 @@ pub use odometry::OdometryBuffer;
 #[cfg(feature = "alloc")]
 pub use pairs::{PairBuilder, PairSettings, PairStats, PairingScheme, labelled_pairs};
 #[cfg(feature = "alloc")]
-pub use stereo::{Pixel, StereoMatch, StereoMatcher, StereoSettings, StereoStats};
+pub use stereo::{
+    Pixel, StereoMatch, StereoMatcher, StereoSettings, StereoStats, rectify_features,
+};
 #[cfg(feature = "alloc")]
 pub use tracker::{
     Observation, TrackId, TrackInfo, TrackedFrame, Tracker, TrackerSettings, TrackerStats,

@@ -60,6 +60,35 @@ impl Pixel {
     }
 }
 
+/// The board's raw features of both cameras mapped into the rectified model through the
+/// rig's lens (vehicle-interfaces.md 1.1), with the count of features the lens could not map
+/// (dropped); `None` for a rig without `[lens]` tables (its features are rectified already).
+pub fn rectify_features(
+    rig: &rig_model::config::Rig,
+    left: &[Pixel],
+    right: &[Pixel],
+) -> Option<(Vec<Pixel>, Vec<Pixel>, u64)> {
+    let lens = rig.lens.as_ref()?;
+    let c = &rig.nominal;
+    let mut dropped = 0;
+    let mut map = |lens: &rig_model::lens::Lens, side: &[Pixel]| -> Vec<Pixel> {
+        side.iter()
+            .filter_map(|p| {
+                let r = lens
+                    .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
+                    .map(|q| Pixel { u: q.x, v: q.y });
+                if r.is_none() {
+                    dropped += 1;
+                }
+                r
+            })
+            .collect()
+    };
+    let l = map(&lens.left, left);
+    let r = map(&lens.right, right);
+    Some((l, r, dropped))
+}
+
 /// Settings of the left-right matching.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StereoSettings {
