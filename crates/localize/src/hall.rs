@@ -115,7 +115,8 @@ const CANDIDATE_GATE: f64 = 16.27;
 
 impl NewLamps {
     /// Adds the observations of this localised frame that no map lamp took: each one's
-    /// triangulation (with the pose's uncertainty) fused into its track's candidate, or the
+    /// triangulation (with the pose's uncertainty and the pixel noise `sigma_px` through the
+    /// lenses, `pixel_noise`) fused into its track's candidate, or the
     /// candidate it falls on, or a new one.
     pub fn add(
         &mut self,
@@ -123,6 +124,7 @@ impl NewLamps {
         pose: &Pose2,
         pose_cov: &Matrix3<f64>,
         sigma_px: f64,
+        pixel_noise: &rig_model::lens::PixelNoise,
         unmatched: &[Observation],
         t_us: u64,
     ) {
@@ -131,7 +133,12 @@ impl NewLamps {
                 continue;
             };
             let p = tri.p_in_world(c, pose);
-            let cov = tri.covariance_in_world(c, pose, sigma_px, Some(pose_cov), None);
+            let cov = if pixel_noise.is_uniform() {
+                tri.covariance_in_world(c, pose, sigma_px, Some(pose_cov), None)
+            } else {
+                let r = pixel_noise.gains(&o.z) * (sigma_px * sigma_px);
+                tri.covariance_in_world_of(c, pose, &r, Some(pose_cov), None)
+            };
             let Some(info) = cov.try_inverse() else {
                 continue;
             };

@@ -4,7 +4,7 @@
 use alloc::collections::VecDeque;
 use alloc::vec::Vec;
 
-use nalgebra::{Matrix3, Matrix3x4};
+use nalgebra::{Matrix3, Matrix3x4, Vector3};
 use rig_model::camera::{CameraParams, Pose2, Vehicle};
 use rig_model::config::Rig;
 use rig_model::odometry::OdomSample;
@@ -114,6 +114,8 @@ pub struct Localizer {
     new_lamps: NewLamps,
     localized_t_us: Vec<u64>,
     sigma_px: f64,
+    /// Relative sigma of the map's scale (its baseline's, [`Localizer::new`]).
+    scale_sigma: f64,
     stats: LocalizerStats,
 }
 
@@ -145,6 +147,7 @@ impl Localizer {
             rig.width,
             rig.height,
             model.pixel_variance_px2(),
+            model.pixel_noise,
             &map,
             &settings,
         );
@@ -157,6 +160,14 @@ impl Localizer {
                 .unwrap_or(0.0)
         });
         let counts = LampCounts::new(map.len());
+        // Stereo sets the map's scale: a point triangulated at disparity d lies at (u - cx)
+        // B / d, so the whole map scales with the baseline about the mapping run's origin.
+        let baseline_sigma = camera_sigma
+            .get(rig_model::Param::Baseline.index())
+            .copied()
+            .filter(|s| s.is_finite())
+            .unwrap_or(0.0);
+        let scale_sigma = baseline_sigma / camera.baseline;
         Ok(Self {
             vehicle: camera.vehicle,
             vehicle_sigma,
@@ -177,6 +188,7 @@ impl Localizer {
             new_lamps: NewLamps::default(),
             localized_t_us: Vec::new(),
             sigma_px,
+            scale_sigma,
             stats: LocalizerStats::default(),
         })
     }
@@ -458,9 +470,13 @@ impl Localizer {
             (None, None, None) => {}
         }
         // The pose in the world the map was made in: its uncertainty relative to the map and
-        // the map's own common error.
+        // the map's own common error, its rigid part and its scale's (the map scales with its
+        // baseline about its origin; the two are taken as independent, which overstates the
+        // sum a little: the rigid part's fit holds some of the scale error).
         if let (Some(p), Some(c)) = (&result.pose, self.map.common_error()) {
             result.pose_covariance += c.pose_covariance(p.x, p.y);
+            let j = Vector3::new(p.x, p.y, 0.0) * self.scale_sigma;
+            result.pose_covariance += j * j.transpose();
         }
         if self.status == Status::Localized {
             self.stats.localized_frames += 1;
@@ -573,6 +589,7 @@ impl Localizer {
                 &pose,
                 &cov,
                 self.sigma_px,
+                &self.front_end.model().pixel_noise,
                 &unmatched,
                 t_us,
             );

@@ -5,6 +5,7 @@ use alloc::vec::Vec;
 
 use nalgebra::{Matrix4, Vector3, Vector4};
 use rig_model::camera::CameraParams;
+use rig_model::lens::PixelNoise;
 use vslam_ekf::chi2::chi2_quantile;
 
 use crate::filter::{PoseFilter, Prediction};
@@ -49,6 +50,8 @@ pub struct View {
     height: f64,
     margin_px: f64,
     r: Matrix4<f64>,
+    pixel_variance: f64,
+    pixel_noise: PixelNoise,
     reach_m: f64,
     min_depth_m: f64,
     max_depth_m: f64,
@@ -60,12 +63,14 @@ pub struct View {
 
 impl View {
     /// The view of the camera `camera` on a `width x height` image with pixel variance
-    /// `pixel_variance` (px^2) over the map `map`.
+    /// `pixel_variance` (px^2, of a raw feature) stretched by the lenses as `pixel_noise`
+    /// says, over the map `map`.
     pub fn new(
         camera: CameraParams,
         width: u32,
         height: u32,
         pixel_variance: f64,
+        pixel_noise: PixelNoise,
         map: &LampMap,
         settings: &LocalizerSettings,
     ) -> Self {
@@ -89,6 +94,8 @@ impl View {
             height: h,
             margin_px: settings.image_margin_px,
             r: Matrix4::identity() * pixel_variance,
+            pixel_variance,
+            pixel_noise,
             reach_m: reach_m.min(settings.max_reach_m),
             min_depth_m: st.min_depth_m,
             max_depth_m: st.max_depth_m,
@@ -104,9 +111,14 @@ impl View {
         &self.camera
     }
 
-    /// The pixel noise's covariance.
-    pub fn r(&self) -> &Matrix4<f64> {
-        &self.r
+    /// The pixel noise's covariance at the measurement `z` (diagonal: the lens's gains,
+    /// [`PixelNoise::gains`], times the raw feature's variance).
+    pub fn r_at(&self, z: &Vector4<f64>) -> Matrix4<f64> {
+        if self.pixel_noise.is_uniform() {
+            self.r
+        } else {
+            Matrix4::from_diagonal(&(self.pixel_noise.gains(z) * self.pixel_variance))
+        }
     }
 
     /// Farthest a lamp in view can be from the robot, horizontally, metres.
@@ -159,10 +171,12 @@ impl View {
         map.within(pose.x, pose.y, self.reach_m, near);
         for &i in near.iter() {
             let Some(lamp) = map.lamp(i) else { continue };
-            if let Some(p) =
-                filter.predict_lamp(&self.camera, i, &lamp.position, &lamp.covariance, &self.r)
+            let zero = Matrix4::zeros();
+            if let Some(mut p) =
+                filter.predict_lamp(&self.camera, i, &lamp.position, &lamp.covariance, &zero)
                 && self.in_view(&p.z)
             {
+                p.s += self.r_at(&p.z);
                 out.push(p);
             }
         }
@@ -187,7 +201,7 @@ impl View {
                 continue;
             };
             if filter
-                .update(&self.camera, lamp, l, &self.r, &obs.z, t_us)
+                .update(&self.camera, lamp, l, &self.r_at(&obs.z), &obs.z, t_us)
                 .is_none()
                 && let Some(n) = scored.nis.get_mut(k)
             {

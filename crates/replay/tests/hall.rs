@@ -23,8 +23,11 @@ fn scenario(name: &str) -> sim::Scenario {
     sim::Scenario::load(&path).unwrap()
 }
 
+/// A file of its own for each call: the tests run in parallel in one process.
 fn scratch(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("stereonav-hall-{}-{name}", std::process::id()))
+    static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    std::env::temp_dir().join(format!("stereonav-hall-{}-{k}-{name}", std::process::id()))
 }
 
 /// The mapping drive replayed with no flags, its map saved; with the simulator's lamps.

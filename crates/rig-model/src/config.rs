@@ -37,3 +37,12 @@ pub struct Rig {
     /// are rectified already.
     pub lens: Option<crate::lens::StereoLens>,
 }
+
+impl Rig {
+    /// The rectified pixel noise of this rig's board features: [`Noise::pixel`] carried
+    /// through its lenses into the rectified image the host maps them into (the nominal
+    /// camera's `f, cx, cy`), gains of 1 without lens tables.
+    pub fn pixel_noise(&self) -> crate::lens::PixelNoise {
+        crate::lens::PixelNoise::new(self.lens, self.nominal.f, self.nominal.cx, self.nominal.cy)
+    }
+}

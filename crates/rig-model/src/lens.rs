@@ -13,7 +13,7 @@
 //! far below the detector's resolution everywhere in the image (OpenCV's default five
 //! fixed-point iterations do not), and it must build without `std` for the vehicle.
 
-use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix3, Vector2, Vector3, Vector4};
 
 /// Newton iterations at most for an inverse.
 const MAX_ITERATIONS: usize = 50;
@@ -360,6 +360,112 @@ impl Lens {
     }
 }
 
+impl Lens {
+    /// The covariance, in rectified px^2 per raw px^2, that a raw pixel's isotropic noise
+    /// takes at the rectified pixel `rect` (the forward model's Jacobian `d raw / d rect`
+    /// inverted: `C = J^-1 J^-T`); `None` where the forward model is singular or the ray
+    /// points behind the camera.
+    pub fn rectified_noise_gain(
+        &self,
+        rect: Vector2<f64>,
+        f: f64,
+        cx: f64,
+        cy: f64,
+    ) -> Option<Matrix2<f64>> {
+        let rt = self.rectification.transpose();
+        let ray = rt * Vector3::new((rect.x - cx) / f, (rect.y - cy) / f, 1.0);
+        if !(ray.z > 1e-9 && ray.iter().all(|v| v.is_finite())) {
+            return None;
+        }
+        let (x, y) = (ray.x / ray.z, ray.y / ray.z);
+        let (_, jd) = self.model.distort(Vector2::new(x, y));
+        // d (x, y) / d ray, then d ray / d rect = columns 0 and 1 of R^T over f.
+        let iz = 1.0 / ray.z;
+        let dp_dray = nalgebra::Matrix2x3::new(iz, 0.0, -x * iz, 0.0, iz, -y * iz);
+        let dray_drect = rt.fixed_view::<3, 2>(0, 0) / f;
+        let jraw = Matrix2::new(self.fx, 0.0, 0.0, self.fy) * jd * dp_dray * dray_drect;
+        let inv = jraw.try_inverse()?;
+        let c = inv * inv.transpose();
+        c.iter().all(|v| v.is_finite()).then_some(c)
+    }
+}
+
+/// The noise of a stereo measurement `(uL, vL, uR, vR)` in the rectified image.
+///
+/// The rig's `[noise] pixel` is the noise of a raw board feature (vehicle-interfaces.md 1.1);
+/// through a real lens it reaches the rectified image stretched by the lens (a fisheye's
+/// rectified image stretches it four- to six-fold in the corners of a wide field). This
+/// carries it: [`PixelNoise::gains`] gives, for a measurement, the factor by which each
+/// coordinate's variance exceeds the raw pixel's. Without lens tables every gain is exactly 1.
+///
+/// The rest of the stack weighs each coordinate separately, so the 2x2 covariance of each
+/// image's point is bounded by a diagonal one: `(c00 + |c01|, c11 + |c01|)`, which is never
+/// smaller than the true covariance in any direction (it overstates the noise along the
+/// direction the lens does not stretch, in the corners, and is exact along the axes).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelNoise {
+    lens: Option<StereoLens>,
+    f: f64,
+    cx: f64,
+    cy: f64,
+}
+
+impl PixelNoise {
+    /// Gains of 1 everywhere (rectified features, no lens tables).
+    pub const UNIFORM: Self = Self {
+        lens: None,
+        f: 1.0,
+        cx: 0.0,
+        cy: 0.0,
+    };
+
+    /// The noise model of a rig whose board features are rectified through `lens` into the
+    /// rectified image of focal length `f` and principal point `(cx, cy)` (the rig's nominal
+    /// camera, as the host rectifies with).
+    pub fn new(lens: Option<StereoLens>, f: f64, cx: f64, cy: f64) -> Self {
+        Self { lens, f, cx, cy }
+    }
+
+    /// Whether every gain is 1 (no lens tables).
+    pub fn is_uniform(&self) -> bool {
+        self.lens.is_none()
+    }
+
+    /// The variance gains of `(uL, vL, uR, vR)` at the measurement `z` (each at least 1e-6;
+    /// where the lens model cannot say, as far outside its field, a large gain, 1e4, so that
+    /// such a coordinate counts for next to nothing).
+    pub fn gains(&self, z: &Vector4<f64>) -> Vector4<f64> {
+        let Some(lens) = &self.lens else {
+            return Vector4::repeat(1.0);
+        };
+        let (l0, l1) = self.side_gains(&lens.left, z.x, z.y);
+        let (r0, r1) = self.side_gains(&lens.right, z.z, z.w);
+        Vector4::new(l0, l1, r0, r1)
+    }
+
+    /// The variance gains of `(u, v)` of one image's point: `left` for the left camera.
+    pub fn point_gains(&self, left: bool, u: f64, v: f64) -> (f64, f64) {
+        match &self.lens {
+            None => (1.0, 1.0),
+            Some(lens) => self.side_gains(if left { &lens.left } else { &lens.right }, u, v),
+        }
+    }
+
+    fn side_gains(&self, lens: &Lens, u: f64, v: f64) -> (f64, f64) {
+        const UNKNOWN: f64 = 1e4;
+        match lens.rectified_noise_gain(Vector2::new(u, v), self.f, self.cx, self.cy) {
+            Some(c) => {
+                let off = libm::fabs(c[(0, 1)]);
+                (
+                    (c[(0, 0)] + off).clamp(1e-6, UNKNOWN),
+                    (c[(1, 1)] + off).clamp(1e-6, UNKNOWN),
+                )
+            }
+            None => (UNKNOWN, UNKNOWN),
+        }
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
@@ -577,6 +683,63 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_noise_gain_is_the_rectification_jacobian_s_covariance() {
+        for (name, lens, f, cx, cy) in lenses() {
+            for raw in [
+                Vector2::new(40.0, 30.0),
+                Vector2::new(376.0, 240.0),
+                Vector2::new(400.0, 250.0),
+                Vector2::new(700.0, 450.0),
+            ] {
+                let (rect, j) = lens.rectify(raw, f, cx, cy).unwrap();
+                let want = j * j.transpose();
+                let got = lens.rectified_noise_gain(rect, f, cx, cy).unwrap();
+                for (a, b) in got.iter().zip(want.iter()) {
+                    assert!(
+                        (a - b).abs() < 1e-6 * want.norm(),
+                        "{name} {raw:?} {got} {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pixel_noise_bounds_the_covariance_and_is_one_without_a_lens() {
+        let z = Vector4::new(30.0, 20.0, 25.0, 21.0);
+        assert_eq!(PixelNoise::UNIFORM.gains(&z), Vector4::repeat(1.0));
+        let lens = fisheye();
+        let noise = PixelNoise::new(
+            Some(StereoLens {
+                left: lens,
+                right: lens,
+            }),
+            260.0,
+            376.0,
+            240.0,
+        );
+        // At the centre the gain is (f / fx)^2; the corners are stretched far more.
+        let centre = noise.gains(&Vector4::new(376.0, 240.0, 376.0, 240.0));
+        let corner = noise.gains(&z);
+        let ratio = (260.0_f64 / 360.0).powi(2);
+        assert!(
+            centre.iter().all(|&g| (g / ratio - 1.0).abs() < 0.05),
+            "{centre}"
+        );
+        assert!(corner.iter().all(|&g| g > 4.0 * ratio), "{corner}");
+        // The diagonal bound holds in every direction.
+        let c = lens
+            .rectified_noise_gain(Vector2::new(z.x, z.y), 260.0, 376.0, 240.0)
+            .unwrap();
+        let d = Matrix2::new(corner.x, 0.0, 0.0, corner.y);
+        let e = (d - c).symmetric_eigenvalues();
+        assert!(e.iter().all(|&v| v >= -1e-9), "{e}");
+        // Outside the lens's field: a large gain, not NaN.
+        let far = noise.gains(&Vector4::new(1e6, 1e6, 1e6, 1e6));
+        assert!(far.iter().all(|&g| g.is_finite() && g >= 1e3), "{far}");
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! `(uL, vL, uR, vR)`, its analytic Jacobians, and triangulation back
 //! (vehicle-interfaces.md section 1).
 
-use nalgebra::{Matrix3, SMatrix, Vector3, Vector4};
+use nalgebra::{Matrix3, Matrix4, SMatrix, Vector3, Vector4};
 
 use crate::camera::{CameraParams, N_PARAMS, Param, Pose2, skew};
 
@@ -250,10 +250,51 @@ impl Triangulation {
         pose_cov: Option<&Matrix3<f64>>,
         camera_cov: Option<&SMatrix<f64, N_PARAMS, N_PARAMS>>,
     ) -> Matrix3<f64> {
+        self.rig_covariance_in_world(
+            c,
+            pose,
+            &self.covariance_in_rig(sigma_px),
+            pose_cov,
+            camera_cov,
+        )
+    }
+
+    /// Covariance in the rig frame from the variances of the measurement's `uL, vL, uR, vR`
+    /// (px^2; a lens stretches them unequally, `lens::PixelNoise`).
+    pub fn covariance_in_rig_of(&self, variances: &Vector4<f64>) -> Matrix3<f64> {
+        self.jac_measurement * Matrix4::from_diagonal(variances) * self.jac_measurement.transpose()
+    }
+
+    /// [`Triangulation::covariance_in_world`] with per-coordinate measurement variances
+    /// ([`Triangulation::covariance_in_rig_of`]).
+    pub fn covariance_in_world_of(
+        &self,
+        c: &CameraParams,
+        pose: &Pose2,
+        variances: &Vector4<f64>,
+        pose_cov: Option<&Matrix3<f64>>,
+        camera_cov: Option<&SMatrix<f64, N_PARAMS, N_PARAMS>>,
+    ) -> Matrix3<f64> {
+        self.rig_covariance_in_world(
+            c,
+            pose,
+            &self.covariance_in_rig_of(variances),
+            pose_cov,
+            camera_cov,
+        )
+    }
+
+    fn rig_covariance_in_world(
+        &self,
+        c: &CameraParams,
+        pose: &Pose2,
+        in_rig: &Matrix3<f64>,
+        pose_cov: Option<&Matrix3<f64>>,
+        camera_cov: Option<&SMatrix<f64, N_PARAMS, N_PARAMS>>,
+    ) -> Matrix3<f64> {
         let world_from_robot = pose.world_from_robot_rotation();
         let world_from_rig = world_from_robot * c.mount.robot_from_rig_rotation();
-        let mut cov =
-            world_from_rig * self.covariance_in_rig(sigma_px) * world_from_rig.transpose();
+        let mut cov = world_from_rig * in_rig * world_from_rig.transpose();
         if let Some(pc) = pose_cov {
             let j = self.jac_pose(c, pose);
             cov += j * pc * j.transpose();

@@ -1,9 +1,11 @@
 //! What the association assumes about the sensors: the camera parameters it triangulates and
 //! projects with, how uncertain they are, and the noise of pixels and odometry.
 
-use nalgebra::SMatrix;
+use nalgebra::{SMatrix, Vector4};
+use rig_model::Measurement;
 use rig_model::camera::{CameraParams, N_PARAMS, Param};
 use rig_model::config::{Noise, Rig};
+use rig_model::lens::PixelNoise;
 
 /// Covariance of the ten camera parameters, in [`Param::ALL`] order.
 pub type CameraCovariance = SMatrix<f64, N_PARAMS, N_PARAMS>;
@@ -21,6 +23,9 @@ pub struct Model {
     pub camera_covariance: CameraCovariance,
     /// Pixel and odometry noise (rig file `[noise]`).
     pub noise: Noise,
+    /// How the rig's lenses stretch the pixel noise in the rectified image
+    /// ([`Rig::pixel_noise`]; gains of 1 without lens tables).
+    pub pixel_noise: PixelNoise,
 }
 
 impl Model {
@@ -41,6 +46,7 @@ impl Model {
             camera: rig.nominal,
             camera_covariance,
             noise: rig.noise,
+            pixel_noise: rig.pixel_noise(),
         }
     }
 
@@ -50,6 +56,7 @@ impl Model {
             camera,
             camera_covariance,
             noise: self.noise,
+            pixel_noise: self.pixel_noise,
         }
     }
 
@@ -63,6 +70,12 @@ impl Model {
             0.0
         };
         noise + Q4_ROUNDING_VARIANCE_PX2
+    }
+
+    /// The variances of a measurement's `uL, vL, uR, vR` in the rectified image, px^2:
+    /// [`Model::pixel_variance_px2`] times the lens's gain at `z`.
+    pub fn measurement_variances_px2(&self, z: &Measurement) -> Vector4<f64> {
+        self.pixel_noise.gains(z) * self.pixel_variance_px2()
     }
 
     /// The prior sigma of one parameter in this model (0 when held exact).

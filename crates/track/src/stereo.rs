@@ -77,6 +77,24 @@ pub fn rectify_features(
                 let r = lens
                     .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
                     .map(|q| Pixel { u: q.x, v: q.y });
+                let maxmag: f64 = std::env::var("SN_MAXMAG")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(1e9);
+                let r = r.filter(|q| {
+                    let a =
+                        lens.rectify_point(nalgebra::Vector2::new(p.u + 1.0, p.v), c.f, c.cx, c.cy);
+                    let b =
+                        lens.rectify_point(nalgebra::Vector2::new(p.u, p.v + 1.0), c.f, c.cx, c.cy);
+                    match (a, b) {
+                        (Some(a), Some(b)) => {
+                            let m =
+                                ((a.x - q.u).hypot(a.y - q.v)).max((b.x - q.u).hypot(b.y - q.v));
+                            m <= maxmag
+                        }
+                        _ => false,
+                    }
+                });
                 if r.is_none() {
                     dropped += 1;
                 }
@@ -87,6 +105,18 @@ pub fn rectify_features(
     let l = map(&lens.left, left);
     let r = map(&lens.right, right);
     Some((l, r, dropped))
+}
+
+/// The largest row-noise gain of one image's features (1 without a lens).
+fn max_row_gain(model: &Model, left: bool, features: &[Pixel]) -> f64 {
+    if model.pixel_noise.is_uniform() {
+        return 1.0;
+    }
+    features
+        .iter()
+        .filter(|p| p.is_finite())
+        .map(|p| model.pixel_noise.point_gains(left, p.u, p.v).1)
+        .fold(1.0, f64::max)
 }
 
 /// Settings of the left-right matching.
@@ -270,6 +300,11 @@ impl StereoMatcher {
         let sigma_row = Self::row_sigma_px(model);
         let tolerance = self.settings.row_gate_sigmas * sigma_row;
         let margin = self.settings.ambiguity_sigmas * sigma_row;
+        // The rows searched: the gate of the most stretched pair (gains of 1 without a lens).
+        let window = tolerance
+            * libm::sqrt(
+                0.5 * (max_row_gain(model, true, left) + max_row_gain(model, false, right)),
+            );
         let fb = model.camera.f * model.camera.baseline;
         // d = f B / z; an infinite max depth gives 0 (then only d > 0 is required).
         let (d_min, d_max) = (
@@ -302,9 +337,9 @@ impl StereoMatcher {
                 continue;
             }
             stats.left += 1;
-            let lo = self.by_row.partition_point(|(v, _)| *v < l.v - tolerance);
+            let lo = self.by_row.partition_point(|(v, _)| *v < l.v - window);
             for &(v, j) in self.by_row.iter().skip(lo) {
-                if v > l.v + tolerance {
+                if v > l.v + window {
                     break;
                 }
                 let Some(r) = right.get(j) else { continue };
@@ -312,7 +347,17 @@ impl StereoMatcher {
                 if !(d > 0.0 && d >= d_min && d <= d_max) {
                     continue;
                 }
-                let cost = libm::fabs(l.v - v);
+                let mut cost = libm::fabs(l.v - v);
+                if !model.pixel_noise.is_uniform() {
+                    // The row gate in this pair's own sigma (a lens stretches the rows'
+                    // noise unequally), in pixels of the base sigma.
+                    let (_, gl) = model.pixel_noise.point_gains(true, l.u, l.v);
+                    let (_, gr) = model.pixel_noise.point_gains(false, r.u, r.v);
+                    cost *= libm::sqrt(2.0 / (gl + gr));
+                    if cost > tolerance {
+                        continue;
+                    }
+                }
                 stats.candidates += 1;
                 if let Some(b) = self.best_left.get_mut(i) {
                     b.offer(cost, j);

@@ -284,7 +284,12 @@ pub fn predict(
     let robot_from_rig = c.mount.robot_from_rig_rotation();
     let a = jac.landmark * robot_from_rig * tri.jac_measurement;
     let g = jac.camera + jac.landmark * tri.jac_camera_in_world(c, &origin);
-    let covariance = a * a.transpose() * model.pixel_variance_px2()
+    let pixel = if model.pixel_noise.is_uniform() {
+        a * a.transpose() * model.pixel_variance_px2()
+    } else {
+        a * Matrix4::from_diagonal(&model.measurement_variances_px2(last)) * a.transpose()
+    };
+    let covariance = pixel
         + jac.pose * motion_cov * jac.pose.transpose()
         + g * model.camera_covariance * g.transpose();
     if !covariance.iter().all(|v| v.is_finite()) {
@@ -488,7 +493,14 @@ impl Tracker {
                 let gate = predict(model, &t.last, &t.since_seen, &q)
                     .ok()
                     .and_then(|p| {
-                        let s = p.covariance + Matrix4::identity() * noise_new;
+                        let s = if model.pixel_noise.is_uniform() {
+                            p.covariance + Matrix4::identity() * noise_new
+                        } else {
+                            let r = model
+                                .measurement_variances_px2(&p.measurement)
+                                .add_scalar(extra * extra);
+                            p.covariance + Matrix4::from_diagonal(&r)
+                        };
                         let trace = s.trace();
                         let chol = s.cholesky()?;
                         Some(Gate {

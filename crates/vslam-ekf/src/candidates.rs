@@ -388,7 +388,12 @@ impl Candidates {
                 continue;
             };
             let point = tri.p_in_world(&camera, &pose);
-            let covariance = tri.covariance_in_world(&camera, &pose, sigma, None, None);
+            let covariance = if ekf.pixel_noise().is_uniform() {
+                tri.covariance_in_world(&camera, &pose, sigma, None, None)
+            } else {
+                let r = nalgebra::Vector4::from(ekf.measurement_variances(&z));
+                tri.covariance_in_world_of(&camera, &pose, &r, None, None)
+            };
             let gp = tri.jac_pose(&camera, &pose);
             let hits = match self.pending.get(&track) {
                 Some(prev) if prev.last_frame + 1 == self.frame => {

@@ -7,7 +7,8 @@ use alloc::vec::Vec;
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 use rig_model::camera::Param;
-use rig_model::{CameraParams, N_PARAMS, Noise};
+use rig_model::lens::PixelNoise;
+use rig_model::{CameraParams, Measurement, N_PARAMS, Noise};
 
 use crate::error::Error;
 use crate::health::{Health, HealthState};
@@ -137,6 +138,8 @@ pub struct Ekf {
     /// Values of the parameters not estimated (the estimated ones are read from `x`).
     pub(crate) camera_base: CameraParams,
     pub(crate) noise: Noise,
+    /// The rectified pixel noise through the rig's lenses ([`rig_model::Rig::pixel_noise`]).
+    pub(crate) pixel_noise: PixelNoise,
     pub(crate) width: u32,
     pub(crate) height: u32,
     pub(crate) settings: Settings,
@@ -163,6 +166,22 @@ impl Ekf {
     /// The noise model (rig file `[noise]`).
     pub fn noise(&self) -> &Noise {
         &self.noise
+    }
+
+    /// The rectified pixel noise of the rig's board features (its lenses' stretch).
+    pub fn pixel_noise(&self) -> &PixelNoise {
+        &self.pixel_noise
+    }
+
+    /// The variances of a measurement's `uL, vL, uR, vR`, px^2: [`Noise::pixel`] squared
+    /// times the lens's gain at `z` ([`PixelNoise::gains`]).
+    pub fn measurement_variances(&self, z: &Measurement) -> [f64; 4] {
+        let r2 = self.noise.pixel * self.noise.pixel;
+        if self.pixel_noise.is_uniform() {
+            return [r2; 4];
+        }
+        let g = self.pixel_noise.gains(z);
+        [r2 * g[0], r2 * g[1], r2 * g[2], r2 * g[3]]
     }
 
     /// The settings.

@@ -32,6 +32,8 @@ pub(crate) struct Obs {
     pub(crate) q: usize,
     /// Innovation `z - h(x)`.
     pub(crate) nu: [f64; 4],
+    /// Variances of the measurement's `uL, vL, uR, vR`, px^2 (the diagonal of `R`).
+    pub(crate) r: [f64; 4],
 }
 
 impl Obs {
@@ -42,6 +44,7 @@ impl Obs {
             h: h.h,
             q: h.len,
             nu: [0.0; 4],
+            r: [0.0; 4],
         }
     }
 }
@@ -74,9 +77,9 @@ pub(crate) struct Workspace {
 }
 
 /// `A = P H^T` (`n x 4k`), each column a sum of the few columns of `P` that its row of `H`
-/// touches (gathered once into `g` from the lower triangle), and `S = H A + r2 I` (`4k x 4k`,
+/// touches (gathered once into `g` from the lower triangle), and `S = H A + R` (`4k x 4k`,
 /// symmetrised).
-pub(crate) fn innovation_products(p: &[f64], n: usize, obs: &[Obs], r2: f64, ws: &mut Workspace) {
+pub(crate) fn innovation_products(p: &[f64], n: usize, obs: &[Obs], ws: &mut Workspace) {
     let d = 4 * obs.len();
     // The union of the involved states, and each observation's columns in it.
     ws.union.clear();
@@ -112,17 +115,16 @@ pub(crate) fn innovation_products(p: &[f64], n: usize, obs: &[Obs], r2: f64, ws:
             s[j * d + i] = v;
             s[i * d + j] = v;
         }
-        s[i * d + i] += r2;
+        s[i * d + i] += obs.get(i / 4).map_or(0.0, |o| o.r[i % 4]);
     }
 }
 
-/// `A = P H^T` (`n x 4`) and `S = H A + r2 I` (4x4, column-major) of one observation, from
+/// `A = P H^T` (`n x 4`) and `S = H A + R` (4x4, column-major) of one observation, from
 /// the lower triangle of `P` (the small states' working copy).
 pub(crate) fn observation_products(
     p: &[f64],
     n: usize,
     o: &Obs,
-    r2: f64,
     a: &mut Vec<f64>,
     s: &mut [f64; 16],
 ) {
@@ -144,7 +146,7 @@ pub(crate) fn observation_products(
             s[j * 4 + i] = v;
             s[i * 4 + j] = v;
         }
-        s[i * 4 + i] += r2;
+        s[i * 4 + i] += o.r[i];
     }
 }
 

@@ -155,8 +155,13 @@ impl Ekf {
         let world_from_rig =
             pose.world_from_robot_rotation() * camera.mount.robot_from_rig_rotation();
         let gz = world_from_rig * tri.jac_measurement;
-        let r2 = self.noise.pixel * self.noise.pixel;
-        let mut pll = gz * gz.transpose() * r2;
+        let mut pll = if self.pixel_noise.is_uniform() {
+            let r2 = self.noise.pixel * self.noise.pixel;
+            gz * gz.transpose() * r2
+        } else {
+            let r = nalgebra::Vector4::from(self.measurement_variances(z));
+            gz * nalgebra::Matrix4::from_diagonal(&r) * gz.transpose()
+        };
         for a in 0..3 {
             for b in 0..3 {
                 let mut v = 0.0;

@@ -112,7 +112,8 @@ impl Ekf {
         id: LandmarkId,
     ) -> Result<(Measurement, Matrix4<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
-        let (z, m) = self.observation_model(s, &self.camera(), &self.pose())?;
+        let (z, mut m) = self.observation_model(s, &self.camera(), &self.pose())?;
+        m.r = self.measurement_variances(&z);
         Ok((z, self.innovation_covariance(&m)))
     }
 

@@ -140,6 +140,7 @@ impl Ekf {
             estimated,
             camera_base: start.camera,
             noise: rig.noise,
+            pixel_noise: rig.pixel_noise(),
             width: rig.width,
             height: rig.height,
             settings,

@@ -229,6 +229,7 @@ impl Ekf {
                 // Eq. (6)'s innovation, nu = z - h(x).
                 let nu = z - predicted;
                 o.nu = [nu[0], nu[1], nu[2], nu[3]];
+                o.r = self.measurement_variances(z);
                 obs.push(o);
                 projected.push(b);
             }
@@ -316,8 +317,7 @@ impl Ekf {
             }
             return self.sequential_update(&keep, ws);
         }
-        let r2 = self.noise.pixel * self.noise.pixel;
-        innovation_products(self.p.as_slice(), n, obs, r2, ws);
+        innovation_products(self.p.as_slice(), n, obs, ws);
         let mut d = 4 * obs.len();
         if ws.s.iter().any(|v| !v.is_finite()) {
             return Err(Error::InnovationNotPositiveDefinite {
@@ -423,7 +423,6 @@ impl Ekf {
         // with zero variance and no correlation is left exactly as it is by the update.
         let n = self.x.len();
         let np = n.next_multiple_of(LANES);
-        let r2 = self.noise.pixel * self.noise.pixel;
         let joseph = self.joseph();
         ws.p.clear();
         ws.p.resize(np * np, 0.0);
@@ -437,7 +436,7 @@ impl Ekf {
         ws.dx_total.resize(np, 0.0);
         let mut s16 = [0.0; 16];
         for o in obs {
-            observation_products(&ws.p, np, o, r2, &mut ws.a, &mut s16);
+            observation_products(&ws.p, np, o, &mut ws.a, &mut s16);
             let s4: [[f64; 4]; 4] =
                 core::array::from_fn(|r| core::array::from_fn(|c| s16[c * 4 + r]));
             // nu - H dx: the innovation at the estimate corrected so far.
@@ -495,13 +494,12 @@ impl Ekf {
                 }
             }
         }
-        let r2 = self.noise.pixel * self.noise.pixel;
         let mut s = Matrix4::zeros();
         for (r, t_row) in t.iter().enumerate() {
             for (c, h_row) in m.h.iter().enumerate().skip(r) {
                 let mut v: f64 = t_row.iter().zip(h_row).take(q).map(|(a, b)| a * b).sum();
                 if r == c {
-                    v += r2;
+                    v += m.r[r];
                 }
                 s[(r, c)] = v;
                 s[(c, r)] = v;
