@@ -118,6 +118,7 @@ impl NewLamps {
     /// triangulation (with the pose's uncertainty and the pixel noise `sigma_px` through the
     /// lenses, `pixel_noise`) fused into its track's candidate, or the
     /// candidate it falls on, or a new one.
+    #[allow(clippy::too_many_arguments)] // the frame's pose, its noise and its leftovers
     pub fn add(
         &mut self,
         c: &CameraParams,
