@@ -77,24 +77,6 @@ pub fn rectify_features(
                 let r = lens
                     .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
                     .map(|q| Pixel { u: q.x, v: q.y });
-                let maxmag: f64 = std::env::var("SN_MAXMAG")
-                    .ok()
-                    .and_then(|v| v.parse().ok())
-                    .unwrap_or(1e9);
-                let r = r.filter(|q| {
-                    let a =
-                        lens.rectify_point(nalgebra::Vector2::new(p.u + 1.0, p.v), c.f, c.cx, c.cy);
-                    let b =
-                        lens.rectify_point(nalgebra::Vector2::new(p.u, p.v + 1.0), c.f, c.cx, c.cy);
-                    match (a, b) {
-                        (Some(a), Some(b)) => {
-                            let m =
-                                ((a.x - q.u).hypot(a.y - q.v)).max((b.x - q.u).hypot(b.y - q.v));
-                            m <= maxmag
-                        }
-                        _ => false,
-                    }
-                });
                 if r.is_none() {
                     dropped += 1;
                 }
