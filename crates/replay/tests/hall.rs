@@ -1,15 +1,20 @@
-//! Issue 20's hall, end to end: `fixtures/scenarios/hall-map.toml` (70 lamps 7 m up on a
-//! jittered grid, a wide fisheye lens, a real vehicle's odometry) replayed with no flags and
-//! its map saved; then `hall-localize.toml` (the same hall, a start unknown to the stack, 8 s
-//! carried while blind, 7 lamps dark and 3 new) localised on that map, over several noise
+//! Issue 20's hall, end to end. Two halls of 70 lamps 7 m up on a jittered grid, seen through
+//! a wide fisheye lens from a forklift with a real vehicle's odometry: the dense hall
+//! (`hall-dense-map.toml`, a 2.5 m grid, the issue's acceptance layout, about 25 lamps in view)
+//! and the sparse one (`hall-map.toml`, a 4 m grid, about 9 in view). Each mapping drive is
+//! replayed with no flags and its map saved; then its localisation drive (`hall-dense-
+//! localize.toml`, `hall-localize.toml`: the same hall, a start unknown to the stack, 8 s
+//! carried while blind, 7 lamps dark and 3 new) is localised on that map, over several noise
 //! seeds. The issue's bounds: localised within 3 s of the start and of the end of the blind
 //! move, at least 85 % of the frames localised, no localised frame more than 0.25 m off, at
 //! least 5 of the 7 dark lamps reported and at most 2 wrongly.
 //!
-//! The issue also asks for a trajectory error of at most 20 mm RMS while localised; on this
-//! hall it is about 80 mm, because the map itself is that far off (the mapping replay's
-//! landmark RMS is 87 mm: docs/localize.md, "The hall"). That bound is checked by the ignored
-//! test below, which fails: the mapping, not the localiser, is what is unfinished.
+//! The issue also asks for a trajectory error of at most 20 mm RMS while localised. The
+//! localiser's error relative to its map is a few mm; what remains is the map's own scale
+//! error (the baseline, which only the lever arm makes observable, 0.1 to 0.3 % off: 20 to
+//! 60 mm across a 20 m hall). The dense hall meets 20 mm on its mapping seed (checked below);
+//! the sparse hall does not (about 44 mm), which the ignored test records: docs/localize.md,
+//! "The hall".
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::{Path, PathBuf};
@@ -30,9 +35,9 @@ fn scratch(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("stereonav-hall-{}-{k}-{name}", std::process::id()))
 }
 
-/// The mapping drive replayed with no flags, its map saved; with the simulator's lamps.
-fn mapped() -> (map_file::Map, Vec<sim::Lamp>) {
-    let run = sim::simulate(&scenario("hall-map.toml"), sim::Mode::Fast).unwrap();
+/// The mapping drive `name` replayed with no flags, its map saved; with the simulator's lamps.
+fn mapped(name: &str) -> (map_file::Map, Vec<sim::Lamp>) {
+    let run = sim::simulate(&scenario(name), sim::Mode::Fast).unwrap();
     let log = scratch("map.mcap");
     run.write_log(&log).unwrap();
     let replayer = Replayer::open(&log, None, &NavSettings::default()).unwrap();
@@ -59,9 +64,9 @@ struct Judged {
     new_near_added: usize,
 }
 
-/// The localisation drive with noise seed `seed` on `map`, judged.
-fn localized(map: &map_file::Map, hall: &[sim::Lamp], seed: u64) -> Judged {
-    let sc = scenario("hall-localize.toml").with_seed(seed);
+/// The localisation drive `name` with noise seed `seed` on `map`, judged.
+fn localized(map: &map_file::Map, hall: &[sim::Lamp], name: &str, seed: u64) -> Judged {
+    let sc = scenario(name).with_seed(seed);
     let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
     let log = scratch(&format!("loc-{seed}.mcap"));
     run.write_log(&log).unwrap();
@@ -138,27 +143,42 @@ fn localized(map: &map_file::Map, hall: &[sim::Lamp], seed: u64) -> Judged {
     }
 }
 
+/// The issue's bounds other than the 20 mm, for one drive.
+fn assert_meets_the_issue(j: &Judged) {
+    let d = format!("{j:?}");
+    assert!(j.first_fix_s.is_some_and(|t| t <= 3.0), "{d}");
+    assert!(j.refix_s.is_some_and(|t| t <= 3.0), "{d}");
+    assert!(j.localized_fraction >= 0.85, "{d}");
+    assert_eq!(j.wrong_frames, 0, "{d}");
+    assert!(j.dark_reported >= 5, "{d}");
+    assert!(j.missing_wrong <= 2, "{d}");
+    assert!(j.new_near_added >= 2, "{d}");
+}
+
 #[test]
-fn the_hall_is_localised_from_an_unknown_start_and_after_a_blind_move() {
-    let (map, hall) = mapped();
-    for seed in [71, 72, 73] {
-        let j = localized(&map, &hall, seed);
-        let d = format!("{j:?}");
-        assert!(j.first_fix_s.is_some_and(|t| t <= 3.0), "{d}");
-        assert!(j.refix_s.is_some_and(|t| t <= 3.0), "{d}");
-        assert!(j.localized_fraction >= 0.85, "{d}");
-        assert_eq!(j.wrong_frames, 0, "{d}");
-        assert!(j.dark_reported >= 5, "{d}");
-        assert!(j.missing_wrong <= 2, "{d}");
-        assert!(j.new_near_added >= 2, "{d}");
+fn the_dense_hall_is_localised_from_an_unknown_start_and_after_a_blind_move() {
+    let (map, hall) = mapped("hall-dense-map.toml");
+    for seed in [81, 82, 83] {
+        let j = localized(&map, &hall, "hall-dense-localize.toml", seed);
+        assert_meets_the_issue(&j);
+        assert!(j.ate_rms_m <= 0.020, "{j:?}");
     }
 }
 
-/// Issue 20's 20 mm: fails today by the map's own error (about 80 mm; see the module docs).
 #[test]
-#[ignore = "the hall's map is about 80 mm off (mapping through the wide lens): unfinished"]
-fn the_hall_s_trajectory_error_is_within_20_mm() {
-    let (map, hall) = mapped();
-    let j = localized(&map, &hall, 71);
+fn the_sparse_hall_is_localised_from_an_unknown_start_and_after_a_blind_move() {
+    let (map, hall) = mapped("hall-map.toml");
+    for seed in [71, 72, 73] {
+        assert_meets_the_issue(&localized(&map, &hall, "hall-localize.toml", seed));
+    }
+}
+
+/// Issue 20's 20 mm on the sparse hall: fails by the map's scale error (about 44 mm; see the
+/// module docs).
+#[test]
+#[ignore = "the sparse hall's map is 0.2 % off in scale (the baseline): about 44 mm, unfinished"]
+fn the_sparse_hall_s_trajectory_error_is_within_20_mm() {
+    let (map, hall) = mapped("hall-map.toml");
+    let j = localized(&map, &hall, "hall-localize.toml", 71);
     assert!(j.ate_rms_m <= 0.020, "{j:?}");
 }
