@@ -1,5 +1,6 @@
 //! `stereonav localize LOG.mcap --map MAP [--rig RIG.toml] [--summary SUMMARY.json]
-//! [--trajectory TRAJ.csv] [--save-map NEW_MAP]`: a vehicle log on a saved map
+//! [--trajectory TRAJ.csv] [--trajectory-tum TRAJ.tum] [--truth-tum TRUTH.tum] [--save-map NEW_MAP]`:
+//! a vehicle log on a saved map
 //! (vehicle-interfaces.md section 5; `replay::localize_log`).
 //!
 //! The vehicle may start anywhere in the map and be moved while the stack is blind; poses are
@@ -13,7 +14,10 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
-use replay::{LocalizeEnd, LocalizedTrajectoryWriter, LocalizerSettings};
+use replay::{
+    LocalizeEnd, LocalizedTrajectoryWriter, LocalizerSettings, TRAJ_TUM_FILE, TRUTH_TUM_FILE,
+    TumWriter,
+};
 use rig_model::Rig;
 
 use crate::progress::ByteProgress;
@@ -37,6 +41,14 @@ pub(crate) struct Args {
     /// Write the trajectory as CSV (`t_us,x,y,theta,localized`, a row per stereo frame).
     #[arg(long, value_name = "TRAJ.csv")]
     trajectory: Option<PathBuf>,
+    /// Write the localised frames' poses in the TUM format (`t x y z qx qy qz qw`, z = 0, the
+    /// yaw as a quaternion) for evo and other SLAM tools; lost frames have no line.
+    #[arg(long, value_name = "TRAJ.tum")]
+    trajectory_tum: Option<PathBuf>,
+    /// Write the log's true pose at those frames in the TUM format, when the log has truth
+    /// (simulator logs): `evo_ape tum TRUTH.tum TRAJ.tum` then gives the summary's ATE.
+    #[arg(long, value_name = "TRUTH.tum")]
+    truth_tum: Option<PathBuf>,
     /// Write a new version of the map with the lamps this run found that are not in it.
     #[arg(long, value_name = "NEW_MAP")]
     save_map: Option<PathBuf>,
@@ -50,12 +62,33 @@ pub(crate) fn run(args: &Args) -> Result<()> {
         .as_deref()
         .map(LocalizedTrajectoryWriter::create)
         .transpose()?;
+    let mut traj_tum = args
+        .trajectory_tum
+        .as_deref()
+        .map(|p| TumWriter::create(TRAJ_TUM_FILE, p))
+        .transpose()?;
+    let mut truth_tum = args
+        .truth_tum
+        .as_deref()
+        .map(|p| TumWriter::create(TRUTH_TUM_FILE, p))
+        .transpose()?;
     let mut bar = ByteProgress::new("localising");
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let started = Instant::now();
-    let mut rows = |f: &replay::LocalizedFrame| match traj.as_mut() {
-        Some(t) => t.frame(f),
-        None => Ok(()),
+    let mut rows = |f: &replay::LocalizedFrame| {
+        if let Some(t) = traj.as_mut() {
+            t.frame(f)?;
+        }
+        // The frames the summary's ATE is over: localised, with a true pose for the truth.
+        if let (true, Some(pose)) = (f.localized, f.pose) {
+            if let Some(t) = traj_tum.as_mut() {
+                t.pose(f.t_us, pose)?;
+            }
+            if let (Some(t), Some(truth)) = (truth_tum.as_mut(), f.truth) {
+                t.pose(f.t_us, truth)?;
+            }
+        }
+        Ok(())
     };
     let result = replay::localize_log(
         &args.log,
@@ -70,6 +103,9 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     if let Some(t) = traj {
         t.finish()?;
     }
+    for t in [traj_tum, truth_tum].into_iter().flatten() {
+        t.finish()?;
+    }
     if let Some(path) = &args.summary {
         replay::write_summary_value(path, &replay::localize_summary_json(&end))?;
     }
@@ -81,6 +117,12 @@ pub(crate) fn run(args: &Args) -> Result<()> {
         let mut stderr = io::stderr().lock();
         for w in &end.warnings {
             writeln!(stderr, "stereonav: warning: {w}")?;
+        }
+        if args.truth_tum.is_some() && end.truth.is_none() {
+            writeln!(
+                stderr,
+                "stereonav: warning: the log has no truth: --truth-tum wrote no pose"
+            )?;
         }
     }
     let text = human_summary(&args.log, &end, took);

@@ -1,5 +1,6 @@
 //! `stereonav replay LOG.mcap [--rig RIG.toml] [--out EST.mcap] [--summary SUMMARY.json]
-//! [--trajectory TRAJ.csv] [--save-map MAP] [--skip-phase1] [--phase1-frames N] [--consider-camera]`: the whole stack on a vehicle log
+//! [--trajectory TRAJ.csv] [--trajectory-tum TRAJ.tum] [--truth-tum TRUTH.tum] [--save-map MAP]
+//! [--skip-phase1] [--phase1-frames N] [--consider-camera]`: the whole stack on a vehicle log
 //! (vehicle-interfaces.md section 5; `replay::Replayer`).
 //!
 //! The replay streams: `EST.mcap` and `TRAJ.csv` are written as the frames come and
@@ -41,6 +42,14 @@ pub(crate) struct Args {
     /// Write the trajectory as CSV (`t_us,x,y,theta`, a row per stereo frame).
     #[arg(long, value_name = "TRAJ.csv")]
     trajectory: Option<PathBuf>,
+    /// Write the trajectory in the TUM format (`t x y z qx qy qz qw`, a line per stereo frame,
+    /// z = 0, the yaw as a quaternion) for evo and other SLAM tools.
+    #[arg(long, value_name = "TRAJ.tum")]
+    trajectory_tum: Option<PathBuf>,
+    /// Write the log's true pose at those frames in the TUM format, when the log has truth
+    /// (simulator logs): `evo_ape tum TRUTH.tum TRAJ.tum` then gives the summary's ATE.
+    #[arg(long, value_name = "TRUTH.tum")]
+    truth_tum: Option<PathBuf>,
     /// Write the map the run built (landmarks with their covariance, the calibrated C and V,
     /// the rig) in the project's map format (docs/maps.md).
     #[arg(long, value_name = "MAP")]
@@ -100,7 +109,8 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     // The log's start first: a foreign file or one without a rig makes no output.
     let replayer = Replayer::open(&args.log, rig, &settings)?;
     let rig_used = replayer.rig().clone();
-    let mut outputs = OutputFiles::create(args.out.as_deref(), args.trajectory.as_deref())?;
+    let mut outputs = OutputFiles::create(args.out.as_deref(), args.trajectory.as_deref())?
+        .with_tum(args.trajectory_tum.as_deref(), args.truth_tum.as_deref())?;
     let result = replayer.run(&mut outputs, &mut progress);
     bar.finish();
     let end = result?;
@@ -113,6 +123,12 @@ pub(crate) fn run(args: &Args) -> Result<()> {
         let mut stderr = io::stderr().lock();
         for w in &end.warnings {
             writeln!(stderr, "stereonav: warning: {w}")?;
+        }
+        if args.truth_tum.is_some() && end.truth.is_none() {
+            writeln!(
+                stderr,
+                "stereonav: warning: the log has no truth: --truth-tum wrote no pose"
+            )?;
         }
     }
     let text = human_summary(&args.log, &end, took);

@@ -231,6 +231,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<rig::PyRig>()?;
     m.add_function(wrap_pyfunction!(rig::rectify_points, m)?)?;
     m.add_function(wrap_pyfunction!(rig::camera_parameter_names, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::vehicle_parameter_names, m)?)?;
     m.add_class::<simulation::SimRun>()?;
     m.add_function(wrap_pyfunction!(simulation::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(stream::encode_packet, m)?)?;

@@ -352,3 +352,10 @@ impl PyRig {
 pub(crate) fn camera_parameter_names() -> Vec<&'static str> {
     Param::CAMERA.iter().map(|p| p.name()).collect()
 }
+
+/// The names of the 4 vehicle parameters `V` (vehicle-interfaces.md 1.2), in SUMMARY.json's
+/// `vehicle` order.
+#[pyfunction]
+pub(crate) fn vehicle_parameter_names() -> Vec<&'static str> {
+    Param::VEHICLE.iter().map(|p| p.name()).collect()
+}

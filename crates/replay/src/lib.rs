@@ -14,7 +14,8 @@
 //!    its instant.
 //! 4. **Navigate** (`nav`): association, phase 1's self-calibration, the switch, phase 2's
 //!    EKF SLAM.
-//! 5. **Output**: `EST.mcap` (`estimates-log`), `SUMMARY.json`, `TRAJ.csv` ([`OutputFiles`]).
+//! 5. **Output**: `EST.mcap` (`estimates-log`), `SUMMARY.json`, `TRAJ.csv` ([`OutputFiles`]),
+//!    and the trajectory and the truth in the TUM format that evo reads ([`TumWriter`]).
 //!
 //! **The replay streams.** [`Replayer`] reads the log record by record, orders frames and
 //! odometry through a window of [`REORDER_US`] of data time, and hands each frame's estimate to
@@ -43,6 +44,7 @@ mod map;
 mod navigate;
 mod output;
 mod stream;
+mod tum;
 
 use std::path::{Path, PathBuf};
 
@@ -74,10 +76,11 @@ pub use navigate::{
     replay_log, truth_camera,
 };
 pub use output::{
-    OutputFiles, TrajectoryWriter, write_estimates, write_summary, write_summary_value,
-    write_trajectory,
+    OutputFiles, TRAJ_TUM_FILE, TRUTH_TUM_FILE, TrajectoryWriter, write_estimates, write_summary,
+    write_summary_value, write_trajectory,
 };
 pub use stream::REORDER_US;
+pub use tum::{TUM_HEADER, TumWriter, tum_line};
 
 /// Where the rig came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

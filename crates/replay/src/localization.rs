@@ -36,6 +36,9 @@ pub struct LocalizedFrame {
     pub matched: u32,
     /// Live relocalisation hypotheses.
     pub hypotheses: u32,
+    /// The log's true pose at this frame's time, when it has one (simulator logs): what the
+    /// errors against the truth compare the pose to.
+    pub truth: Option<[f64; 3]>,
 }
 
 /// The errors of a localisation run against the log's simulator truth (the truth taken to be
@@ -190,8 +193,9 @@ pub fn localize_log(
                 };
                 frames += 1;
                 first_t.get_or_insert(f.t_us);
-                let row = frame_row(&result);
+                let mut row = frame_row(&result);
                 if let Some(t) = stream.truth.pose_at(f.t_us) {
+                    row.truth = Some([t.x, t.y, t.theta]);
                     truth.add(&row, [t.x, t.y, t.theta], &result.pose_covariance);
                 }
                 stream.truth.forget_before(f.t_us);
@@ -287,6 +291,7 @@ fn frame_row(r: &FrameResult) -> LocalizedFrame {
         localized: r.status == Status::Localized,
         matched: u32::try_from(r.matched.len()).unwrap_or(u32::MAX),
         hypotheses: u32::try_from(r.hypotheses).unwrap_or(u32::MAX),
+        truth: None,
     }
 }
 

@@ -130,6 +130,13 @@ pub trait ReplaySink {
     fn camera(&mut self, sample: &CameraSample) -> Result<(), Error>;
     /// The map at a frame, about once a second of data time, and at the end.
     fn map(&mut self, map: &MapSnapshot) -> Result<(), Error>;
+    /// The log's true pose `(x, y, theta)` at a frame's time, after that frame, when the log
+    /// has one (simulator logs): the pose the errors against the truth compare the frame to.
+    /// Ignored unless a sink wants it.
+    fn truth(&mut self, t_us: u64, pose: [f64; 3]) -> Result<(), Error> {
+        let _ = (t_us, pose);
+        Ok(())
+    }
 }
 
 /// A [`ReplaySink`] that keeps everything: the series of a [`Replay`].
@@ -411,8 +418,16 @@ impl Replayer {
                 break;
             };
             self.truth.add(&bundle.frame, &self.stream.truth, &self.rig);
+            let true_pose = self
+                .stream
+                .truth
+                .pose_at(bundle.frame.t_us)
+                .map(|p| [p.x, p.y, p.theta]);
             self.stream.truth.forget_before(bundle.frame.t_us);
             sink.frame(&bundle.frame)?;
+            if let Some(p) = true_pose {
+                sink.truth(bundle.frame.t_us, p)?;
+            }
             if let Some(c) = &bundle.camera {
                 sink.camera(c)?;
             }

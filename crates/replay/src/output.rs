@@ -1,5 +1,6 @@
 //! The replay's output files (vehicle-interfaces.md section 5): `EST.mcap` for a viewer (the
-//! `estimates-log` crate writes it), `SUMMARY.json` and `TRAJ.csv`.
+//! `estimates-log` crate writes it), `SUMMARY.json` and `TRAJ.csv`, and the trajectory and the
+//! log's truth as TUM files for evo ([`crate::TumWriter`]).
 //!
 //! `SUMMARY.json` is [`summary_json`] (the `/est/summary` message of `EST.mcap`),
 //! pretty-printed. `TRAJ.csv` prints numbers that are not finite as `NaN`, `inf` or `-inf`
@@ -12,7 +13,7 @@ use std::path::{Path, PathBuf};
 use estimates_log::{EstimatesWriter, end_summary_json, summary_json};
 use serde_json::Value;
 
-use crate::{CameraSample, Error, FrameEstimate, MapSnapshot, Replay, ReplayEnd};
+use crate::{CameraSample, Error, FrameEstimate, MapSnapshot, Replay, ReplayEnd, TumWriter};
 
 /// What `SUMMARY.json` is called in error messages.
 const SUMMARY_FILE: &str = "SUMMARY.json";
@@ -101,12 +102,20 @@ impl TrajectoryWriter {
     }
 }
 
+/// What the TUM trajectory (`--trajectory-tum`) is called in error messages.
+pub const TRAJ_TUM_FILE: &str = "TRAJ.tum";
+/// What the TUM truth (`--truth-tum`) is called in error messages.
+pub const TRUTH_TUM_FILE: &str = "TRUTH.tum";
+
 /// The replay's output files written as the frames come (a [`crate::ReplaySink`]):
-/// `EST.mcap` and `TRAJ.csv` when asked for; [`OutputFiles::finish`] adds the summary.
+/// `EST.mcap` and `TRAJ.csv` when asked for, the TUM files when added
+/// ([`OutputFiles::with_tum`]); [`OutputFiles::finish`] adds the summary.
 #[derive(Debug, Default)]
 pub struct OutputFiles {
     estimates: Option<EstimatesWriter>,
     trajectory: Option<TrajectoryWriter>,
+    trajectory_tum: Option<TumWriter>,
+    truth_tum: Option<TumWriter>,
 }
 
 impl OutputFiles {
@@ -117,7 +126,29 @@ impl OutputFiles {
         Ok(Self {
             estimates: estimates.map(EstimatesWriter::create).transpose()?,
             trajectory: trajectory.map(TrajectoryWriter::create).transpose()?,
+            trajectory_tum: None,
+            truth_tum: None,
         })
+    }
+
+    /// Adds the TUM files asked for: the trajectory (a pose per frame, every frame the
+    /// summary's `truth.ate_rms_m` is over when the log has truth) and the log's true pose at
+    /// those frames (only frames with a true pose), so that `evo_ape tum TRUTH TRAJ` compares
+    /// what the project's ATE compares.
+    ///
+    /// Errors: a file cannot be created ([`Error::Output`]).
+    pub fn with_tum(
+        mut self,
+        trajectory: Option<&Path>,
+        truth: Option<&Path>,
+    ) -> Result<Self, Error> {
+        self.trajectory_tum = trajectory
+            .map(|p| TumWriter::create(TRAJ_TUM_FILE, p))
+            .transpose()?;
+        self.truth_tum = truth
+            .map(|p| TumWriter::create(TRUTH_TUM_FILE, p))
+            .transpose()?;
+        Ok(self)
     }
 
     /// Ends the files: `EST.mcap` with its `/est/summary` message, and `SUMMARY.json` at
@@ -128,6 +159,9 @@ impl OutputFiles {
             w.finish(&value)?;
         }
         if let Some(w) = self.trajectory {
+            w.finish()?;
+        }
+        for w in [self.trajectory_tum, self.truth_tum].into_iter().flatten() {
             w.finish()?;
         }
         if let Some(path) = summary {
@@ -145,7 +179,17 @@ impl crate::ReplaySink for OutputFiles {
         if let Some(w) = &mut self.trajectory {
             w.frame(frame)?;
         }
+        if let Some(w) = &mut self.trajectory_tum {
+            w.pose(frame.t_us, frame.pose)?;
+        }
         Ok(())
+    }
+
+    fn truth(&mut self, t_us: u64, pose: [f64; 3]) -> Result<(), Error> {
+        match &mut self.truth_tum {
+            Some(w) => w.pose(t_us, pose),
+            None => Ok(()),
+        }
     }
 
     fn camera(&mut self, sample: &CameraSample) -> Result<(), Error> {

@@ -1185,6 +1185,7 @@ mod tests {
             localized,
             matched: u32::from(localized) * 3,
             hypotheses: u32::from(!localized) * 2,
+            truth: None,
         }
     }
 

@@ -121,6 +121,7 @@ from .logs import LogDamage, LogTruth, LostSpan, VehicleLog, read_log
 from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
     CAMERA_PARAMETERS,
+    VEHICLE_PARAMETERS,
     Camera,
     Projection,
     RigConfig,
@@ -188,6 +189,7 @@ __all__ = [
     "Simulation",
     "simulate",
     "CAMERA_PARAMETERS",
+    "VEHICLE_PARAMETERS",
     "Camera",
     "Projection",
     "RigConfig",
@@ -214,6 +216,16 @@ __all__ = [
     "harris_detect",
     "harris_response",
 ]
+
+def __getattr__(name: str) -> object:
+    """``stereonav.fleet`` on first use: it needs the ``fleet`` extra (Dask, pandas), which
+    ``import stereonav`` does not; without it the import error says what to install."""
+    if name == "fleet":
+        import importlib
+
+        return importlib.import_module(f"{__name__}.fleet")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: The package version (the Rust workspace's version).
 __version__: Final[str] = _native.__version__

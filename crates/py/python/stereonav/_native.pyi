@@ -51,6 +51,7 @@ __all__ = [
     "Frame",
     "simulate",
     "camera_parameter_names",
+    "vehicle_parameter_names",
     "Rig",
     "rectify_points",
     "project",
@@ -194,6 +195,9 @@ class Rig:
 
 def camera_parameter_names() -> list[str]:
     """The ten camera parameter names in array order."""
+
+def vehicle_parameter_names() -> list[str]:
+    """The four vehicle parameter names (``V``) in ``SUMMARY.json``'s order."""
 
 @final
 class SimRun:

@@ -20,6 +20,7 @@ from ._errors import InputError, InputTypeError
 
 __all__ = [
     "CAMERA_PARAMETERS",
+    "VEHICLE_PARAMETERS",
     "Camera",
     "Projection",
     "RigConfig",
@@ -31,6 +32,9 @@ __all__ = [
 
 #: The ten camera parameters ``C``, in the order of every camera array and Jacobian column.
 CAMERA_PARAMETERS: tuple[str, ...] = tuple(_native.camera_parameter_names())
+#: The four parameters of the vehicle ``V`` (``vehicle-interfaces.md`` 1.2: odometry scale,
+#: yaw-rate scale and bias, the board's clock offset), in ``SUMMARY.json``'s ``vehicle`` order.
+VEHICLE_PARAMETERS: tuple[str, ...] = tuple(_native.vehicle_parameter_names())
 
 @dataclasses.dataclass(frozen=True)
 class Camera:
