@@ -3,8 +3,10 @@
 Every row of :func:`stereonav.fleet.replay_logs` must equal a one-by-one
 :func:`stereonav.replay` of the same log, on the default local cluster and on an existing
 scheduler with two workers on the loopback (started here as ``dask scheduler`` and ``dask
-worker`` processes, as an integrator runs them); a damaged, a foreign and a missing file give
-their one-line error in their own row and stop nothing. Without the ``fleet`` extra,
+worker`` processes, as an integrator runs them); a garbage, a foreign and a missing file give
+their one-line error in their own row and stop nothing, and damaged logs that can still be
+replayed (cut short, a chunk overwritten) are replayed as far as they go, what was lost in
+their ``error``. Without the ``fleet`` extra,
 ``import stereonav`` works and ``stereonav.fleet`` says what to install.
 """
 
@@ -64,14 +66,28 @@ def bad_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, pathlib.Path
     d = tmp_path_factory.mktemp("bad")
     foreign = d / "not-a-log.mcap"
     foreign.write_bytes(b"this is no MCAP file\n" * 50)
-    damaged = d / "damaged.mcap"
-    damaged.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 20)  # the magic, then garbage
-    return {"foreign": foreign, "damaged": damaged, "missing": d / "no-such-log.mcap"}
+    garbage = d / "garbage.mcap"
+    garbage.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 20)  # the magic, then garbage
+    return {"foreign": foreign, "garbage": garbage, "missing": d / "no-such-log.mcap"}
 
 
 @pytest.fixture(scope="module")
-def expected() -> dict[str, dict[str, Any]]:
-    return {str(p): one_by_one(p) for p in GOOD}
+def damaged_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, pathlib.Path]:
+    """Damaged logs that are still replayed as far as they go: one cut short (power lost),
+    one with a chunk overwritten in the middle."""
+    d = tmp_path_factory.mktemp("damaged")
+    data = GOOD[2].read_bytes()
+    cut = d / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 6 // 10])
+    overwritten = d / "overwritten.mcap"
+    third = len(data) // 3
+    overwritten.write_bytes(data[:third] + bytes(4096) + data[third + 4096 :])
+    return {"cut": cut, "overwritten": overwritten}
+
+
+@pytest.fixture(scope="module")
+def expected(damaged_logs: dict[str, pathlib.Path]) -> dict[str, dict[str, Any]]:
+    return {str(p): one_by_one(p) for p in [*GOOD, *damaged_logs.values()]}
 
 
 def check_table(table: Any, logs: list[pathlib.Path], expected: Mapping[str, Mapping[str, Any]]) -> None:
@@ -79,8 +95,14 @@ def check_table(table: Any, logs: list[pathlib.Path], expected: Mapping[str, Map
     assert list(table["log"]) == [str(p) for p in logs]
     for (_, row), log in zip(table.iterrows(), logs):
         if str(log) in expected:
-            assert row["error"] is None, row["error"]
             assert_row_is(row, expected[str(log)])
+            if log in GOOD:
+                assert row["error"] is None, row["error"]
+            else:  # damaged, replayed as far as it goes: what was lost, in one line
+                error = row["error"]
+                assert isinstance(error, str) and "\n" not in error, error
+                assert error.startswith("damaged log, replayed as far as it goes: "), error
+                assert row["damage"] in error and row["frames"] > 0
         else:
             error = row["error"]
             assert isinstance(error, str) and error and "\n" not in error, error
@@ -88,9 +110,11 @@ def check_table(table: Any, logs: list[pathlib.Path], expected: Mapping[str, Map
 
 
 def test_rows_equal_one_by_one_replays_on_the_default_local_cluster(
-    bad_logs: dict[str, pathlib.Path], expected: dict[str, dict[str, Any]]
+    bad_logs: dict[str, pathlib.Path], damaged_logs: dict[str, pathlib.Path],
+    expected: dict[str, dict[str, Any]]
 ) -> None:
-    logs = [GOOD[0], bad_logs["foreign"], GOOD[1], bad_logs["damaged"], GOOD[2], bad_logs["missing"]]
+    logs = [GOOD[0], bad_logs["foreign"], GOOD[1], bad_logs["garbage"], GOOD[2], bad_logs["missing"],
+            damaged_logs["cut"], damaged_logs["overwritten"]]
     seen: list[tuple[int, int]] = []
     table = fleet.replay_logs(logs, progress=lambda done, total, row: seen.append((done, total)))
     check_table(table, logs, expected)
@@ -139,10 +163,12 @@ def loopback_scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str
 
 
 def test_rows_equal_one_by_one_replays_on_an_existing_two_worker_scheduler(
-    loopback_scheduler: str, bad_logs: dict[str, pathlib.Path], expected: dict[str, dict[str, Any]]
+    loopback_scheduler: str, bad_logs: dict[str, pathlib.Path],
+    damaged_logs: dict[str, pathlib.Path], expected: dict[str, dict[str, Any]]
 ) -> None:
     assert loopback_scheduler.startswith("tcp://127.0.0.1:")
-    logs = [bad_logs["damaged"], *GOOD, bad_logs["foreign"]]
+    logs = [bad_logs["garbage"], *GOOD, damaged_logs["cut"], bad_logs["foreign"],
+            damaged_logs["overwritten"]]
     table = fleet.replay_logs(logs, scheduler=loopback_scheduler, progress=False)
     check_table(table, logs, expected)
     # Relative paths are this process's, whatever the workers' working directory.
@@ -175,7 +201,7 @@ def test_the_command_writes_csv_and_parquet(
             capture_output=True, text=True, timeout=300, check=False,
         )
         assert result.returncode == 0, result.stderr
-        assert f"{out}: 2 logs, 1 failed" in result.stdout
+        assert f"{out}: 2 logs, 1 failed, 0 damaged" in result.stdout
         table = pd.read_csv(out) if name.endswith(".csv") else pd.read_parquet(out)
         assert list(table.columns) == list(fleet.COLUMNS)
         assert table["frames"].iloc[0] == expected[str(GOOD[0])]["frames"]

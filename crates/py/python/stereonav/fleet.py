@@ -125,7 +125,9 @@ def summary_row(log: str, summary: Mapping[str, Any]) -> dict[str, Any]:
 
     The fixed columns, ``<parameter>`` and ``<parameter>_sigma`` for every parameter of ``C``
     and ``V``, the last pose, the warnings, the counters and, for a log with simulator truth,
-    the errors against it; ``error`` is None.
+    the errors against it. ``error`` is None for a log read whole; for a damaged log that was
+    replayed as far as it goes (the summary's ``log_damage``) it is the damage in one line,
+    the other columns filled.
     """
     row: dict[str, Any] = dict.fromkeys(COLUMNS)
     row.update(
@@ -135,7 +137,6 @@ def summary_row(log: str, summary: Mapping[str, Any]) -> dict[str, Any]:
         lost=summary["lost"],
         landmarks=len(summary["landmarks"]),
         phase_switch_t_us=summary["phase_switch_t_us"],
-        error=None,
         phase1_skipped=summary.get("phase1_skipped"),
     )
     for group in ("camera", "vehicle"):
@@ -151,6 +152,8 @@ def summary_row(log: str, summary: Mapping[str, Any]) -> dict[str, Any]:
     row["warnings"] = len(warnings)
     row["warnings_text"] = "\n".join(warnings) if warnings else None
     row["damage"] = _damage(summary.get("log_damage"))
+    if row["damage"] is not None:
+        row["error"] = f"damaged log, replayed as far as it goes: {row['damage']}"
     counts = summary.get("counts") or {}
     for name in _COUNTS:
         row[f"counts_{name}"] = counts.get(name)
@@ -170,8 +173,8 @@ def summary_row(log: str, summary: Mapping[str, Any]) -> dict[str, Any]:
 def _damage(damage: Optional[Mapping[str, Any]]) -> Optional[str]:
     """``SUMMARY.json``'s ``log_damage`` in one line, or None for a log read whole.
 
-    A damaged log that could be replayed is no failure (its ``error`` stays None, as
-    :func:`stereonav.replay` raises nothing): this says what the reader could not read."""
+    A damaged log that could be replayed (:func:`stereonav.replay` raises nothing for it) is
+    replayed as far as it goes: this says what the reader could not read."""
     if damage is None:
         return None
     parts = [f"{damage.get('spans_total', 0)} stretches ({damage.get('bytes_lost', 0)} bytes) lost"]
@@ -264,7 +267,7 @@ class _Reporter:
         self.step = max(1, math.ceil(total / 10))
 
     def __call__(self, done: int, total: int, row: Mapping[str, Any]) -> None:
-        self.failed += row.get("error") is not None
+        self.failed += row.get("frames") is None  # a damaged log replayed is no failure
         if not self.tty and done % self.step and done != total:
             return
         line = f"fleet: {done}/{total} logs replayed, {self.failed} failed"
@@ -315,14 +318,15 @@ def replay_logs(
     pandas.DataFrame
         One row per log, in the order of ``log_paths``, with :data:`COLUMNS`: ``log`` (the
         path as given), ``frames``, ``corrupt``, ``lost``, ``landmarks`` (the map's size),
-        ``phase_switch_t_us``, ``error`` (None, or the one-line message of a log that
-        failed: its other columns are then missing), ``<parameter>`` and
+        ``phase_switch_t_us``, ``error`` (None for a log read whole and replayed; else one
+        line: why the log failed, its other columns then missing, or, for a damaged log
+        replayed as far as it goes, what was lost, its other columns filled), ``<parameter>`` and
         ``<parameter>_sigma`` for every parameter of :data:`stereonav.CAMERA_PARAMETERS` and
         :data:`stereonav.VEHICLE_PARAMETERS`, ``phase1_skipped``, the last pose
         (``pose_t_us``, ``pose_x``, ``pose_y``, ``pose_theta``), ``warnings`` (how many) and
         ``warnings_text`` (one per line), ``damage`` (None, or what the reader of a damaged
-        log could not read, in one line: such a log is replayed as far as it can be, and is
-        no failure), the summary's ``counts_<name>`` and, for a log
+        log could not read, in one line: such a log is replayed as far as it goes), the
+        summary's ``counts_<name>`` and, for a log
         with simulator truth, ``truth_<error>`` (NaN without). Integer columns are pandas'
         nullable ``Int64``.
 
@@ -494,8 +498,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (OSError, ImportError, ValueError) as error:
         print(f"stereonav fleet: error: {args.out}: {_one_line(error)}", file=sys.stderr)
         return 2
-    failed = int(table["error"].notna().sum())
-    print(f"{args.out}: {len(table)} logs, {failed} failed")
+    failed = int((table["error"].notna() & table["frames"].isna()).sum())
+    damaged = int(table["damage"].notna().sum())
+    print(
+        f"{args.out}: {len(table)} logs, {failed} failed, "
+        f"{damaged} damaged (replayed as far as they go)"
+    )
     return 0
 
 
