@@ -207,4 +207,20 @@ impl LocalizeResult {
         })
         .map_err(|e| file_error(py, &e))
     }
+
+    /// Writes the localised frames' poses in the TUM format (`replay::TumWriter`, as
+    /// `stereonav localize --trajectory-tum`). Raises as `write_summary`.
+    fn write_trajectory_tum(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let frames = &self.frames;
+        py.detach(|| -> Result<(), replay::Error> {
+            let mut out = replay::TumWriter::create(replay::TRAJ_TUM_FILE, &path)?;
+            for f in frames {
+                if let (true, Some(pose)) = (f.localized, f.pose) {
+                    out.pose(f.t_us, pose)?;
+                }
+            }
+            out.finish()
+        })
+        .map_err(|e| file_error(py, &e))
+    }
 }

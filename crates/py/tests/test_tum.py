@@ -162,3 +162,22 @@ def test_an_unwritable_tum_path_is_one_line_naming_it(cli: pathlib.Path, tmp_pat
     assert p.returncode != 0
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and "TRAJ.tum" in lines[0] and str(bad) in lines[0], p.stderr
+
+
+def test_python_writes_the_same_tum_files_as_the_command_line(
+        cli: pathlib.Path, replays: dict[str, pathlib.Path], tmp_path: pathlib.Path) -> None:
+    import stereonav
+
+    for name in TRUTH_LOGS:
+        r = stereonav.replay(LOGS / name)
+        r.write_trajectory_tum(tmp_path / "py.tum")
+        assert (tmp_path / "py.tum").read_bytes() == (replays[name] / "est.tum").read_bytes()
+    d = replays["paper-square.mcap"]
+    run_cli(cli, "localize", LOGS / "paper-square.mcap", "--map", d / "map",
+            "--trajectory-tum", tmp_path / "loc-cli.tum")
+    loc = stereonav.localize(LOGS / "paper-square.mcap", d / "map")
+    loc.write_trajectory_tum(tmp_path / "loc-py.tum")
+    assert (tmp_path / "loc-py.tum").read_bytes() == (tmp_path / "loc-cli.tum").read_bytes()
+    assert len(read_tum(tmp_path / "loc-py.tum")) == int(np.sum(loc.trajectory["localized"]))
+    with pytest.raises(stereonav.InputError, match="TRAJ.tum"):
+        r.write_trajectory_tum(tmp_path / "no-such-dir" / "x.tum")

@@ -778,6 +778,8 @@ class ReplayResult:
         """Write ``SUMMARY.json``; raises ``stereonav.InputError``."""
     def write_trajectory(self, path: str) -> None:
         """Write ``TRAJ.csv``; raises ``stereonav.InputError``."""
+    def write_trajectory_tum(self, path: str) -> None:
+        """Write the trajectory as TUM; raises ``stereonav.InputError``."""
 
 def replay(
     log_path: str,
@@ -848,6 +850,8 @@ class LocalizeResult:
         """Write ``SUMMARY.json``; raises ``stereonav.InputError``."""
     def write_trajectory(self, path: str) -> None:
         """Write ``TRAJ.csv``; raises ``stereonav.InputError``."""
+    def write_trajectory_tum(self, path: str) -> None:
+        """Write the trajectory as TUM; raises ``stereonav.InputError``."""
 
 def localize(
     log_path: str, map_path: str, rig: Rig | None, save_map: str | None

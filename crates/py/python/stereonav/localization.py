@@ -193,6 +193,13 @@ class Localization:
         :meth:`write_summary`."""
         self._result.write_trajectory(_path("path", path))
 
+    def write_trajectory_tum(self, path: _PathLike) -> None:
+        """Write the localised frames' poses in the TUM format, as ``stereonav localize
+        --trajectory-tum`` (``t x y z qx qy qz qw``, ``z = 0``, the heading as a quaternion;
+        lost frames have no line), for evo and other SLAM tools. Raises as
+        :meth:`write_summary`."""
+        self._result.write_trajectory_tum(_path("path", path))
+
     def __repr__(self) -> str:
         localized = int(np.count_nonzero(self.trajectory["localized"]))
         return (

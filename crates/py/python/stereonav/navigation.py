@@ -319,6 +319,13 @@ class Replay:
         :meth:`write_estimates`."""
         self._result.write_trajectory(_path("path", path))
 
+    def write_trajectory_tum(self, path: Union[str, "os.PathLike[str]"]) -> None:
+        """Write the trajectory in the TUM format, as ``stereonav replay --trajectory-tum``:
+        ``t x y z qx qy qz qw`` a line per stereo frame (``t`` in seconds exact to the
+        microsecond, ``z = 0``, the heading as the quaternion ``(0, 0, sin(theta/2),
+        cos(theta/2))``), for evo and other SLAM tools. Raises as :meth:`write_estimates`."""
+        self._result.write_trajectory_tum(_path("path", path))
+
     def __repr__(self) -> str:
         switch = (
             "phase 1 skipped"
