@@ -80,7 +80,7 @@ pub(crate) fn run(args: &Args) -> Result<()> {
             t.frame(f)?;
         }
         // The frames the summary's ATE is over: localised, with a true pose for the truth.
-        if let (true, Some(pose)) = (f.localized, f.pose) {
+        if let Some(pose) = f.localized_pose() {
             if let Some(t) = traj_tum.as_mut() {
                 t.pose(f.t_us, pose)?;
             }
@@ -115,14 +115,10 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     let took = started.elapsed();
     {
         let mut stderr = io::stderr().lock();
-        for w in &end.warnings {
+        let truth_tum =
+            crate::replay::truth_tum_warning(args.truth_tum.is_some(), end.truth.is_some());
+        for w in end.warnings.iter().map(String::as_str).chain(truth_tum) {
             writeln!(stderr, "stereonav: warning: {w}")?;
-        }
-        if args.truth_tum.is_some() && end.truth.is_none() {
-            writeln!(
-                stderr,
-                "stereonav: warning: the log has no truth: --truth-tum wrote no pose"
-            )?;
         }
     }
     let text = human_summary(&args.log, &end, took);

@@ -100,6 +100,12 @@ pub(crate) fn nav_settings(
     Ok(settings)
 }
 
+/// The warning for `--truth-tum` on a log without truth (the file then holds its header only);
+/// `replay` and `localize` print it after the run's own warnings.
+pub(crate) fn truth_tum_warning(asked: bool, has_truth: bool) -> Option<&'static str> {
+    (asked && !has_truth).then_some("the log has no truth: --truth-tum wrote no pose")
+}
+
 pub(crate) fn run(args: &Args) -> Result<()> {
     let settings = nav_settings(args.skip_phase1, args.phase1_frames, args.consider_camera)?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
@@ -121,14 +127,9 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     let took = started.elapsed();
     {
         let mut stderr = io::stderr().lock();
-        for w in &end.warnings {
+        let truth_tum = truth_tum_warning(args.truth_tum.is_some(), end.truth.is_some());
+        for w in end.warnings.iter().map(String::as_str).chain(truth_tum) {
             writeln!(stderr, "stereonav: warning: {w}")?;
-        }
-        if args.truth_tum.is_some() && end.truth.is_none() {
-            writeln!(
-                stderr,
-                "stereonav: warning: the log has no truth: --truth-tum wrote no pose"
-            )?;
         }
     }
     let text = human_summary(&args.log, &end, took);

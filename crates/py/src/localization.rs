@@ -215,7 +215,7 @@ impl LocalizeResult {
         py.detach(|| -> Result<(), replay::Error> {
             let mut out = replay::TumWriter::create(replay::TRAJ_TUM_FILE, &path)?;
             for f in frames {
-                if let (true, Some(pose)) = (f.localized, f.pose) {
+                if let Some(pose) = f.localized_pose() {
                     out.pose(f.t_us, pose)?;
                 }
             }

@@ -422,18 +422,12 @@ impl ReplayResult {
             .map_err(|e| replay_error(py, &e))
     }
 
-    /// Writes the trajectory in the TUM format (`replay::TumWriter`, as `stereonav replay
-    /// --trajectory-tum`). Raises as `write_estimates`.
+    /// Writes the trajectory in the TUM format (`replay::write_trajectory_tum`, as
+    /// `stereonav replay --trajectory-tum`). Raises as `write_estimates`.
     fn write_trajectory_tum(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let frames = &self.replay.frames;
-        py.detach(|| -> Result<(), replay::Error> {
-            let mut out = replay::TumWriter::create(replay::TRAJ_TUM_FILE, &path)?;
-            for f in frames {
-                out.pose(f.t_us, f.pose)?;
-            }
-            out.finish()
-        })
-        .map_err(|e| replay_error(py, &e))
+        let replay = &self.replay;
+        py.detach(|| replay::write_trajectory_tum(&path, replay))
+            .map_err(|e| replay_error(py, &e))
     }
 }
 

@@ -77,7 +77,7 @@ pub use navigate::{
 };
 pub use output::{
     OutputFiles, TRAJ_TUM_FILE, TRUTH_TUM_FILE, TrajectoryWriter, write_estimates, write_summary,
-    write_summary_value, write_trajectory,
+    write_summary_value, write_trajectory, write_trajectory_tum,
 };
 pub use stream::REORDER_US;
 pub use tum::{TUM_HEADER, TumWriter, tum_line};

@@ -41,6 +41,16 @@ pub struct LocalizedFrame {
     pub truth: Option<[f64; 3]>,
 }
 
+impl LocalizedFrame {
+    /// The pose the localiser stands behind: `Some` for a localised frame, `None` for a lost
+    /// one (even with a best guess). The frames the errors against the truth are over, and
+    /// those a TUM trajectory holds.
+    #[must_use]
+    pub fn localized_pose(&self) -> Option<[f64; 3]> {
+        self.pose.filter(|_| self.localized)
+    }
+}
+
 /// The errors of a localisation run against the log's simulator truth (the truth taken to be
 /// in the map's frame: the mapping run started at the truth's origin).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -195,8 +205,9 @@ pub fn localize_log(
                 first_t.get_or_insert(f.t_us);
                 let mut row = frame_row(&result);
                 if let Some(t) = stream.truth.pose_at(f.t_us) {
-                    row.truth = Some([t.x, t.y, t.theta]);
-                    truth.add(&row, [t.x, t.y, t.theta], &result.pose_covariance);
+                    let pose = [t.x, t.y, t.theta];
+                    row.truth = Some(pose);
+                    truth.add(&row, pose, &result.pose_covariance);
                 }
                 stream.truth.forget_before(f.t_us);
                 trajectory(&row)?;

@@ -64,6 +64,18 @@ pub fn write_trajectory(path: &Path, replay: &Replay) -> Result<(), Error> {
     w.finish()
 }
 
+/// Writes the trajectory of `replay` as a TUM file at `path` (a pose per frame, in its
+/// order; [`TumWriter`]), as `stereonav replay --trajectory-tum` does while streaming.
+///
+/// Errors: the file cannot be created or written ([`Error::Output`]).
+pub fn write_trajectory_tum(path: &Path, replay: &Replay) -> Result<(), Error> {
+    let mut w = TumWriter::create(TRAJ_TUM_FILE, path)?;
+    for frame in &replay.frames {
+        w.pose(frame.t_us, frame.pose)?;
+    }
+    w.finish()
+}
+
 /// Writes `TRAJ.csv` row by row: a header `t_us,x,y,theta`, then a row per frame. Numbers
 /// are printed with Rust's `Display`, which reads back to the same `f64`.
 #[derive(Debug)]
