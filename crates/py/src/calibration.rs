@@ -1217,6 +1217,12 @@ pub(crate) struct LogCalibrationResult {
 
 #[pymethods]
 impl LogCalibrationResult {
+    /// The whole result as the JSON text `stereonav calibrate --out` writes
+    /// (`replay::calibration_json`; NaN and infinity are null).
+    fn document_json(&self) -> String {
+        replay::calibration_json(&self.result).to_string()
+    }
+
     /// The batch solve over every frame pair of the log.
     #[getter]
     fn calibration(&self) -> CalibrationResult {

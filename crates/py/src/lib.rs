@@ -230,6 +230,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rig::triangulate, m)?)?;
     m.add_class::<rig::PyRig>()?;
     m.add_function(wrap_pyfunction!(rig::rectify_points, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::rig_file_keys, m)?)?;
     m.add_function(wrap_pyfunction!(rig::camera_parameter_names, m)?)?;
     m.add_function(wrap_pyfunction!(rig::vehicle_parameter_names, m)?)?;
     m.add_class::<simulation::SimRun>()?;

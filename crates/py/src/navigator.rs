@@ -33,8 +33,8 @@ use replay::{
     CameraSample, FrameEstimate, LandmarkEstimate, NavSettings, ParamEstimate, Phase, Replay,
     ReplayCollector, Replayer,
 };
-use rig_model::N_CAMERA;
 use rig_model::odometry::OdomSample;
+use rig_model::{N_CAMERA, Param};
 use selfcal::smoother::SmootherSettings;
 use track::Pixel;
 
@@ -130,20 +130,28 @@ fn step_error(py: Python<'_>, err: nav::Error) -> PyErr {
     }
 }
 
-/// Values and sigmas as two `(10,)` arrays in `Param::ALL` order (NaN for a parameter
-/// missing from `params`, which the replay never leaves out).
+/// Values and sigmas of the camera parameters as two `(10,)` arrays in `Param::CAMERA` order
+/// (NaN for a parameter missing from `params`, which the replay never leaves out).
 fn camera_tuple<'py>(py: Python<'py>, params: &[ParamEstimate]) -> CameraTuple<'py> {
-    let mut values = vec![f64::NAN; N_CAMERA];
-    let mut sigmas = vec![f64::NAN; N_CAMERA];
-    for p in params {
-        if let (Some(v), Some(s)) = (
-            values.get_mut(p.param.index()),
-            sigmas.get_mut(p.param.index()),
-        ) {
-            *v = p.value;
-            *s = p.sigma;
-        }
-    }
+    group_tuple(py, params, &Param::CAMERA)
+}
+
+/// Values and sigmas of the vehicle parameters `V` as two `(4,)` arrays in `Param::VEHICLE`
+/// order (NaN for a parameter missing from `params`).
+fn vehicle_tuple<'py>(py: Python<'py>, params: &[ParamEstimate]) -> CameraTuple<'py> {
+    group_tuple(py, params, &Param::VEHICLE)
+}
+
+fn group_tuple<'py>(
+    py: Python<'py>,
+    params: &[ParamEstimate],
+    group: &[Param],
+) -> CameraTuple<'py> {
+    let estimate = |param: Param| params.iter().find(|p| p.param == param);
+    let (values, sigmas): (Vec<f64>, Vec<f64>) = group
+        .iter()
+        .map(|&param| estimate(param).map_or((f64::NAN, f64::NAN), |p| (p.value, p.sigma)))
+        .unzip();
     (values.into_pyarray(py), sigmas.into_pyarray(py))
 }
 
@@ -357,6 +365,13 @@ impl ReplayResult {
     #[getter]
     fn camera<'py>(&self, py: Python<'py>) -> CameraTuple<'py> {
         camera_tuple(py, &self.replay.final_camera)
+    }
+
+    /// The final vehicle parameters `V`: `(values (4,), sigmas (4,))`, `VEHICLE_PARAMETERS`
+    /// order (SUMMARY.json's `vehicle`).
+    #[getter]
+    fn vehicle<'py>(&self, py: Python<'py>) -> CameraTuple<'py> {
+        vehicle_tuple(py, &self.replay.final_camera)
     }
 
     /// The final map, by id: `(ids (N,), positions (N, 3), covariances (N, 3, 3),
@@ -740,6 +755,13 @@ impl Navigator {
         camera_tuple(py, &ParamEstimate::all(&c, &cov))
     }
 
+    /// Every vehicle parameter `V`: `(values (4,), sigmas (4,))`, `VEHICLE_PARAMETERS` order.
+    #[getter]
+    fn vehicle<'py>(&self, py: Python<'py>) -> CameraTuple<'py> {
+        let (c, cov) = self.locked().navigator.camera();
+        vehicle_tuple(py, &ParamEstimate::all(&c, &cov))
+    }
+
     /// The camera covariance, (10, 10), `CAMERA_PARAMETERS` order.
     #[getter]
     fn camera_covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
@@ -898,7 +920,7 @@ mod tests {
         cov[(3, 3)] = 4e-6;
         let params = ParamEstimate::all(&rig_camera, &cov);
         assert_eq!(params.len(), rig_model::N_PARAMS);
-        assert_eq!(params[3].param, rig_model::Param::Baseline);
+        assert_eq!(params[3].param, Param::Baseline);
         assert!((params[3].sigma - 2e-3).abs() < 1e-15);
         assert_eq!(params[0].sigma, 0.0);
         for (i, p) in params.iter().enumerate() {

@@ -176,17 +176,17 @@ pub(crate) fn triangulate<'py>(
 }
 
 /// Raw pixels `(N, 2)` of one camera (`"left"` or `"right"`) into the rectified rig model of
-/// a rig file's `[lens.*]` tables (vehicle-interfaces.md 1.1): `(N, 2)`, NaN rows for points
+/// a rig's `[lens.*]` tables (vehicle-interfaces.md 1.1): `(N, 2)`, NaN rows for points
 /// that cannot be mapped; the input unchanged without lens tables. Raises
 /// `stereonav.InputError` for a bad file, shape or camera name. The GIL is released.
 #[pyfunction]
 pub(crate) fn rectify_points<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
-    path: std::path::PathBuf,
+    rig: PyRef<'py, PyRig>,
     camera: &str,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let rig = Rig::load(&path).map_err(|e| input_error(py, e.to_string()))?;
+    let rig = &rig.rig;
     let p = points.as_array();
     if p.ncols() != 2 {
         return Err(input_error(
@@ -225,71 +225,72 @@ pub(crate) fn rectify_points<'py>(
     Ok(out.into_pyarray(py))
 }
 
-/// A rig file (`vehicle-interfaces.md` section 3), checked: image size, nominal camera, the
-/// parameters to estimate, their priors and the noise model. Every function of the module that
-/// needs a rig takes this object (see `stereonav.RigConfig`, which builds it).
+/// A rig file (`vehicle-interfaces.md` section 3), checked: every table the command line
+/// reads (`[camera]`, `[mount]`, `[estimate]`, `[prior]`, `[noise]`, `[vehicle]`,
+/// `[lens.*]`, `[board]`), held as the Rust rig itself. Every function of the module that
+/// needs a rig takes this object, so that Python hands the native code exactly what the
+/// command line's reading of the same file gives (`stereonav.RigConfig` wraps it).
 #[pyclass(name = "Rig", module = "stereonav._native", frozen)]
 pub(crate) struct PyRig {
     pub(crate) rig: Rig,
 }
 
+fn rig_result(py: Python<'_>, rig: Result<Rig, rig_model::RigFileError>) -> PyResult<PyRig> {
+    rig.map(|rig| PyRig { rig })
+        .map_err(|e| input_error(py, e.to_string()))
+}
+
 #[pymethods]
 impl PyRig {
-    /// A rig from the values of a rig file's tables, checked as the file is (the same
-    /// `stereonav.InputError`, `source` naming the values in it).
-    #[new]
-    #[pyo3(signature = (*, width, height, nominal, estimate, prior, pixel_noise, velocity_noise, yaw_rate_noise, source))]
-    #[allow(clippy::too_many_arguments)] // the fields of a rig file, by keyword
-    fn new(
-        py: Python<'_>,
-        width: i64,
-        height: i64,
-        nominal: PyReadonlyArray1<'_, f64>,
-        estimate: Vec<String>,
-        prior: Vec<(String, f64)>,
-        pixel_noise: f64,
-        velocity_noise: f64,
-        yaw_rate_noise: f64,
-        source: &str,
-    ) -> PyResult<Self> {
-        let values = nominal.as_array();
-        if values.len() != N_CAMERA {
-            return Err(input_error(
-                py,
-                format!(
-                    "{source}: nominal has {} values, expected {N_CAMERA}",
-                    values.len()
-                ),
-            ));
-        }
-        let nominal = crate::camera_from_values(
-            &values.iter().copied().collect::<Vec<_>>(),
-            &rig_model::Vehicle::NOMINAL,
-        );
-        let estimate: Vec<&str> = estimate.iter().map(String::as_str).collect();
-        let prior: Vec<(&str, f64)> = prior.iter().map(|(n, s)| (n.as_str(), *s)).collect();
-        let values = rig_model::RigValues {
-            width,
-            height,
-            nominal,
-            estimate: &estimate,
-            prior: &prior,
-            noise: rig_model::Noise {
-                pixel: pixel_noise,
-                velocity: velocity_noise,
-                yaw_rate: yaw_rate_noise,
-            },
-        };
-        let rig = Rig::from_values(&values, source).map_err(|e| input_error(py, e.to_string()))?;
-        Ok(Self { rig })
-    }
-
     /// Reads a rig file (TOML); raises `stereonav.InputError` naming the file, the key and the
     /// problem.
     #[staticmethod]
     fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Self> {
-        let rig = Rig::load(&path).map_err(|e| input_error(py, e.to_string()))?;
-        Ok(Self { rig })
+        rig_result(py, Rig::load(&path))
+    }
+
+    /// Parses a rig file's TOML text; `source` names it in errors.
+    #[staticmethod]
+    fn from_toml(py: Python<'_>, text: &str, source: &str) -> PyResult<Self> {
+        rig_result(py, Rig::from_toml_str(text, source))
+    }
+
+    /// Parses the JSON form of a rig file (a log's `/rig` message); `source` names it in
+    /// errors.
+    #[staticmethod]
+    fn from_json(py: Python<'_>, text: &str, source: &str) -> PyResult<Self> {
+        rig_result(py, Rig::from_json_str(text, source))
+    }
+
+    /// A rig from a rig file's tables as a dict of dicts (`{"camera": {"width": 752, ...},
+    /// ...}`, what `tables()` returns), checked as the file is; `source` names the values in
+    /// errors. A value of a type a rig file cannot hold raises `stereonav.InputError` naming
+    /// its key.
+    #[staticmethod]
+    fn from_tables(py: Python<'_>, tables: &Bound<'_, PyDict>, source: &str) -> PyResult<Self> {
+        let root = table_from_py(py, tables, source, "")?;
+        rig_result(py, Rig::from_toml_table(&root, source))
+    }
+
+    /// The rig file's tables as a dict of dicts: every table and key of this rig, as the
+    /// rig file (or `to_toml()`) has them; `from_tables` gives the same rig back.
+    fn tables<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        table_to_py(py, &self.rig.to_toml_table())
+    }
+
+    /// The rig file as TOML text (every table this rig has).
+    fn to_toml(&self) -> String {
+        self.rig.to_toml()
+    }
+
+    /// The rig file's tables as JSON (the form of a log's `/rig` message).
+    fn to_json(&self) -> String {
+        self.rig.to_json()
+    }
+
+    /// Whether the two rigs are the same in every table.
+    fn __eq__(&self, other: &Self) -> bool {
+        self.rig == other.rig
     }
 
     /// Image width, pixels.
@@ -310,7 +311,17 @@ impl PyRig {
         crate::camera_values(&self.rig.nominal).into_pyarray(py)
     }
 
-    /// Names of the estimated parameters, in `CAMERA_PARAMETERS` order.
+    /// The nominal vehicle parameters (`[vehicle]`), 4 values in `VEHICLE_PARAMETERS` order.
+    #[getter]
+    fn vehicle<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        Param::VEHICLE
+            .iter()
+            .map(|&p| self.rig.nominal.get(p))
+            .collect::<Vec<f64>>()
+            .into_pyarray(py)
+    }
+
+    /// Names of the estimated parameters, in `CAMERA_PARAMETERS` + `VEHICLE_PARAMETERS` order.
     #[getter]
     fn estimate(&self) -> Vec<&'static str> {
         self.rig.estimate.iter().map(|p| p.name()).collect()
@@ -345,6 +356,165 @@ impl PyRig {
     fn yaw_rate_noise(&self) -> f64 {
         self.rig.noise.yaw_rate
     }
+
+    /// Time constant of the odometry's velocity errors (s; 0: white).
+    #[getter]
+    fn velocity_tau(&self) -> f64 {
+        self.rig.noise.velocity_tau
+    }
+
+    /// Time constant of the odometry's yaw-rate errors (s; 0: white).
+    #[getter]
+    fn yaw_rate_tau(&self) -> f64 {
+        self.rig.noise.yaw_rate_tau
+    }
+
+    /// The board's `THRESHOLD` register for images the host detects on (`[board]`).
+    #[getter]
+    fn board_threshold(&self) -> i32 {
+        self.rig.board.threshold
+    }
+
+    /// The board's `MAX_FEATURES` register (`[board]`).
+    #[getter]
+    fn board_max_features(&self) -> usize {
+        self.rig.board.max_features
+    }
+
+    /// Whether the rig has `[lens.left]` and `[lens.right]` (raw board features).
+    #[getter]
+    fn has_lens(&self) -> bool {
+        self.rig.lens.is_some()
+    }
+}
+
+/// Every table of a rig file and its keys as the Rust reader reads them
+/// (`rig_model::RIG_FILE_KEYS`): `[(table, [key, ...]), ...]`, `[prior]`'s keys being
+/// parameter names. The Python tests check that `RigConfig` shows each of them.
+#[pyfunction]
+pub(crate) fn rig_file_keys() -> Vec<(&'static str, Vec<&'static str>)> {
+    rig_model::RIG_FILE_KEYS
+        .iter()
+        .map(|(table, keys)| (*table, keys.to_vec()))
+        .collect()
+}
+
+fn table_to_py<'py>(py: Python<'py>, table: &toml::Table) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    for (key, value) in table {
+        out.set_item(key, value_to_py(py, value)?)?;
+    }
+    Ok(out)
+}
+
+fn value_to_py<'py>(py: Python<'py>, value: &toml::Value) -> PyResult<Bound<'py, PyAny>> {
+    use pyo3::IntoPyObjectExt;
+    match value {
+        toml::Value::String(s) => s.into_bound_py_any(py),
+        toml::Value::Integer(i) => i.into_bound_py_any(py),
+        toml::Value::Float(x) => x.into_bound_py_any(py),
+        toml::Value::Boolean(b) => b.into_bound_py_any(py),
+        toml::Value::Datetime(d) => d.to_string().into_bound_py_any(py),
+        toml::Value::Array(items) => {
+            let list = pyo3::types::PyList::empty(py);
+            for item in items {
+                list.append(value_to_py(py, item)?)?;
+            }
+            Ok(list.into_any())
+        }
+        toml::Value::Table(t) => Ok(table_to_py(py, t)?.into_any()),
+    }
+}
+
+/// A dict of a rig's tables as TOML values; `at` is the dotted path of `dict` (for errors).
+fn table_from_py(
+    py: Python<'_>,
+    dict: &Bound<'_, PyDict>,
+    source: &str,
+    at: &str,
+) -> PyResult<toml::Table> {
+    let mut out = toml::Table::new();
+    for (key, value) in dict.iter() {
+        let Ok(key) = key.extract::<String>() else {
+            return Err(input_error(
+                py,
+                format!(
+                    "{source}: {}: a table's keys must be strings, found {}",
+                    if at.is_empty() { "tables" } else { at },
+                    type_name(&key)
+                ),
+            ));
+        };
+        let path = if at.is_empty() {
+            key.clone()
+        } else {
+            format!("{at}.{key}")
+        };
+        out.insert(key, value_from_py(py, &value, source, &path)?);
+    }
+    Ok(out)
+}
+
+fn value_from_py(
+    py: Python<'_>,
+    value: &Bound<'_, PyAny>,
+    source: &str,
+    at: &str,
+) -> PyResult<toml::Value> {
+    use pyo3::types::{PyBool, PyFloat, PyInt, PyList, PyString, PyTuple};
+    if value.is_instance_of::<PyBool>() {
+        return Ok(toml::Value::Boolean(value.extract()?));
+    }
+    if value.is_instance_of::<PyInt>() {
+        return value
+            .extract::<i64>()
+            .map(toml::Value::Integer)
+            .map_err(|_| {
+                input_error(
+                    py,
+                    format!("{source}: {at}: {value} does not fit a 64-bit integer"),
+                )
+            });
+    }
+    if value.is_instance_of::<PyFloat>() {
+        return Ok(toml::Value::Float(value.extract()?));
+    }
+    if value.is_instance_of::<PyString>() {
+        return Ok(toml::Value::String(value.extract()?));
+    }
+    if let Ok(dict) = value.cast::<PyDict>() {
+        return Ok(toml::Value::Table(table_from_py(py, dict, source, at)?));
+    }
+    if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+        let mut items = Vec::new();
+        for (i, item) in value.try_iter()?.enumerate() {
+            items.push(value_from_py(py, &item?, source, &format!("{at}[{i}]"))?);
+        }
+        return Ok(toml::Value::Array(items));
+    }
+    // NumPy scalars and other numbers: integers first (`__index__`), then floats.
+    if value.hasattr("__index__")?
+        && let Ok(i) = value.extract::<i64>()
+    {
+        return Ok(toml::Value::Integer(i));
+    }
+    if let Ok(x) = value.extract::<f64>() {
+        return Ok(toml::Value::Float(x));
+    }
+    Err(input_error(
+        py,
+        format!(
+            "{source}: {at}: a rig file holds numbers, strings, lists and tables, found {}",
+            type_name(value)
+        ),
+    ))
+}
+
+fn type_name(value: &Bound<'_, PyAny>) -> String {
+    value
+        .get_type()
+        .qualname()
+        .map_or_else(|_| "an object".to_string(), |n| n.to_string())
 }
 
 /// The names of the 10 camera parameters, in the order of the camera arrays.

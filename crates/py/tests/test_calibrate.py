@@ -294,14 +294,14 @@ def test_bad_rigs_are_named(tmp_path: pathlib.Path) -> None:
     with pytest.raises(stereonav.InputError, match="missing.rig.toml"):
         calibrate(observations, motions, tmp_path / "missing.rig.toml")
     rig = paper_rig()
-    no_prior = dataclasses.replace(rig, prior={"f": 30.0})
+    no_prior = rig.replace(prior={"f": 30.0})
     with pytest.raises(stereonav.InputError, match=r"RigConfig: \[prior\] baseline: missing key"):
         calibrate(observations, motions, no_prior)
-    nan_noise = dataclasses.replace(rig, pixel_noise=float("nan"))
+    nan_noise = rig.replace(pixel_noise=float("nan"))
     with pytest.raises(stereonav.InputError, match="RigConfig"):
         calibrate(observations, motions, nan_noise)
     with pytest.raises(stereonav.InputError, match="unknown parameter"):
-        SelfCalibrator(dataclasses.replace(rig, estimate=("f", "focus"), prior={"f": 1.0, "focus": 1.0}))
+        SelfCalibrator(rig.replace(estimate=("f", "focus"), prior={"f": 1.0, "focus": 1.0}))
 
 
 def test_bad_frame_and_odometry_input() -> None:

@@ -125,7 +125,7 @@ def test_the_rig_given_as_rig_config_or_path_is_used() -> None:
 
 
 def test_a_rig_that_differs_from_the_logs_is_used_with_a_warning() -> None:
-    rig = dataclasses.replace(load_rig(PAPER_RIG), pixel_noise=0.5)
+    rig = load_rig(PAPER_RIG).replace(pixel_noise=0.5)
     result = calibrate_log(PAPER_LOG, rig)
     assert result.rig_source == "given"
     assert any("differs from the log's /rig" in w for w in result.warnings), result.warnings

@@ -70,18 +70,12 @@ def test_the_rig_crosses_as_a_native_object() -> None:
     np.testing.assert_array_equal(native.nominal, config.nominal.to_array())
     with pytest.raises(AttributeError):
         native.width = 3  # type: ignore[misc]
+    tables = native.tables()
+    tables["estimate"]["parameters"] = ["f"]
+    tables["prior"] = {}
     with pytest.raises(stereonav.InputError, match=r"values: \[prior\] f: missing key"):
-        _native.Rig(
-            width=config.width,
-            height=config.height,
-            nominal=config.nominal.to_array(),
-            estimate=["f"],
-            prior=[],
-            pixel_noise=0.3,
-            velocity_noise=0.01,
-            yaw_rate_noise=0.01,
-            source="values",
-        )
+        _native.Rig.from_tables(tables, "values")
+    assert _native.Rig.from_tables(native.tables(), "values") == native
 
 
 def test_decoded_frames_are_frozen_native_objects() -> None:

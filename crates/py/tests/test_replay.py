@@ -6,7 +6,6 @@ fed by hand from the simulator, equal to the replay of the same data."""
 from __future__ import annotations
 
 import csv
-import dataclasses
 import functools
 import json
 import math
@@ -603,7 +602,7 @@ def test_bad_navigator_settings_raise(tmp_path: pathlib.Path) -> None:
     rig = stereonav.load_rig(EXPERIMENT_RIG)
     assert Navigator(rig, phase1_frames=200).phase == "calibrating"
     with pytest.raises(InputError, match=r"RigConfig: \[prior\] baseline: missing key"):
-        Navigator(dataclasses.replace(rig, prior={}))
+        Navigator(rig.replace(prior={}))
     assert math.isfinite(Navigator(rig).camera["baseline"].value)
 
 

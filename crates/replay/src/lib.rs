@@ -38,6 +38,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+mod calibration_json;
 mod error;
 mod localization;
 mod map;
@@ -57,6 +58,7 @@ use selfcal::solve::{Calibration, SolveStatus};
 use track::Pixel;
 use vehicle_log::Record;
 
+pub use calibration_json::{calibration_json, is_estimated, solve_status_name};
 pub use error::Error;
 pub use estimates_log::topics::FRAME as ESTIMATES_FRAME_TOPIC;
 pub use estimates_log::{

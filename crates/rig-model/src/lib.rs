@@ -38,10 +38,10 @@ pub mod stereo_rectify;
 
 pub use camera::{CameraParams, Mount, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, Vehicle};
 #[cfg(feature = "alloc")]
-pub use config::{Noise, Rig};
+pub use config::{Board, Noise, Rig};
 pub use rig::{
     Measurement, ProjectionJacobians, RigError, Triangulation, point_in_rig, project,
     project_with_jacobians, triangulate,
 };
 #[cfg(feature = "std")]
-pub use rig_file::{RigFileError, RigValues};
+pub use rig_file::{RIG_FILE_KEYS, RigFileError};

@@ -10,7 +10,7 @@ use std::vec::Vec;
 use toml::{Table, Value};
 
 use crate::camera::{CameraParams, Mount, N_PARAMS, Param, Vehicle};
-use crate::config::{Noise, Rig};
+use crate::config::{Board, Noise, Rig};
 use crate::lens::{Lens, LensModel, StereoLens};
 
 /// A rig file that cannot be used; the message names the file, the key and the problem.
@@ -45,16 +45,58 @@ pub enum RigFileError {
     },
 }
 
-const TABLES: [&str; 7] = [
-    "camera", "mount", "estimate", "prior", "noise", "vehicle", "lens",
+/// `[camera]`'s keys.
+const CAMERA_KEYS: [&str; 6] = ["width", "height", "f", "cx", "cy", "baseline"];
+/// `[mount]`'s keys.
+const MOUNT_KEYS: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
+/// `[estimate]`'s keys.
+const ESTIMATE_KEYS: [&str; 1] = ["parameters"];
+/// `[noise]`'s keys (the two time constants are v3's and optional).
+const NOISE_KEYS: [&str; 5] = [
+    "pixel",
+    "velocity",
+    "yaw_rate",
+    "velocity_tau",
+    "yaw_rate_tau",
 ];
-
 /// `[vehicle]`'s keys: the parameters of `V` (vehicle-interfaces.md 1.2).
 const VEHICLE_KEYS: [&str; 4] = [
     "odom_scale",
     "odom_yaw_scale",
     "odom_yaw_bias",
     "time_offset",
+];
+/// `[lens.left]`'s and `[lens.right]`'s keys.
+const LENS_KEYS: [&str; 7] = [
+    "model",
+    "fx",
+    "fy",
+    "cx",
+    "cy",
+    "coefficients",
+    "rectification",
+];
+/// `[board]`'s keys (v3, 4.1): the detector's registers for images the host detects on.
+const BOARD_KEYS: [&str; 2] = ["threshold", "max_features"];
+
+/// Every table of a rig file and the keys it may hold, as this reader reads them
+/// (vehicle-interfaces.md section 3); `[prior]`'s keys are parameter names ([`Param::ALL`]).
+/// Front ends check against this list that they show every table and key (one reading of
+/// the format: a table one side reads and the other does not fails their tests).
+pub const RIG_FILE_KEYS: [(&str, &[&str]); 9] = [
+    ("camera", &CAMERA_KEYS),
+    ("mount", &MOUNT_KEYS),
+    ("estimate", &ESTIMATE_KEYS),
+    ("prior", &[]),
+    ("noise", &NOISE_KEYS),
+    ("vehicle", &VEHICLE_KEYS),
+    ("lens.left", &LENS_KEYS),
+    ("lens.right", &LENS_KEYS),
+    ("board", &BOARD_KEYS),
+];
+
+const TABLES: [&str; 8] = [
+    "camera", "mount", "estimate", "prior", "noise", "vehicle", "lens", "board",
 ];
 
 struct Reader<'a> {
@@ -128,6 +170,22 @@ impl Reader<'_> {
             Ok(x)
         } else {
             Err(self.error(format!("[{table}] {key}"), format!("{x} must be positive")))
+        }
+    }
+
+    /// An optional `[noise]` time constant (v3): seconds, `>= 0`; absent means 0 (white).
+    fn time_constant(&self, key: &str) -> Result<f64, RigFileError> {
+        if !self.table("noise")?.contains_key(key) {
+            return Ok(0.0);
+        }
+        let x = self.number("noise", key)?;
+        if x >= 0.0 {
+            Ok(x)
+        } else {
+            Err(self.error(
+                format!("[noise] {key}"),
+                format!("{x} must be >= 0 (0: the odometry's errors are white)"),
+            ))
         }
     }
 
@@ -215,18 +273,7 @@ fn lenses(r: &Reader<'_>) -> Result<Option<StereoLens>, RigFileError> {
         other => other,
     };
     let side = |name: &str| -> Result<Lens, RigFileError> {
-        sub.check_keys(
-            name,
-            &[
-                "model",
-                "fx",
-                "fy",
-                "cx",
-                "cy",
-                "coefficients",
-                "rectification",
-            ],
-        )?;
+        sub.check_keys(name, &LENS_KEYS)?;
         let t = sub.table(name)?;
         let numbers = |key: &str, lens_of: &[usize]| -> Result<Vec<f64>, RigFileError> {
             let found = t
@@ -329,6 +376,52 @@ fn lenses(r: &Reader<'_>) -> Result<Option<StereoLens>, RigFileError> {
     }
 }
 
+/// The optional `[board]` table (vehicle-interfaces.md 4.1): the board's registers, each key
+/// defaulting to the board's power-on value and checked against board-icd.md's ranges.
+fn board(r: &Reader<'_>) -> Result<Board, RigFileError> {
+    let mut board = Board::DEFAULT;
+    if !r.root.contains_key("board") {
+        return Ok(board);
+    }
+    r.check_keys("board", &BOARD_KEYS)?;
+    let t = r.table("board")?;
+    let integer = |key: &str| -> Result<Option<i64>, RigFileError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Value::Integer(i)) => Ok(Some(*i)),
+            Some(other) => Err(r.error(
+                format!("[board] {key}"),
+                format!("expected an integer, found {}", describe(other)),
+            )),
+        }
+    };
+    if let Some(i) = integer("threshold")? {
+        board.threshold = i32::try_from(i).map_err(|_| {
+            r.error(
+                "[board] threshold".to_string(),
+                format!(
+                    "{i} is outside the THRESHOLD register's range {}..={}",
+                    i32::MIN,
+                    i32::MAX
+                ),
+            )
+        })?;
+    }
+    if let Some(i) = integer("max_features")? {
+        let limit = harris_core::MAX_FEATURES_LIMIT;
+        board.max_features = usize::try_from(i)
+            .ok()
+            .filter(|n| (1..=limit).contains(n))
+            .ok_or_else(|| {
+                r.error(
+                    "[board] max_features".to_string(),
+                    format!("{i} is outside the MAX_FEATURES register's range 1..={limit}"),
+                )
+            })?;
+    }
+    Ok(board)
+}
+
 fn describe(v: &Value) -> String {
     match v {
         Value::String(s) => format!("string {s:?}"),
@@ -339,24 +432,6 @@ fn describe(v: &Value) -> String {
         Value::Array(_) => "an array".to_string(),
         Value::Table(_) => "a table".to_string(),
     }
-}
-
-/// The values of a rig file's tables as a program holds them, for [`Rig::from_values`]: the
-/// names of the estimated parameters and of the priors are not checked yet.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RigValues<'a> {
-    /// `[camera] width`, pixels.
-    pub width: i64,
-    /// `[camera] height`, pixels.
-    pub height: i64,
-    /// `[camera]` and `[mount]` (the vehicle part is not used).
-    pub nominal: CameraParams,
-    /// `[estimate] parameters`, by name.
-    pub estimate: &'a [&'a str],
-    /// `[prior]`: name and 1-sigma of each estimated parameter.
-    pub prior: &'a [(&'a str, f64)],
-    /// `[noise]`.
-    pub noise: Noise,
 }
 
 impl Rig {
@@ -406,73 +481,21 @@ impl Rig {
         Self::from_table(&root, source_name)
     }
 
-    /// A rig from the values of a rig file's `[camera]`, `[mount]`, `[estimate]`, `[prior]`
-    /// and `[noise]` tables as a program holds them (the Python `RigConfig`), checked as the
-    /// file's text is, with the same errors (`source_name` names the values in them). The
-    /// vehicle is nominal and there are no lens tables, as in those values.
-    pub fn from_values(values: &RigValues<'_>, source_name: &str) -> Result<Self, RigFileError> {
-        let table = |entries: &[(&str, Value)]| {
-            Value::Table(
-                entries
-                    .iter()
-                    .map(|(k, v)| ((*k).to_string(), v.clone()))
-                    .collect(),
-            )
-        };
-        let c = &values.nominal;
-        let m = &c.mount;
-        let n = &values.noise;
-        let mut root = Table::new();
-        root.insert(
-            "camera".to_string(),
-            table(&[
-                ("width", Value::Integer(values.width)),
-                ("height", Value::Integer(values.height)),
-                ("f", Value::Float(c.f)),
-                ("cx", Value::Float(c.cx)),
-                ("cy", Value::Float(c.cy)),
-                ("baseline", Value::Float(c.baseline)),
-            ]),
-        );
-        root.insert(
-            "mount".to_string(),
-            table(&[
-                ("x", Value::Float(m.x)),
-                ("y", Value::Float(m.y)),
-                ("z", Value::Float(m.z)),
-                ("roll", Value::Float(m.roll)),
-                ("pitch", Value::Float(m.pitch)),
-                ("yaw", Value::Float(m.yaw)),
-            ]),
-        );
-        let names = values
-            .estimate
-            .iter()
-            .map(|name| Value::String((*name).to_string()))
-            .collect();
-        root.insert(
-            "estimate".to_string(),
-            table(&[("parameters", Value::Array(names))]),
-        );
-        root.insert(
-            "prior".to_string(),
-            Value::Table(
-                values
-                    .prior
-                    .iter()
-                    .map(|(name, sigma)| ((*name).to_string(), Value::Float(*sigma)))
-                    .collect(),
-            ),
-        );
-        root.insert(
-            "noise".to_string(),
-            table(&[
-                ("pixel", Value::Float(n.pixel)),
-                ("velocity", Value::Float(n.velocity)),
-                ("yaw_rate", Value::Float(n.yaw_rate)),
-            ]),
-        );
-        Self::from_table(&root, source_name)
+    /// A rig from a rig file's tables as a program holds them (a TOML table: the Python
+    /// `RigConfig`'s `tables`, a rig edited in memory), checked as the file's text is, with
+    /// the same errors (`source_name` names the values in them).
+    pub fn from_toml_table(root: &Table, source_name: &str) -> Result<Self, RigFileError> {
+        Self::from_table(root, source_name)
+    }
+
+    /// The rig file's tables (every table and key this rig has, as [`Rig::to_json`] writes
+    /// them): [`Rig::from_toml_table`] gives this rig back.
+    pub fn to_toml_table(&self) -> Table {
+        // The JSON form holds no null, so every value converts.
+        match json_to_toml(&self.to_json_value()) {
+            Some(Value::Table(t)) => t,
+            _ => Table::new(),
+        }
     }
 
     fn from_table(root: &Table, source: &str) -> Result<Self, RigFileError> {
@@ -485,10 +508,10 @@ impl Rig {
                 ));
             }
         }
-        r.check_keys("camera", &["width", "height", "f", "cx", "cy", "baseline"])?;
-        r.check_keys("mount", &["x", "y", "z", "roll", "pitch", "yaw"])?;
-        r.check_keys("estimate", &["parameters"])?;
-        r.check_keys("noise", &["pixel", "velocity", "yaw_rate"])?;
+        r.check_keys("camera", &CAMERA_KEYS)?;
+        r.check_keys("mount", &MOUNT_KEYS)?;
+        r.check_keys("estimate", &ESTIMATE_KEYS)?;
+        r.check_keys("noise", &NOISE_KEYS)?;
         let nominal = CameraParams {
             f: r.positive("camera", "f")?,
             cx: r.number("camera", "cx")?,
@@ -580,8 +603,11 @@ impl Rig {
             pixel: r.positive("noise", "pixel")?,
             velocity: r.positive("noise", "velocity")?,
             yaw_rate: r.positive("noise", "yaw_rate")?,
+            velocity_tau: r.time_constant("velocity_tau")?,
+            yaw_rate_tau: r.time_constant("yaw_rate_tau")?,
         };
         let lens = lenses(&r)?;
+        let board = board(&r)?;
         Ok(Self {
             width: r.size("width")?,
             height: r.size("height")?,
@@ -590,11 +616,19 @@ impl Rig {
             prior,
             noise,
             lens,
+            board,
         })
     }
 
     /// The rig file's tables as JSON (the `/rig` message of a log).
     pub fn to_json(&self) -> String {
+        self.to_json_value().to_string()
+    }
+
+    /// The rig file's tables as a JSON value: every table this rig needs to be read back as
+    /// it is (`[vehicle]`, `[board]` and the noise's time constants only when they are not
+    /// the defaults, so that older rigs read as before).
+    fn to_json_value(&self) -> serde_json::Value {
         let c = &self.nominal;
         let m = &c.mount;
         let mut prior = serde_json::Map::new();
@@ -610,6 +644,29 @@ impl Rig {
             "prior": prior,
             "noise": {"pixel": self.noise.pixel, "velocity": self.noise.velocity, "yaw_rate": self.noise.yaw_rate},
         });
+        if let Some(noise) = json
+            .get_mut("noise")
+            .and_then(serde_json::Value::as_object_mut)
+        {
+            // v3's time constants only when the odometry's errors have memory, so that the
+            // rig of a white-noise log reads as before.
+            for (key, tau) in [
+                ("velocity_tau", self.noise.velocity_tau),
+                ("yaw_rate_tau", self.noise.yaw_rate_tau),
+            ] {
+                if tau != 0.0 {
+                    noise.insert(key.to_string(), tau.into());
+                }
+            }
+        }
+        if let Some(obj) = json.as_object_mut()
+            && !self.board.is_default()
+        {
+            obj.insert(
+                "board".to_string(),
+                serde_json::json!({"threshold": self.board.threshold, "max_features": self.board.max_features}),
+            );
+        }
         if let Some(obj) = json.as_object_mut()
             && !c.vehicle.is_nominal()
         {
@@ -634,7 +691,7 @@ impl Rig {
                 serde_json::json!({"left": side(&l.left), "right": side(&l.right)}),
             );
         }
-        json.to_string()
+        json
     }
 
     /// The rig file as TOML text.
@@ -673,6 +730,20 @@ impl Rig {
             "\n[noise]\npixel = {:?}\nvelocity = {:?}\nyaw_rate = {:?}\n",
             self.noise.pixel, self.noise.velocity, self.noise.yaw_rate
         ));
+        for (key, tau) in [
+            ("velocity_tau", self.noise.velocity_tau),
+            ("yaw_rate_tau", self.noise.yaw_rate_tau),
+        ] {
+            if tau != 0.0 {
+                out.push_str(&format!("{key} = {tau:?}\n"));
+            }
+        }
+        if !self.board.is_default() {
+            out.push_str(&format!(
+                "\n[board]\nthreshold = {}\nmax_features = {}\n",
+                self.board.threshold, self.board.max_features
+            ));
+        }
         if !c.vehicle.is_nominal() {
             let v = &c.vehicle;
             out.push_str(&format!(

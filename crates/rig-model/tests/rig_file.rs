@@ -171,16 +171,13 @@ fn example_rig() -> Rig {
     prior[Param::Baseline.index()] = Some(0.01);
     Rig {
         lens: None,
+        board: rig_model::Board::DEFAULT,
         width: 752,
         height: 480,
         nominal: common::nominal_camera(),
         estimate: vec![Param::F, Param::Baseline],
         prior,
-        noise: Noise {
-            pixel: 0.3,
-            velocity: 0.02,
-            yaw_rate: 0.01,
-        },
+        noise: Noise::white(0.3, 0.02, 0.01),
     }
 }
 
@@ -218,14 +215,7 @@ fn euroc_rig_file_loads_when_present() {
     assert_eq!(rig.estimate, [Param::Baseline]);
     assert_eq!(rig.prior[Param::Baseline.index()], Some(0.005));
     assert_eq!(rig.prior.iter().flatten().count(), 1);
-    assert_eq!(
-        rig.noise,
-        Noise {
-            pixel: 0.3,
-            velocity: 0.02,
-            yaw_rate: 0.01
-        }
-    );
+    assert_eq!(rig.noise, Noise::white(0.3, 0.02, 0.01));
     assert_eq!(Rig::from_json_str(&rig.to_json(), "json").unwrap(), rig);
 }
 
@@ -674,10 +664,23 @@ fn rig_strategy_with(
         ),
         proptest::collection::vec(finite, 6),
         proptest::collection::vec((any::<bool>(), positive.clone()), N_PARAMS),
-        (positive.clone(), positive.clone(), positive),
+        (positive.clone(), positive.clone(), positive.clone()),
+        (
+            any::<i32>(),
+            1usize..=1023,
+            prop_oneof![Just(0.0), positive.clone()],
+            prop_oneof![Just(0.0), positive],
+        ),
     )
         .prop_map(
-            |((width, height), (f, cx, cy, baseline), m, est, (pixel, velocity, yaw_rate))| {
+            |(
+                (width, height),
+                (f, cx, cy, baseline),
+                m,
+                est,
+                (pixel, velocity, yaw_rate),
+                (threshold, max_features, velocity_tau, yaw_rate_tau),
+            )| {
                 let mut estimate = Vec::new();
                 let mut prior = [None; N_PARAMS];
                 for (p, (on, sigma)) in Param::ALL.into_iter().zip(est) {
@@ -688,6 +691,10 @@ fn rig_strategy_with(
                 }
                 Rig {
                     lens: None,
+                    board: rig_model::Board {
+                        threshold,
+                        max_features,
+                    },
                     width,
                     height,
                     nominal: CameraParams {
@@ -708,9 +715,9 @@ fn rig_strategy_with(
                     estimate,
                     prior,
                     noise: Noise {
-                        pixel,
-                        velocity,
-                        yaw_rate,
+                        velocity_tau,
+                        yaw_rate_tau,
+                        ..Noise::white(pixel, velocity, yaw_rate)
                     },
                 }
             },
@@ -722,7 +729,16 @@ fn same_bits(a: &Rig, b: &Rig) -> bool {
     let bits = |r: &Rig| {
         let mut v: Vec<u64> = r.nominal.to_vector().iter().map(|x| x.to_bits()).collect();
         v.extend(r.prior.iter().flatten().map(|x| x.to_bits()));
-        v.extend([r.noise.pixel, r.noise.velocity, r.noise.yaw_rate].map(f64::to_bits));
+        v.extend(
+            [
+                r.noise.pixel,
+                r.noise.velocity,
+                r.noise.yaw_rate,
+                r.noise.velocity_tau,
+                r.noise.yaw_rate_tau,
+            ]
+            .map(f64::to_bits),
+        );
         v
     };
     a == b && bits(a) == bits(b)
@@ -980,5 +996,168 @@ fn bad_vehicle_tables_are_named() {
         ),
         "[prior] time_offset",
         "missing key",
+    );
+}
+
+/// The `[board]` table (v3, 4.1): the detector's registers for images the host detects on,
+/// each key optional (the board's power-on value when absent), checked against board-icd.md's
+/// ranges; written back by both forms.
+#[test]
+fn board_table_loads_and_round_trips() {
+    let base = render(&example_tables());
+    let plain = Rig::from_toml_str(&base, NAME).unwrap();
+    assert_eq!(plain.board, rig_model::Board::DEFAULT);
+    assert_eq!(
+        (plain.board.threshold, plain.board.max_features),
+        (1 << 18, 512)
+    );
+    assert!(
+        !plain.to_toml().contains("[board]"),
+        "defaults are not written"
+    );
+    let rig = Rig::from_toml_str(
+        &format!("{base}[board]\nthreshold = -2147483648\nmax_features = 1023\n"),
+        NAME,
+    )
+    .unwrap();
+    assert_eq!(
+        rig.board,
+        rig_model::Board {
+            threshold: i32::MIN,
+            max_features: 1023
+        }
+    );
+    let regs = rig.board_registers();
+    assert_eq!((regs.width, regs.height), (752, 480));
+    assert!(regs.validate().is_ok());
+    assert_eq!(Rig::from_toml_str(&rig.to_toml(), NAME).unwrap(), rig);
+    assert_eq!(Rig::from_json_str(&rig.to_json(), NAME).unwrap(), rig);
+    let only_threshold =
+        Rig::from_toml_str(&format!("{base}[board]\nthreshold = 1000\n"), NAME).unwrap();
+    assert_eq!(only_threshold.board.max_features, 512);
+}
+
+#[test]
+fn bad_board_tables_are_named() {
+    let base = render(&example_tables());
+    for (text, key, fragment) in [
+        ("threshold = 2147483648", "[board] threshold", "outside"),
+        (
+            "threshold = 1.5",
+            "[board] threshold",
+            "expected an integer",
+        ),
+        ("max_features = 0", "[board] max_features", "range 1..=1023"),
+        (
+            "max_features = 1024",
+            "[board] max_features",
+            "range 1..=1023",
+        ),
+        (
+            "max_features = -1",
+            "[board] max_features",
+            "range 1..=1023",
+        ),
+        (
+            "max_features = \"all\"",
+            "[board] max_features",
+            "expected an integer",
+        ),
+        ("width = 640", "[board] width", "unknown key"),
+    ] {
+        expect_key_error(&format!("{base}[board]\n{text}\n"), key, fragment);
+    }
+}
+
+/// `[noise] velocity_tau` and `yaw_rate_tau` (v3, section 2): optional time constants of the
+/// odometry's errors, 0 (white) when absent, never negative; written back when not 0.
+#[test]
+fn noise_time_constants_load_and_round_trip() {
+    let base = render(&example_tables());
+    let plain = Rig::from_toml_str(&base, NAME).unwrap();
+    assert_eq!(
+        (plain.noise.velocity_tau, plain.noise.yaw_rate_tau),
+        (0.0, 0.0)
+    );
+    assert!(!plain.noise.odometry_has_memory());
+    let text = base.replace(
+        "[noise]\n",
+        "[noise]\nvelocity_tau = 0.6\nyaw_rate_tau = 0.0\n",
+    );
+    let rig = Rig::from_toml_str(&text, NAME).unwrap();
+    assert_eq!((rig.noise.velocity_tau, rig.noise.yaw_rate_tau), (0.6, 0.0));
+    assert!(rig.noise.odometry_has_memory());
+    assert_eq!(Rig::from_toml_str(&rig.to_toml(), NAME).unwrap(), rig);
+    assert_eq!(Rig::from_json_str(&rig.to_json(), NAME).unwrap(), rig);
+    expect_key_error(
+        &base.replace("[noise]\n", "[noise]\nyaw_rate_tau = -0.1\n"),
+        "[noise] yaw_rate_tau",
+        "must be >= 0",
+    );
+    expect_key_error(
+        &base.replace("[noise]\n", "[noise]\nvelocity_tau = \"0.6 s\"\n"),
+        "[noise] velocity_tau",
+        "expected a number",
+    );
+}
+
+/// `RIG_FILE_KEYS` is what the reader reads: a rig file holding every table and key it lists
+/// loads, its table form lists no table or key beyond it, and a key beside them is refused.
+#[test]
+fn rig_file_keys_list_what_the_reader_reads() {
+    let base = render(&example_tables());
+    let lens = |side: &str| {
+        format!(
+            "[lens.{side}]\nmodel = \"plumb_bob\"\nfx = 458.0\nfy = 457.0\ncx = 367.0\ncy = 248.0\n\
+             coefficients = [-0.28, 0.07, 0.0002, 0.00002]\n\
+             rectification = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]\n"
+        )
+    };
+    let text = format!(
+        "{}[vehicle]\nodom_scale = 1.01\nodom_yaw_scale = 0.99\nodom_yaw_bias = 0.001\ntime_offset = 0.02\n\
+         [board]\nthreshold = 5000\nmax_features = 300\n{}{}",
+        base.replace(
+            "[noise]\n",
+            "[noise]\nvelocity_tau = 0.6\nyaw_rate_tau = 0.4\n"
+        ),
+        lens("left"),
+        lens("right")
+    );
+    let rig = Rig::from_toml_str(&text, NAME).unwrap();
+    let tables = rig.to_toml_table();
+    for (name, value) in &tables {
+        let toml::Value::Table(table) = value else {
+            panic!("[{name}] is not a table");
+        };
+        let mut entries: Vec<(String, &toml::Table)> = Vec::new();
+        if name == "lens" {
+            for (side, t) in table {
+                if let toml::Value::Table(t) = t {
+                    entries.push((format!("lens.{side}"), t));
+                }
+            }
+        } else {
+            entries.push((name.clone(), table));
+        }
+        for (name, table) in entries {
+            let known = rig_model::RIG_FILE_KEYS
+                .iter()
+                .find(|(t, _)| *t == name)
+                .unwrap_or_else(|| panic!("[{name}] is not in RIG_FILE_KEYS"));
+            for key in table.keys() {
+                assert!(
+                    name == "prior" || known.1.contains(&key.as_str()),
+                    "[{name}] {key} is not in RIG_FILE_KEYS"
+                );
+            }
+            if name != "prior" {
+                assert_eq!(table.len(), known.1.len(), "[{name}] holds every key");
+            }
+        }
+    }
+    assert_eq!(
+        Rig::from_toml_table(&tables, "tables").unwrap(),
+        rig,
+        "the table form reads back"
     );
 }

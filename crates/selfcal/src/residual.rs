@@ -378,16 +378,13 @@ mod tests {
         prior[Param::Baseline.index()] = Some(0.01);
         Rig {
             lens: None,
+            board: rig_model::Board::DEFAULT,
             width: 752,
             height: 480,
             nominal: camera(),
             estimate: alloc::vec![Param::F, Param::Baseline],
             prior,
-            noise: Noise {
-                pixel: 0.3,
-                velocity: 0.02,
-                yaw_rate: 0.01,
-            },
+            noise: Noise::white(0.3, 0.02, 0.01),
         }
     }
 

@@ -22,6 +22,7 @@ fn rig() -> Rig {
     prior[Param::Baseline.index()] = Some(0.006);
     Rig {
         lens: None,
+        board: rig_model::Board::DEFAULT,
         width: 752,
         height: 480,
         nominal: CameraParams {
@@ -38,11 +39,7 @@ fn rig() -> Rig {
         },
         estimate: vec![Param::F, Param::Baseline],
         prior,
-        noise: Noise {
-            pixel: 0.3,
-            velocity: 0.02,
-            yaw_rate: 0.01,
-        },
+        noise: Noise::white(0.3, 0.02, 0.01),
     }
 }
 

@@ -230,6 +230,7 @@ mod tests {
         prior[Param::Baseline.index()] = Some(0.005);
         Rig {
             lens: None,
+            board: rig_model::Board::DEFAULT,
             width: 752,
             height: 480,
             nominal: CameraParams {
@@ -245,11 +246,7 @@ mod tests {
             },
             estimate: alloc::vec![Param::Baseline],
             prior,
-            noise: Noise {
-                pixel: 0.3,
-                velocity: 0.02,
-                yaw_rate: 0.01,
-            },
+            noise: Noise::white(0.3, 0.02, 0.01),
         }
     }
 

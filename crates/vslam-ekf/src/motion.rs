@@ -357,11 +357,7 @@ mod tests {
     /// acceleration past the hold limit; samples at their usual rate are not.
     #[test]
     fn a_gap_in_the_odometry_widens_the_prediction() {
-        let noise = Noise {
-            pixel: 0.3,
-            velocity: 0.005,
-            yaw_rate: 0.01,
-        };
+        let noise = Noise::white(0.3, 0.005, 0.01);
         let at = |t_us: u64| OdomSample {
             t_us,
             vx: 1.0,
@@ -399,11 +395,7 @@ mod tests {
     /// sample add up to the variance of the whole sample, not half of it.
     #[test]
     fn a_sample_cut_by_a_frame_keeps_its_variance() {
-        let noise = Noise {
-            pixel: 0.3,
-            velocity: 0.02,
-            yaw_rate: 0.01,
-        };
+        let noise = Noise::white(0.3, 0.02, 0.01);
         let samples = [
             OdomSample {
                 t_us: 0,

@@ -83,12 +83,9 @@ pub fn rig() -> Rig {
         },
         estimate: Vec::new(),
         prior: [None; N_PARAMS],
-        noise: Noise {
-            pixel: PIXEL_SIGMA_PX,
-            velocity: VELOCITY_SIGMA,
-            yaw_rate: YAW_RATE_SIGMA,
-        },
+        noise: Noise::white(PIXEL_SIGMA_PX, VELOCITY_SIGMA, YAW_RATE_SIGMA),
         lens: None,
+        board: rig_model::Board::DEFAULT,
     }
 }
 

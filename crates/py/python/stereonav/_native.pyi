@@ -3,7 +3,7 @@
 Call the typed wrappers in :mod:`stereonav` instead; these functions check less.
 """
 
-from typing import Final, final
+from typing import Any, Final, final
 
 import numpy as np
 import numpy.typing as npt
@@ -143,31 +143,35 @@ def triangulate(
 ) -> tuple[_F64, _F64, _F64, _F64]:
     """``(p_in_rig, p_in_robot, p_in_world, cov_in_world)``."""
 
-def rectify_points(points: _F64, path: str, camera: str) -> _F64:
+def rectify_points(points: _F64, rig: Rig, camera: str) -> _F64:
     """Raw pixels of one camera into the rectified rig model (NaN rows: not mappable)."""
+
+def rig_file_keys() -> list[tuple[str, list[str]]]:
+    """Every rig-file table and its keys, as the Rust reader reads them."""
 
 @final
 class Rig:
-    """A rig file, checked (see ``stereonav.RigConfig``)."""
+    """A rig file, checked: every table, held as the Rust rig (see ``stereonav.RigConfig``)."""
 
-    def __new__(
-        cls,
-        *,
-        width: int,
-        height: int,
-        nominal: _F64,
-        estimate: list[str],
-        prior: list[tuple[str, float]],
-        pixel_noise: float,
-        velocity_noise: float,
-        yaw_rate_noise: float,
-        source: str,
-    ) -> Rig:
-        """A rig from the values of a rig file's tables, checked as the file is; raises
-        ``stereonav.InputError`` naming ``source``."""
     @staticmethod
     def load(path: str) -> Rig:
         """Read a rig file (TOML); raises ``stereonav.InputError``."""
+    @staticmethod
+    def from_toml(text: str, source: str) -> Rig:
+        """Parse a rig file's TOML text; raises ``stereonav.InputError``."""
+    @staticmethod
+    def from_json(text: str, source: str) -> Rig:
+        """Parse the JSON form of a rig file; raises ``stereonav.InputError``."""
+    @staticmethod
+    def from_tables(tables: dict[str, Any], source: str) -> Rig:
+        """A rig from its tables as a dict of dicts; raises ``stereonav.InputError``."""
+    def tables(self) -> dict[str, Any]:
+        """The rig file's tables as a dict of dicts."""
+    def to_toml(self) -> str:
+        """The rig file as TOML text."""
+    def to_json(self) -> str:
+        """The rig file's tables as JSON."""
+    def __eq__(self, other: object) -> bool: ...
     @property
     def width(self) -> int:
         """Image width, pixels."""
@@ -177,6 +181,9 @@ class Rig:
     @property
     def nominal(self) -> _F64:
         """The nominal camera, 10 values in ``CAMERA_PARAMETERS`` order."""
+    @property
+    def vehicle(self) -> _F64:
+        """The nominal vehicle parameters, 4 values in ``VEHICLE_PARAMETERS`` order."""
     @property
     def estimate(self) -> list[str]:
         """Names of the estimated parameters."""
@@ -192,6 +199,21 @@ class Rig:
     @property
     def yaw_rate_noise(self) -> float:
         """Odometry yaw-rate noise per sample (rad/s, 1 sigma)."""
+    @property
+    def velocity_tau(self) -> float:
+        """Time constant of the odometry's velocity errors (s)."""
+    @property
+    def yaw_rate_tau(self) -> float:
+        """Time constant of the odometry's yaw-rate errors (s)."""
+    @property
+    def board_threshold(self) -> int:
+        """The board's THRESHOLD register."""
+    @property
+    def board_max_features(self) -> int:
+        """The board's MAX_FEATURES register."""
+    @property
+    def has_lens(self) -> bool:
+        """Whether the rig has lens tables."""
 
 def camera_parameter_names() -> list[str]:
     """The ten camera parameter names in array order."""
@@ -445,6 +467,8 @@ class SelfCalibrator:
 class LogCalibrationResult:
     """Phase 1 on a whole vehicle log (see ``stereonav.LogCalibration``)."""
 
+    def document_json(self) -> str:
+        """The ``stereonav calibrate --out`` document as JSON text."""
     @property
     def calibration(self) -> CalibrationResult: ...
     @property
@@ -761,6 +785,8 @@ class ReplayResult:
     @property
     def camera(self) -> _CameraTuple: ...
     @property
+    def vehicle(self) -> _CameraTuple: ...
+    @property
     def landmarks(self) -> _LandmarkTuple: ...
     @property
     def maps(self) -> list[tuple[int, _LandmarkTuple]]: ...
@@ -889,6 +915,8 @@ class Navigator:
     def pose_covariance(self) -> _F64: ...
     @property
     def camera(self) -> _CameraTuple: ...
+    @property
+    def vehicle(self) -> _CameraTuple: ...
     @property
     def camera_covariance(self) -> _F64: ...
     @property

@@ -26,6 +26,7 @@ built and solved, in Rust; it returns a :class:`LogCalibration`.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 from typing import Any, NamedTuple, Optional, Union, final
@@ -280,6 +281,11 @@ class LogCalibration:
         nominal value), one line each.
     rig_source : str
         ``"given"`` (the ``rig`` argument) or ``"log"`` (the log's ``/rig`` message).
+    document : dict
+        The whole result as ``stereonav calibrate --out RESULT.json`` writes it (the same
+        function makes both): every parameter of ``C`` and ``V`` (``camera``, ``vehicle``:
+        ``value``, ``sigma``, ``nominal``, ``estimated``), the solve, observability, the
+        hand-over, the incremental history, counts and warnings. A new dict at each access.
     """
 
     calibration: Calibration
@@ -288,6 +294,13 @@ class LogCalibration:
     counts: dict[str, int]
     warnings: tuple[str, ...]
     rig_source: str
+    _document_json: str = dataclasses.field(repr=False)
+
+    @property
+    def document(self) -> dict[str, Any]:
+        """See the class docs."""
+        document: dict[str, Any] = json.loads(self._document_json)
+        return document
 
 
 def _sigmas(covariance: _F64) -> dict[str, float]:
@@ -743,6 +756,7 @@ def calibrate_log(
         counts=dict(native.counts),
         warnings=tuple(native.warnings),
         rig_source=native.rig_source,
+        _document_json=native.document_json(),
     )
 
 

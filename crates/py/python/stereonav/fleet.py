@@ -42,7 +42,7 @@ except ImportError as _missing:  # pragma: no cover - exercised in a subprocess 
 
 from ._errors import InputError, InputTypeError
 from .navigation import replay
-from .rig import CAMERA_PARAMETERS, VEHICLE_PARAMETERS
+from .rig import CAMERA_PARAMETERS, VEHICLE_PARAMETERS, RigConfig
 
 __all__ = ["COLUMNS", "FIXED_COLUMNS", "main", "replay_logs", "summary_row"]
 
@@ -209,7 +209,7 @@ def _error_row(log: str, message: str) -> dict[str, Any]:
 
 
 def _replay_row(
-    log: str, path: str, rig: Optional[str], options: Mapping[str, Any]
+    log: str, path: str, rig: Union[None, str, RigConfig], options: Mapping[str, Any]
 ) -> dict[str, Any]:
     """The Dask task: one log replayed, as its row; a failure is the row's error."""
     try:
@@ -277,7 +277,7 @@ class _Reporter:
 
 def replay_logs(
     log_paths: Iterable[PathLike],
-    rig_path: Optional[PathLike] = None,
+    rig_path: Union[None, PathLike, RigConfig] = None,
     *,
     scheduler: Union[None, str, distributed.Client] = None,
     n_workers: Optional[int] = None,
@@ -297,8 +297,10 @@ def replay_logs(
     log_paths : iterable of str or os.PathLike
         The logs. Relative paths are taken from this process's working directory; the workers
         must see the same files (the same machine, or a shared file system).
-    rig_path : str or os.PathLike, optional
-        The rig file for every log; default: each log's ``/rig`` message.
+    rig_path : str, os.PathLike or RigConfig, optional
+        The rig file for every log (read by each worker with the command line's reader: every
+        table, the lenses and ``[vehicle]`` included), or a :class:`stereonav.RigConfig` (sent
+        to the workers as its TOML text); default: each log's ``/rig`` message.
     scheduler : None, str or distributed.Client, keyword-only
         None: a local cluster on this machine (``n_workers`` processes of one thread each),
         closed at the end. A string: the address of an existing Dask scheduler
@@ -347,12 +349,14 @@ def replay_logs(
     >>> table[["log", "frames", "baseline", "baseline_sigma", "error"]]  # doctest: +SKIP
     """
     logs = _log_paths(log_paths)
-    rig = None
-    if rig_path is not None:
+    rig: Union[None, str, RigConfig] = None
+    if isinstance(rig_path, RigConfig):
+        rig = rig_path
+    elif rig_path is not None:
         if not isinstance(rig_path, (str, os.PathLike)):
             raise InputTypeError(
-                "rig_path must be the path of a rig file (the workers read it), "
-                f"got {type(rig_path).__qualname__}"
+                "rig_path must be the path of a rig file (the workers read it) or a "
+                f"stereonav.RigConfig, got {type(rig_path).__qualname__}"
             )
         rig = os.path.abspath(os.fspath(rig_path))
     options: dict[str, Any] = {

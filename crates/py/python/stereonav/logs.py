@@ -19,7 +19,7 @@ from . import _native
 from ._arrays import readonly as _readonly
 from .board_stream import Frame, StreamDecoder, StreamStats
 from .navigation import _path
-from .rig import Camera, RigConfig, _rig_config
+from .rig import Camera, RigConfig
 from .simulation import ODOMETRY_DTYPE, TRAJECTORY_DTYPE
 
 __all__ = ["LogDamage", "LogTruth", "LostSpan", "VehicleLog", "read_log"]
@@ -189,7 +189,7 @@ class VehicleLog:
             ``/rig``, the key and the problem (:attr:`rig_json` still has the text).
         """
         raw = self._contents.rig()
-        return None if raw is None else _rig_config(raw)
+        return None if raw is None else RigConfig._from_native(raw)
 
     def __repr__(self) -> str:
         ends = f", truncated ({self.truncated})" if self.truncated is not None else ""

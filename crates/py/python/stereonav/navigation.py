@@ -37,7 +37,7 @@ from ._errors import InputError, InputTypeError
 from .calibration import RigLike, _count, _describe, _odometry_tables, _times
 from ._arrays import bindings as _bindings
 from ._arrays import gated as _gated
-from .rig import CAMERA_PARAMETERS, RigConfig, _native_rig
+from .rig import CAMERA_PARAMETERS, VEHICLE_PARAMETERS, RigConfig, _native_rig
 from .simulation import TRAJECTORY_DTYPE
 
 __all__ = [
@@ -138,11 +138,16 @@ class MapSnapshot(NamedTuple):
 
 
 def _camera_dict(raw: tuple[_F64, _F64]) -> dict[str, ParamEstimate]:
+    return _estimates(CAMERA_PARAMETERS, raw)
+
+
+def _vehicle_dict(raw: tuple[_F64, _F64]) -> dict[str, ParamEstimate]:
+    return _estimates(VEHICLE_PARAMETERS, raw)
+
+
+def _estimates(names: tuple[str, ...], raw: tuple[_F64, _F64]) -> dict[str, ParamEstimate]:
     values, sigmas = raw
-    return {
-        name: ParamEstimate(float(v), float(s))
-        for name, v, s in zip(CAMERA_PARAMETERS, values, sigmas)
-    }
+    return {name: ParamEstimate(float(v), float(s)) for name, v, s in zip(names, values, sigmas)}
 
 
 def _map(raw: tuple[_U64, _F64, _F64, _U64]) -> npt.NDArray[np.void]:
@@ -193,6 +198,9 @@ class Replay:
         The map about once a second of data time in phase 2, and at the end.
     camera : dict of str to ParamEstimate
         The final camera parameters, every one of :data:`CAMERA_PARAMETERS`.
+    vehicle : dict of str to ParamEstimate
+        The final vehicle parameters, every one of :data:`VEHICLE_PARAMETERS` (the summary's
+        ``vehicle``).
     camera_history : CameraHistory
         The camera parameters after every phase-1 solve, then every phase-2 frame.
     phase_switch_t_us : int or None
@@ -228,6 +236,7 @@ class Replay:
     landmarks: npt.NDArray[np.void]
     maps: tuple[MapSnapshot, ...]
     camera: dict[str, ParamEstimate]
+    vehicle: dict[str, ParamEstimate]
     camera_history: CameraHistory
     phase_switch_t_us: Optional[int]
     phase1_skipped: bool
@@ -266,6 +275,7 @@ class Replay:
             landmarks=_map(native.landmarks),
             maps=tuple(MapSnapshot(t, _map(raw)) for t, raw in native.maps),
             camera=_camera_dict(native.camera),
+            vehicle=_vehicle_dict(native.vehicle),
             camera_history=CameraHistory(*(_readonly(a) for a in native.camera_history)),
             phase_switch_t_us=native.phase_switch_t_us,
             phase1_skipped=native.phase1_skipped,
@@ -777,6 +787,12 @@ class Navigator:
         filter's in phase 2, phase 1's latest solve before (the rig's nominal values and
         priors before the first solve)."""
         return _camera_dict(self._native.camera)
+
+    @property
+    def vehicle(self) -> dict[str, ParamEstimate]:
+        """Every vehicle parameter of :data:`VEHICLE_PARAMETERS` (``vehicle-interfaces.md``
+        1.2) with its 1-sigma, as :attr:`camera` gives the camera's."""
+        return _vehicle_dict(self._native.vehicle)
 
     @property
     def camera_covariance(self) -> _F64:

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from typing import NamedTuple, Union
+from collections.abc import Mapping
+from typing import Any, NamedTuple, Optional, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -21,10 +22,14 @@ from ._errors import InputError, InputTypeError
 __all__ = [
     "CAMERA_PARAMETERS",
     "VEHICLE_PARAMETERS",
+    "Board",
     "Camera",
+    "Lens",
     "Projection",
     "RigConfig",
+    "StereoLens",
     "Triangulated",
+    "Vehicle",
     "load_rig",
     "project",
     "triangulate",
@@ -70,22 +75,331 @@ class Camera:
 
 
 @dataclasses.dataclass(frozen=True)
-class RigConfig:
-    """A rig file: image size, nominal camera, what to estimate, priors and noise."""
+class Vehicle:
+    """The vehicle's own parameters ``V`` (``vehicle-interfaces.md`` 1.2, the rig file's
+    ``[vehicle]`` table): reported ``vx, vy`` = ``odom_scale`` x true, reported ``vtheta`` =
+    ``odom_yaw_scale`` x true + ``odom_yaw_bias`` (rad/s), and ``time_offset`` (s: a board
+    timestamp ``t`` was exposed at odometry-clock time ``t - time_offset``)."""
 
-    width: int
-    height: int
-    nominal: Camera
-    #: Names of the estimated parameters (the others stay at their nominal values).
-    estimate: tuple[str, ...]
-    #: 1-sigma prior of each estimated parameter.
-    prior: dict[str, float]
-    #: Pixel noise of each of uL, vL, uR, vR (px, 1 sigma).
-    pixel_noise: float
-    #: Odometry velocity noise per sample (m/s, 1 sigma).
-    velocity_noise: float
-    #: Odometry yaw-rate noise per sample (rad/s, 1 sigma).
-    yaw_rate_noise: float
+    odom_scale: float = 1.0
+    odom_yaw_scale: float = 1.0
+    odom_yaw_bias: float = 0.0
+    time_offset: float = 0.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Lens:
+    """One raw camera's lens (``vehicle-interfaces.md`` 1.1, ``[lens.left]`` or
+    ``[lens.right]``): ``model`` ``"plumb_bob"`` (``k1 k2 p1 p2 [k3]``) or ``"equidistant"``
+    (``k1 k2 k3 k4``), the raw intrinsics, and ``rectification``, the 3x3 rotation from the raw
+    camera to the rectified rig (row-major, as ROS ``CameraInfo`` ``R``)."""
+
+    model: str
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    coefficients: tuple[float, ...]
+    #: Row-major 3x3.
+    rectification: tuple[float, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class StereoLens:
+    """The two lenses of a rig with raw board features (``[lens.left]`` and ``[lens.right]``)."""
+
+    left: Lens
+    right: Lens
+
+
+@dataclasses.dataclass(frozen=True)
+class Board:
+    """The board's detector registers for images the host detects on (``[board]``,
+    ``vehicle-interfaces.md`` 4.1; ``board-icd.md`` section 1)."""
+
+    threshold: int
+    max_features: int
+
+
+#: The :meth:`RigConfig.replace` keywords and the rig-file table each one sets.
+_REPLACEABLE = {
+    "width": "camera",
+    "height": "camera",
+    "nominal": "camera, mount",
+    "estimate": "estimate",
+    "prior": "prior",
+    "pixel_noise": "noise",
+    "velocity_noise": "noise",
+    "yaw_rate_noise": "noise",
+    "velocity_tau": "noise",
+    "yaw_rate_tau": "noise",
+    "vehicle": "vehicle",
+    "lens": "lens",
+    "board": "board",
+}
+
+_NOISE_KEYS = {
+    "pixel_noise": "pixel",
+    "velocity_noise": "velocity",
+    "yaw_rate_noise": "yaw_rate",
+    "velocity_tau": "velocity_tau",
+    "yaw_rate_tau": "yaw_rate_tau",
+}
+
+
+@final
+class RigConfig:
+    """A rig file (``vehicle-interfaces.md`` section 3), read and checked by the same Rust
+    reader as the command line's: every table (``[camera]``, ``[mount]``, ``[estimate]``,
+    ``[prior]``, ``[noise]``, ``[vehicle]``, ``[lens.*]``, ``[board]``) reaches the stack
+    exactly as ``stereonav replay --rig`` reads it.
+
+    The object holds the native rig itself; its attributes are read-only views of it. Make
+    one with :func:`load_rig`, :meth:`from_toml`, :meth:`from_tables` or
+    :func:`stereonav.import_rig`, change one with :meth:`replace` (checked again, as a file
+    is), write it with :meth:`to_toml`.
+    """
+
+    __slots__ = ("_native", "_text")
+
+    _native: _native.Rig
+    _text: Optional[str]
+
+    def __init__(self) -> None:
+        raise InputTypeError(
+            "make a RigConfig with stereonav.load_rig(path), RigConfig.from_toml(text), "
+            "RigConfig.from_tables(tables) or stereonav.import_rig(...)"
+        )
+
+    @classmethod
+    def _from_native(cls, native: _native.Rig, toml: Optional[str] = None) -> RigConfig:
+        """Wrap a native rig; ``toml``, when given, is the text :meth:`to_toml` returns (a
+        file as written, with its comments)."""
+        self = object.__new__(cls)
+        object.__setattr__(self, "_native", native)
+        object.__setattr__(self, "_text", toml)
+        return self
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise dataclasses.FrozenInstanceError(f"RigConfig is read-only: use replace({name}=...)")
+
+    @classmethod
+    def load(cls, path: Union[str, os.PathLike[str]]) -> RigConfig:
+        """Read a rig file (TOML); the same as :func:`load_rig`."""
+        return load_rig(path)
+
+    @classmethod
+    def from_toml(cls, text: str, source: str = "RigConfig") -> RigConfig:
+        """A rig from a rig file's TOML text; ``source`` names it in errors."""
+        if not isinstance(text, str) or not isinstance(source, str):
+            raise InputTypeError(
+                f"text and source must be str, got {type(text).__qualname__} and "
+                f"{type(source).__qualname__}"
+            )
+        return cls._from_native(_native.Rig.from_toml(text, source))
+
+    @classmethod
+    def from_json(cls, text: str, source: str = "RigConfig") -> RigConfig:
+        """A rig from the JSON form of a rig file (a log's ``/rig`` message)."""
+        if not isinstance(text, str) or not isinstance(source, str):
+            raise InputTypeError(
+                f"text and source must be str, got {type(text).__qualname__} and "
+                f"{type(source).__qualname__}"
+            )
+        return cls._from_native(_native.Rig.from_json(text, source))
+
+    @classmethod
+    def from_tables(cls, tables: Mapping[str, Any], source: str = "RigConfig") -> RigConfig:
+        """A rig from a rig file's tables as a dict of dicts (``{"camera": {"width": 752,
+        ...}, "mount": {...}, ...}``, what :attr:`tables` returns), checked as the file is."""
+        if not isinstance(tables, Mapping):
+            raise InputTypeError(f"tables must be a dict of tables, got {type(tables).__qualname__}")
+        return cls._from_native(_native.Rig.from_tables(_plain(tables), source))
+
+    @property
+    def tables(self) -> dict[str, Any]:
+        """The rig file's tables as a dict of dicts (a fresh copy): every table and key of
+        this rig, as :meth:`to_toml` writes them."""
+        return self._native.tables()
+
+    def to_toml(self) -> str:
+        """The rig file as TOML text (for a rig from :func:`stereonav.import_rig`, the file
+        ``stereonav rig import`` writes, comments included)."""
+        return self._text if self._text is not None else self._native.to_toml()
+
+    def to_json(self) -> str:
+        """The rig file's tables as JSON (the form of a log's ``/rig`` message)."""
+        return self._native.to_json()
+
+    def save(self, path: Union[str, os.PathLike[str]]) -> None:
+        """Write :meth:`to_toml` to ``path``."""
+        with open(os.fspath(path), "w", encoding="utf-8") as out:
+            out.write(self.to_toml())
+
+    def replace(self, **changes: Any) -> RigConfig:
+        """A copy with some values changed, checked again as a rig file is (errors name
+        ``RigConfig``). Keywords: ``width``, ``height``, ``nominal`` (a :class:`Camera`),
+        ``estimate``, ``prior`` (the whole ``[prior]`` table), ``pixel_noise``,
+        ``velocity_noise``, ``yaw_rate_noise``, ``velocity_tau``, ``yaw_rate_tau``,
+        ``vehicle`` (a :class:`Vehicle`), ``lens`` (a :class:`StereoLens` or None), ``board``
+        (a :class:`Board`). Every other table is kept as it is."""
+        tables = self.tables
+        for name, value in changes.items():
+            if name not in _REPLACEABLE:
+                raise InputTypeError(
+                    f"RigConfig.replace: unknown field {name!r} (known: {', '.join(_REPLACEABLE)})"
+                )
+            if name in ("width", "height"):
+                tables["camera"][name] = value
+            elif name == "nominal":
+                if not isinstance(value, Camera):
+                    raise InputTypeError(f"nominal must be a Camera, got {type(value).__qualname__}")
+                for key in ("f", "cx", "cy", "baseline"):
+                    tables["camera"][key] = getattr(value, key)
+                for key in ("x", "y", "z", "roll", "pitch", "yaw"):
+                    tables["mount"][key] = getattr(value, f"mount_{key}")
+            elif name == "estimate":
+                tables["estimate"]["parameters"] = list(value)
+            elif name == "prior":
+                tables["prior"] = dict(value)
+            elif name in _NOISE_KEYS:
+                tables["noise"][_NOISE_KEYS[name]] = value
+            elif name == "vehicle":
+                if not isinstance(value, Vehicle):
+                    raise InputTypeError(f"vehicle must be a Vehicle, got {type(value).__qualname__}")
+                tables["vehicle"] = dataclasses.asdict(value)
+            elif name == "lens":
+                if value is None:
+                    tables.pop("lens", None)
+                elif isinstance(value, StereoLens):
+                    tables["lens"] = {
+                        side: dataclasses.asdict(getattr(value, side)) for side in ("left", "right")
+                    }
+                else:
+                    raise InputTypeError(
+                        f"lens must be a StereoLens or None, got {type(value).__qualname__}"
+                    )
+            else:  # board
+                if not isinstance(value, Board):
+                    raise InputTypeError(f"board must be a Board, got {type(value).__qualname__}")
+                tables["board"] = dataclasses.asdict(value)
+        return RigConfig.from_tables(tables, "RigConfig")
+
+    #: :func:`copy.replace` (Python 3.13) does what :meth:`replace` does.
+    __replace__ = replace
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Pickled as its TOML text (Dask workers, multiprocessing): read back by the same parser.
+        return (RigConfig.from_toml, (self._native.to_toml(), "RigConfig"))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, RigConfig):
+            return NotImplemented
+        return self._native == other._native
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        lens = self.lens
+        return (
+            f"RigConfig({self.width}x{self.height}, f={self.nominal.f}, "
+            f"baseline={self.nominal.baseline}, estimate={list(self.estimate)}, "
+            f"lens={'none' if lens is None else lens.left.model})"
+        )
+
+    @property
+    def width(self) -> int:
+        """``[camera] width``, pixels."""
+        return self._native.width
+
+    @property
+    def height(self) -> int:
+        """``[camera] height``, pixels."""
+        return self._native.height
+
+    @property
+    def nominal(self) -> Camera:
+        """The nominal camera: ``[camera]`` and ``[mount]``."""
+        return Camera.from_array(self._native.nominal)
+
+    @property
+    def vehicle(self) -> Vehicle:
+        """The nominal vehicle parameters (``[vehicle]``; the defaults without the table)."""
+        return Vehicle(*(float(v) for v in self._native.vehicle))
+
+    @property
+    def estimate(self) -> tuple[str, ...]:
+        """Names of the estimated parameters (the others stay at their nominal values)."""
+        return tuple(self._native.estimate)
+
+    @property
+    def prior(self) -> dict[str, float]:
+        """1-sigma prior of each estimated parameter."""
+        return dict(self._native.prior)
+
+    @property
+    def pixel_noise(self) -> float:
+        """Pixel noise of each of uL, vL, uR, vR (px, 1 sigma; of the raw features with lens
+        tables)."""
+        return self._native.pixel_noise
+
+    @property
+    def velocity_noise(self) -> float:
+        """Odometry velocity noise per sample (m/s, 1 sigma)."""
+        return self._native.velocity_noise
+
+    @property
+    def yaw_rate_noise(self) -> float:
+        """Odometry yaw-rate noise per sample (rad/s, 1 sigma)."""
+        return self._native.yaw_rate_noise
+
+    @property
+    def velocity_tau(self) -> float:
+        """Time constant of the odometry's velocity errors (s; 0: white)."""
+        return self._native.velocity_tau
+
+    @property
+    def yaw_rate_tau(self) -> float:
+        """Time constant of the odometry's yaw-rate errors (s; 0: white)."""
+        return self._native.yaw_rate_tau
+
+    @property
+    def lens(self) -> Optional[StereoLens]:
+        """The raw cameras' lenses (``[lens.left]``, ``[lens.right]``), or None when the
+        board's features are rectified already."""
+        table = self.tables.get("lens")
+        if table is None:
+            return None
+        return StereoLens(*(_lens(table[side]) for side in ("left", "right")))
+
+    @property
+    def board(self) -> Board:
+        """The board's registers for images the host detects on (``[board]``; the board's
+        defaults without the table)."""
+        return Board(self._native.board_threshold, self._native.board_max_features)
+
+
+def _lens(table: Mapping[str, Any]) -> Lens:
+    return Lens(
+        model=str(table["model"]),
+        fx=float(table["fx"]),
+        fy=float(table["fy"]),
+        cx=float(table["cx"]),
+        cy=float(table["cy"]),
+        coefficients=tuple(float(v) for v in table["coefficients"]),
+        rectification=tuple(float(v) for v in table["rectification"]),
+    )
+
+
+def _plain(value: Any) -> Any:
+    """Mappings as dicts and sequences as lists, all the way down (for the native reader)."""
+    if isinstance(value, Mapping):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    return value
 
 
 class Projection(NamedTuple):
@@ -208,7 +522,7 @@ def triangulate(
 
 
 def rectify_points(
-    points: npt.ArrayLike, rig_path: Union[str, os.PathLike[str]], camera: str = "left"
+    points: npt.ArrayLike, rig_path: Union[RigConfig, str, os.PathLike[str]], camera: str = "left"
 ) -> npt.NDArray[np.float64]:
     """Raw pixel coordinates of one camera into the rectified rig model.
 
@@ -221,8 +535,8 @@ def rectify_points(
     ----------
     points : array_like, shape (N, 2)
         Raw pixels ``u, v`` of that camera.
-    rig_path : path
-        The rig file (TOML).
+    rig_path : path or RigConfig
+        The rig file (TOML), or the rig.
     camera : {"left", "right"}
         Which camera the points are of.
 
@@ -240,57 +554,35 @@ def rectify_points(
     array = np.asarray(points, dtype=np.float64)
     if array.ndim != 2 or array.shape[1] != 2:
         raise InputError(f"points has shape {array.shape}, expected (N, 2)")
-    return _native.rectify_points(np.ascontiguousarray(array), os.fspath(rig_path), str(camera))
+    return _native.rectify_points(np.ascontiguousarray(array), _native_rig(rig_path), str(camera))
 
 
 def load_rig(path: Union[str, os.PathLike[str]]) -> RigConfig:
-    """Read a rig file (TOML, ``vehicle-interfaces.md`` section 3).
+    """Read a rig file (TOML, ``vehicle-interfaces.md`` section 3), every table of it, with
+    the command line's reader.
 
     Raises :class:`stereonav.InputError` naming the file, the key and the problem.
     """
-    return _rig_config(_native.Rig.load(os.fspath(path)))
+    return RigConfig._from_native(_native.Rig.load(_rig_path(path)))
 
 
-def _rig_config(native: _native.Rig) -> RigConfig:
-    """The :class:`RigConfig` of a native rig (:func:`load_rig`, a log's ``/rig``)."""
-    return RigConfig(
-        width=native.width,
-        height=native.height,
-        nominal=Camera.from_array(native.nominal),
-        estimate=tuple(native.estimate),
-        prior=dict(native.prior),
-        pixel_noise=native.pixel_noise,
-        velocity_noise=native.velocity_noise,
-        yaw_rate_noise=native.yaw_rate_noise,
-    )
+def _rig_path(path: object) -> str:
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputTypeError(f"rig path must be a str or os.PathLike, got {type(path).__qualname__}")
+    source = os.fspath(path)
+    if not isinstance(source, str):
+        raise InputTypeError(f"rig path must be a str path, got {type(source).__qualname__}")
+    return source
 
 
 def _native_rig(rig: object) -> _native.Rig:
-    """The native rig of a :class:`RigConfig` or a rig file's path, checked as a rig file is
-    (errors name the path, or ``RigConfig``)."""
+    """The native rig of a :class:`RigConfig` (the one it holds) or a rig file's path (read
+    by the command line's reader): nothing is copied, so no table is lost on the way."""
+    if isinstance(rig, RigConfig):
+        return rig._native
     if isinstance(rig, (str, os.PathLike)):
-        source = os.fspath(rig)
-        if not isinstance(source, str):
-            raise InputTypeError(f"rig path must be a str path, got {type(source).__qualname__}")
-        config = load_rig(source)
-    elif isinstance(rig, RigConfig):
-        source, config = "RigConfig", rig
-    else:
-        raise InputTypeError(
-            "rig must be a stereonav.RigConfig or the path of a rig file, "
-            f"got {type(rig).__qualname__}"
-        )
-    try:
-        return _native.Rig(
-            width=config.width,
-            height=config.height,
-            nominal=np.ascontiguousarray(config.nominal.to_array()),
-            estimate=list(config.estimate),
-            prior=list(dict(config.prior).items()),
-            pixel_noise=config.pixel_noise,
-            velocity_noise=config.velocity_noise,
-            yaw_rate_noise=config.yaw_rate_noise,
-            source=source,
-        )
-    except (TypeError, OverflowError) as err:
-        raise InputError(f"{source}: not a valid rig: {err}") from err
+        return _native.Rig.load(_rig_path(rig))
+    raise InputTypeError(
+        "rig must be a stereonav.RigConfig or the path of a rig file, "
+        f"got {type(rig).__qualname__}"
+    )

@@ -196,15 +196,12 @@ mod tests {
             },
             estimate: alloc::vec![Param::Baseline],
             prior,
-            noise: rig_model::config::Noise {
-                pixel: 0.3,
-                velocity: 0.02,
-                yaw_rate: 0.01,
-            },
+            noise: rig_model::config::Noise::white(0.3, 0.02, 0.01),
             lens: Some(rig_model::lens::StereoLens {
                 left: lens,
                 right: lens,
             }),
+            board: rig_model::Board::DEFAULT,
         }
     }
 

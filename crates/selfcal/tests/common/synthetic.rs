@@ -40,16 +40,13 @@ pub fn rig(nominal: CameraParams, estimate: &[Param]) -> Rig {
     }
     Rig {
         lens: None,
+        board: rig_model::Board::DEFAULT,
         width: 752,
         height: 480,
         nominal,
         estimate: estimate.to_vec(),
         prior,
-        noise: Noise {
-            pixel: 0.3,
-            velocity: 0.02,
-            yaw_rate: 0.01,
-        },
+        noise: Noise::white(0.3, 0.02, 0.01),
     }
 }
 

@@ -41,11 +41,7 @@ pub fn prior_sigma(p: Param) -> f64 {
 }
 
 pub fn noise() -> Noise {
-    Noise {
-        pixel: 0.3,
-        velocity: 0.02,
-        yaw_rate: 0.01,
-    }
+    Noise::white(0.3, 0.02, 0.01)
 }
 
 pub fn rig(nominal: CameraParams, estimate: &[Param]) -> Rig {
@@ -55,6 +51,7 @@ pub fn rig(nominal: CameraParams, estimate: &[Param]) -> Rig {
     }
     Rig {
         lens: None,
+        board: rig_model::Board::DEFAULT,
         width: 752,
         height: 480,
         nominal,
