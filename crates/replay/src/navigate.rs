@@ -617,6 +617,7 @@ pub(crate) fn time_lost_ms(damage: &vehicle_log::Damage) -> u64 {
 /// The navigator's warnings at the end of a replay.
 fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut Vec<String>) {
     let stats = navigator.stats();
+    warnings.extend(navigator.rig().noise.memory_not_modelled_warning());
     for (n, first) in refused.values() {
         warnings.push(if *n == 1 {
             format!("1 input refused by the navigator: {first}")

@@ -1,6 +1,7 @@
 //! The rig configuration (vehicle-interfaces.md section 3) as data; reading and writing the
 //! file is in [`crate::rig_file`] (feature `std`).
 
+use alloc::string::String;
 use alloc::vec::Vec;
 
 use crate::camera::{CameraParams, N_PARAMS, Param};
@@ -39,6 +40,17 @@ impl Noise {
     /// Whether the odometry's errors are stated to have memory (a time constant above 0).
     pub fn odometry_has_memory(&self) -> bool {
         self.velocity_tau > 0.0 || self.yaw_rate_tau > 0.0
+    }
+
+    /// The warning for a rig file that states time constants the estimators do not model
+    /// yet: its odometry errors are taken as white (`None` when it states none).
+    pub fn memory_not_modelled_warning(&self) -> Option<String> {
+        self.odometry_has_memory().then(|| {
+            alloc::format!(
+                "the rig file gives the odometry's errors memory (velocity_tau {} s, yaw_rate_tau {} s), which this version does not model yet: they are taken as white, and the sigmas may be too small",
+                self.velocity_tau, self.yaw_rate_tau
+            )
+        })
     }
 }
 
