@@ -294,14 +294,15 @@ def test_bad_rigs_are_named(tmp_path: pathlib.Path) -> None:
     with pytest.raises(stereonav.InputError, match="missing.rig.toml"):
         calibrate(observations, motions, tmp_path / "missing.rig.toml")
     rig = paper_rig()
-    no_prior = rig.replace(prior={"f": 30.0})
+    # A rig changed in memory is checked as a file is, when it is changed.
     with pytest.raises(stereonav.InputError, match=r"RigConfig: \[prior\] baseline: missing key"):
-        calibrate(observations, motions, no_prior)
-    nan_noise = rig.replace(pixel_noise=float("nan"))
+        rig.replace(prior={"f": 30.0})
     with pytest.raises(stereonav.InputError, match="RigConfig"):
-        calibrate(observations, motions, nan_noise)
+        rig.replace(pixel_noise=float("nan"))
     with pytest.raises(stereonav.InputError, match="unknown parameter"):
-        SelfCalibrator(rig.replace(estimate=("f", "focus"), prior={"f": 1.0, "focus": 1.0}))
+        rig.replace(estimate=("f", "focus"), prior={"f": 1.0, "focus": 1.0})
+    with pytest.raises(stereonav.InputTypeError, match="rig must be a stereonav.RigConfig"):
+        SelfCalibrator(3)  # type: ignore[arg-type]
 
 
 def test_bad_frame_and_odometry_input() -> None:

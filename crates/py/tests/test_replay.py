@@ -601,7 +601,7 @@ def test_bad_navigator_settings_raise(tmp_path: pathlib.Path) -> None:
         Navigator(EXPERIMENT_RIG, phase1_frames=1)
     rig = stereonav.load_rig(EXPERIMENT_RIG)
     assert Navigator(rig, phase1_frames=200).phase == "calibrating"
-    with pytest.raises(InputError, match=r"RigConfig: \[prior\] baseline: missing key"):
+    with pytest.raises(InputError, match=r"RigConfig: \[prior\] (baseline|f): missing key"):
         Navigator(rig.replace(prior={}))
     assert math.isfinite(Navigator(rig).camera["baseline"].value)
 

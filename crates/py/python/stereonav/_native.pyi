@@ -54,6 +54,7 @@ __all__ = [
     "vehicle_parameter_names",
     "Rig",
     "rectify_points",
+    "rig_file_keys",
     "project",
     "triangulate",
     "encode_packet",
@@ -171,7 +172,7 @@ class Rig:
         """The rig file as TOML text."""
     def to_json(self) -> str:
         """The rig file's tables as JSON."""
-    def __eq__(self, other: object) -> bool: ...
+    def __eq__(self, value: object, /) -> bool: ...
     @property
     def width(self) -> int:
         """Image width, pixels."""

@@ -160,9 +160,9 @@ class RigConfig:
     is), write it with :meth:`to_toml`.
     """
 
-    __slots__ = ("_native", "_text")
+    __slots__ = ("_rig", "_text")
 
-    _native: _native.Rig
+    _rig: _native.Rig
     _text: Optional[str]
 
     def __init__(self) -> None:
@@ -176,7 +176,7 @@ class RigConfig:
         """Wrap a native rig; ``toml``, when given, is the text :meth:`to_toml` returns (a
         file as written, with its comments)."""
         self = object.__new__(cls)
-        object.__setattr__(self, "_native", native)
+        object.__setattr__(self, "_rig", native)
         object.__setattr__(self, "_text", toml)
         return self
 
@@ -220,16 +220,16 @@ class RigConfig:
     def tables(self) -> dict[str, Any]:
         """The rig file's tables as a dict of dicts (a fresh copy): every table and key of
         this rig, as :meth:`to_toml` writes them."""
-        return self._native.tables()
+        return self._rig.tables()
 
     def to_toml(self) -> str:
         """The rig file as TOML text (for a rig from :func:`stereonav.import_rig`, the file
         ``stereonav rig import`` writes, comments included)."""
-        return self._text if self._text is not None else self._native.to_toml()
+        return self._text if self._text is not None else self._rig.to_toml()
 
     def to_json(self) -> str:
         """The rig file's tables as JSON (the form of a log's ``/rig`` message)."""
-        return self._native.to_json()
+        return self._rig.to_json()
 
     def save(self, path: Union[str, os.PathLike[str]]) -> None:
         """Write :meth:`to_toml` to ``path``."""
@@ -290,12 +290,12 @@ class RigConfig:
 
     def __reduce__(self) -> tuple[Any, ...]:
         # Pickled as its TOML text (Dask workers, multiprocessing): read back by the same parser.
-        return (RigConfig.from_toml, (self._native.to_toml(), "RigConfig"))
+        return (RigConfig.from_toml, (self._rig.to_toml(), "RigConfig"))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, RigConfig):
             return NotImplemented
-        return self._native == other._native
+        return self._rig == other._rig
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -310,58 +310,58 @@ class RigConfig:
     @property
     def width(self) -> int:
         """``[camera] width``, pixels."""
-        return self._native.width
+        return self._rig.width
 
     @property
     def height(self) -> int:
         """``[camera] height``, pixels."""
-        return self._native.height
+        return self._rig.height
 
     @property
     def nominal(self) -> Camera:
         """The nominal camera: ``[camera]`` and ``[mount]``."""
-        return Camera.from_array(self._native.nominal)
+        return Camera.from_array(self._rig.nominal)
 
     @property
     def vehicle(self) -> Vehicle:
         """The nominal vehicle parameters (``[vehicle]``; the defaults without the table)."""
-        return Vehicle(*(float(v) for v in self._native.vehicle))
+        return Vehicle(*(float(v) for v in self._rig.vehicle))
 
     @property
     def estimate(self) -> tuple[str, ...]:
         """Names of the estimated parameters (the others stay at their nominal values)."""
-        return tuple(self._native.estimate)
+        return tuple(self._rig.estimate)
 
     @property
     def prior(self) -> dict[str, float]:
         """1-sigma prior of each estimated parameter."""
-        return dict(self._native.prior)
+        return dict(self._rig.prior)
 
     @property
     def pixel_noise(self) -> float:
         """Pixel noise of each of uL, vL, uR, vR (px, 1 sigma; of the raw features with lens
         tables)."""
-        return self._native.pixel_noise
+        return self._rig.pixel_noise
 
     @property
     def velocity_noise(self) -> float:
         """Odometry velocity noise per sample (m/s, 1 sigma)."""
-        return self._native.velocity_noise
+        return self._rig.velocity_noise
 
     @property
     def yaw_rate_noise(self) -> float:
         """Odometry yaw-rate noise per sample (rad/s, 1 sigma)."""
-        return self._native.yaw_rate_noise
+        return self._rig.yaw_rate_noise
 
     @property
     def velocity_tau(self) -> float:
         """Time constant of the odometry's velocity errors (s; 0: white)."""
-        return self._native.velocity_tau
+        return self._rig.velocity_tau
 
     @property
     def yaw_rate_tau(self) -> float:
         """Time constant of the odometry's yaw-rate errors (s; 0: white)."""
-        return self._native.yaw_rate_tau
+        return self._rig.yaw_rate_tau
 
     @property
     def lens(self) -> Optional[StereoLens]:
@@ -376,7 +376,7 @@ class RigConfig:
     def board(self) -> Board:
         """The board's registers for images the host detects on (``[board]``; the board's
         defaults without the table)."""
-        return Board(self._native.board_threshold, self._native.board_max_features)
+        return Board(self._rig.board_threshold, self._rig.board_max_features)
 
 
 def _lens(table: Mapping[str, Any]) -> Lens:
@@ -579,7 +579,7 @@ def _native_rig(rig: object) -> _native.Rig:
     """The native rig of a :class:`RigConfig` (the one it holds) or a rig file's path (read
     by the command line's reader): nothing is copied, so no table is lost on the way."""
     if isinstance(rig, RigConfig):
-        return rig._native
+        return rig._rig
     if isinstance(rig, (str, os.PathLike)):
         return _native.Rig.load(_rig_path(rig))
     raise InputTypeError(
