@@ -8,7 +8,9 @@
 //! * [`config`] (feature `alloc`): the rig configuration: nominal `C`, what to estimate, priors,
 //!   noise; [`rig_file`] (feature `std`) reads and writes it as TOML (section 3) and JSON.
 //! * [`lens`]: real lenses (section 1.1); [`stereo_rectify`]: a raw stereo calibration
-//!   rectified as OpenCV's `stereoRectify` does (section 5, `stereonav rig import`).
+//!   rectified as OpenCV's `stereoRectify` does (section 5, `stereonav rig import`);
+//!   [`import`] (feature `std`): rig files from Kalibr, ROS and OpenCV calibrations, for the
+//!   command line's `rig import` and Python's `stereonav.import_rig`.
 //! * [`odometry`]: odometry samples and their integration into motion (section 2).
 //! * [`handover`] (feature `alloc`): what the phases hand each other (frame pairs, phase 1's
 //!   calibration and map).
@@ -29,6 +31,8 @@ pub mod camera;
 pub mod config;
 #[cfg(feature = "alloc")]
 pub mod handover;
+#[cfg(feature = "std")]
+pub mod import;
 pub mod lens;
 pub mod odometry;
 pub mod rig;
