@@ -22,6 +22,7 @@ mod maps;
 mod montecarlo;
 mod navigator;
 mod rig;
+mod rig_import;
 mod simulation;
 mod stream;
 
@@ -271,6 +272,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<localization::LocalizeResult>()?;
     m.add_class::<localization::LocalizedFrames>()?;
     m.add_function(wrap_pyfunction!(localization::localize_log, m)?)?;
+    m.add_class::<rig_import::ImportedRig>()?;
+    m.add_function(wrap_pyfunction!(rig_import::import_rig_kalibr, m)?)?;
+    m.add_function(wrap_pyfunction!(rig_import::import_rig_ros, m)?)?;
+    m.add_function(wrap_pyfunction!(rig_import::import_rig_opencv, m)?)?;
     Ok(())
 }
 

@@ -4,16 +4,18 @@ From EuRoC V1_01's real ``sensor.yaml`` files (``../shared/data``; skipped witho
 Kalibr ``camchain.yaml`` (``T_cn_cnm1 = inverse(T_BS_cam1) T_BS_cam0``), an OpenCV
 ``FileStorage`` written by ``cv2.FileStorage`` (``R``, ``T`` from the same transform) and ROS
 ``camera_info`` files (``R``, ``P`` from ``cv2.stereoRectify``) are imported with the command
-line and compared with ``cv2.stereoRectify(..., flags=CALIB_ZERO_DISPARITY, alpha=0)``: ``f``,
+line and with ``stereonav.import_rig`` (the same file, byte for byte) and compared with ``cv2.stereoRectify(..., flags=CALIB_ZERO_DISPARITY, alpha=0)``: ``f``,
 ``cx``, ``cy`` within 0.01 px, the baseline within 1 um, ``R1``, ``R2`` within 1e-6, and
 ``stereonav.rectify_points`` with the imported rig equal to ``cv2.undistortPoints(p, K, D, R,
 P)`` iterated to convergence within 0.01 px over the image. A fisheye pair of our own making
 (752 x 480, k1..k4, a small rotation, 0.11 m) likewise against ``cv2.fisheye.stereoRectify``
 (``balance=0``) and ``cv2.fisheye.undistortPoints``; it needs no shared data.
+``stereonav.import_rig``'s argument checks and errors (the command line's message) close it.
 """
 
 from __future__ import annotations
 
+import os
 import pathlib
 import subprocess
 from typing import Any, Callable
@@ -192,6 +194,21 @@ def run_import(cli: pathlib.Path, args: list[str], out: pathlib.Path) -> dict[st
     return rig
 
 
+def python_import(
+    cli_out: pathlib.Path, python_out: pathlib.Path, **calibration: Any
+) -> tuple[dict[str, Any], pathlib.Path]:
+    """``stereonav.import_rig(**calibration)``: its ``to_toml()`` is the command line's file
+    ``cli_out`` byte for byte, and the rig is what that file loads as. Writes the text to
+    ``python_out`` and returns it parsed, for :func:`compare`."""
+    config = stereonav.import_rig(**calibration)
+    text = config.to_toml()
+    assert text.encode("utf-8") == cli_out.read_bytes()
+    assert config == stereonav.load_rig(cli_out)
+    python_out.write_text(text, encoding="utf-8")
+    rig: dict[str, Any] = tomllib.loads(text)
+    return rig, python_out
+
+
 def grid() -> Array:
     u, v = np.meshgrid(np.arange(0.0, SIZE[0], 8.0), np.arange(0.0, SIZE[1], 8.0))
     corners = np.array([[0.0, 0.0], [751.0, 0.0], [0.0, 479.0], [751.0, 479.0]])
@@ -243,8 +260,10 @@ CALIBRATIONS: dict[str, Callable[[], Calibration]] = {"radtan": euroc, "fisheye"
 def test_kalibr_camchain_equals_opencv(lens: str, cli: pathlib.Path, tmp_path: pathlib.Path) -> None:
     cal = CALIBRATIONS[lens]()
     out = tmp_path / "rig.toml"
-    rig = run_import(cli, ["--kalibr", str(write_kalibr(cal, tmp_path / "camchain.yaml"))], out)
+    camchain = write_kalibr(cal, tmp_path / "camchain.yaml")
+    rig = run_import(cli, ["--kalibr", str(camchain)], out)
     compare(f"kalibr-{lens}", cal, rig, out)
+    compare(f"python-kalibr-{lens}", cal, *python_import(out, tmp_path / "python.toml", kalibr=camchain))
 
 
 @pytest.mark.parametrize("lens", sorted(CALIBRATIONS))
@@ -255,6 +274,7 @@ def test_opencv_filestorage_equals_opencv(lens: str, cli: pathlib.Path, tmp_path
     assert stereo.read_text().startswith("%YAML")
     rig = run_import(cli, ["--opencv", str(stereo)], out)
     compare(f"opencv-{lens}", cal, rig, out)
+    compare(f"python-opencv-{lens}", cal, *python_import(out, tmp_path / "python.toml", opencv=str(stereo)))
 
 
 @pytest.mark.parametrize("lens", sorted(CALIBRATIONS))
@@ -264,6 +284,7 @@ def test_ros_camera_info_is_used_as_given(lens: str, cli: pathlib.Path, tmp_path
     left, right = write_ros(cal, tmp_path)
     rig = run_import(cli, ["--ros", str(left), str(right)], out)
     compare(f"ros-{lens}", cal, rig, out)
+    compare(f"python-ros-{lens}", cal, *python_import(out, tmp_path / "python.toml", ros=(left, right)))
     # As given: exactly OpenCV's numbers, to the digits the files hold.
     r1, _, p1, p2 = cal.opencv_rectify()
     assert rig["camera"]["f"] == float(p1[0, 0])
@@ -291,3 +312,73 @@ def test_the_old_opencv_header_and_its_errors(cli: pathlib.Path, tmp_path: pathl
     assert done.returncode != 0
     assert done.stderr.count("\n") == 1 and "T: 2 x 1 matrix with 3 numbers" in done.stderr, done.stderr
     assert not (tmp_path / "x.toml").exists()
+    # Python raises the command line's message.
+    with pytest.raises(stereonav.InputError) as raised:
+        stereonav.import_rig(opencv=broken)
+    assert done.stderr == f"stereonav: error: {raised.value}\n"
+
+
+def test_a_baseline_in_millimetres_warns_in_python_as_on_the_command_line(
+    cli: pathlib.Path, tmp_path: pathlib.Path
+) -> None:
+    """A baseline over 2 (metres expected): the command line's warning on stderr, the same
+    text as a ``UserWarning`` from Python, and the same file either way."""
+    cal = fisheye()
+    cal.t = cal.t * 1000.0
+    stereo = write_opencv(cal, tmp_path / "stereo-mm.yml")
+    out = tmp_path / "rig.toml"
+    done = subprocess.run(
+        [str(cli), "rig", "import", "--opencv", str(stereo), "--out", str(out)],
+        capture_output=True, text=True, timeout=60, check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.startswith("stereonav: warning: baseline 110.0"), done.stderr
+    with pytest.warns(UserWarning) as warned:
+        config = stereonav.import_rig(opencv=stereo)
+    assert [f"stereonav: warning: {w.message}\n" for w in warned] == [done.stderr]
+    assert config.to_toml().encode("utf-8") == out.read_bytes()
+
+
+def test_import_rig_takes_exactly_one_calibration_of_paths(tmp_path: pathlib.Path) -> None:
+    """Wrong combinations and types of arguments raise one line naming them; so does a file
+    that is not there."""
+    path = tmp_path / "camchain.yaml"
+    refused: list[tuple[Callable[[], object], type[stereonav.Error], str]] = [
+        (lambda: stereonav.import_rig(), stereonav.InputTypeError, "import_rig needs one of kalibr="),
+        (
+            lambda: stereonav.import_rig(kalibr=path, opencv=path),
+            stereonav.InputTypeError,
+            "import_rig takes one calibration, got kalibr and opencv",
+        ),
+        (
+            lambda: stereonav.import_rig(ros=str(path)),  # type: ignore[arg-type]
+            stereonav.InputTypeError,
+            "ros must be a pair of paths (left, right), got str",
+        ),
+        (
+            lambda: stereonav.import_rig(ros=(path,)),  # type: ignore[arg-type]
+            stereonav.InputError,
+            "ros must be two paths (left, right), got 1",
+        ),
+        (
+            lambda: stereonav.import_rig(kalibr=3),  # type: ignore[arg-type]
+            stereonav.InputTypeError,
+            "kalibr must be a path (str or os.PathLike), got int",
+        ),
+        (
+            lambda: stereonav.import_rig(ros=(path, b"right.yaml")),  # type: ignore[arg-type]
+            stereonav.InputTypeError,
+            "ros[1] must be a path (str or os.PathLike), got bytes",
+        ),
+        (
+            lambda: stereonav.import_rig(opencv=os.fsencode(path)),  # type: ignore[arg-type]
+            stereonav.InputTypeError,
+            "opencv must be a path (str or os.PathLike), got bytes",
+        ),
+        (lambda: stereonav.import_rig(kalibr=path), stereonav.InputError, f"cannot read {path}: "),
+    ]
+    for call, error, message in refused:
+        with pytest.raises(error) as raised:
+            call()
+        assert str(raised.value).startswith(message), (str(raised.value), message)
+        assert "\n" not in str(raised.value)

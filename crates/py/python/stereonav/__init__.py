@@ -51,6 +51,10 @@ Vehicle logs for analysis (:mod:`stereonav.logs`): :func:`read_log` reads a log 
 returns a :class:`VehicleLog` with what was logged -- the board's byte stream and its decoded
 frames, the odometry, the ``/rig`` rig and, from the simulator, the truth (:class:`LogTruth`).
 
+Rig files (:mod:`stereonav.rig`): :func:`load_rig` reads one into a :class:`RigConfig`;
+:func:`import_rig` makes one from a Kalibr, ROS or OpenCV stereo calibration, as
+``stereonav rig import`` does (the same code; ``to_toml()`` gives the same file).
+
 Exceptions derive from :class:`Error`: :class:`InputError` (also a ``ValueError``) for values
 out of range, :class:`InputTypeError` (also a ``TypeError``) for arguments of the wrong type.
 """
@@ -131,6 +135,7 @@ from .rig import (
     Triangulated,
     Vehicle,
     load_rig,
+    import_rig,
     project,
     rectify_points,
     triangulate,
@@ -203,6 +208,7 @@ __all__ = [
     "Triangulated",
     "Vehicle",
     "load_rig",
+    "import_rig",
     "rectify_points",
     "project",
     "triangulate",

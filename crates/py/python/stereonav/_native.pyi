@@ -20,6 +20,10 @@ __all__ = [
     "LogDamage",
     "LostSpan",
     "read_log",
+    "ImportedRig",
+    "import_rig_kalibr",
+    "import_rig_ros",
+    "import_rig_opencv",
     "Navigator",
     "ReplayResult",
     "ReplayFrames",
@@ -1035,3 +1039,33 @@ def read_log(path: str) -> LogContents:
     """Read a vehicle log whole with the GIL released; raises ``stereonav.InputError`` (the
     ``OSError`` as ``__cause__`` when the OS refused the file, the replay's message for a file
     without the vehicle topics)."""
+
+@final
+class ImportedRig:
+    """A calibration imported as a rig file (see ``stereonav.import_rig``)."""
+
+    @property
+    def rig(self) -> Rig:
+        """The rig, exactly as ``toml`` reads back."""
+    @property
+    def toml(self) -> str:
+        """The commented rig file, byte for byte what ``stereonav rig import --out`` writes."""
+    @property
+    def provenance(self) -> str:
+        """Where the calibration came from and how it was rectified."""
+    @property
+    def summary(self) -> str:
+        """The line ``stereonav rig import`` prints after the file's name."""
+    @property
+    def baseline_warning(self) -> str | None:
+        """The command line's warning for a baseline over 2 (metres expected), else None."""
+
+def import_rig_kalibr(path: str) -> ImportedRig:
+    """Kalibr's ``camchain.yaml`` as a rig; raises ``stereonav.InputError``."""
+
+def import_rig_ros(left: str, right: str) -> ImportedRig:
+    """The ROS ``camera_info`` files of the left and the right camera as a rig; raises
+    ``stereonav.InputError``."""
+
+def import_rig_opencv(path: str) -> ImportedRig:
+    """OpenCV's ``FileStorage`` stereo calibration as a rig; raises ``stereonav.InputError``."""

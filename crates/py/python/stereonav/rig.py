@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import warnings
 from collections.abc import Mapping
 from typing import Any, NamedTuple, Optional, Union, final
 
@@ -31,6 +32,7 @@ __all__ = [
     "Triangulated",
     "Vehicle",
     "load_rig",
+    "import_rig",
     "project",
     "triangulate",
 ]
@@ -519,6 +521,86 @@ def triangulate(
             _array("measurements", measurements, 4), _pose(pose), _camera(camera), float(sigma_px)
         )
     )
+
+
+def import_rig(
+    *,
+    kalibr: str | os.PathLike[str] | None = None,
+    ros: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
+    opencv: str | os.PathLike[str] | None = None,
+) -> RigConfig:
+    """A rig from a lab stereo calibration, as ``stereonav rig import`` makes it.
+
+    ``vehicle-interfaces.md`` section 5, the same library code as the command line
+    (``rig_model::import``): ``[camera]`` (the rectified ``f``, ``cx``, ``cy`` and baseline)
+    and ``[lens.left]`` / ``[lens.right]`` (the raw lenses and their rectification) from the
+    calibration, ``[mount]``, ``[estimate]``, ``[prior]`` and ``[noise]`` defaults to fill in.
+    Kalibr and OpenCV calibrations are rectified exactly as OpenCV's ``stereoRectify``
+    (``fisheye.stereoRectify`` for equidistant lenses) with ``CALIB_ZERO_DISPARITY`` and
+    ``alpha = 0``; ROS ``camera_info`` files are taken with their ``R`` and ``P`` as given.
+    ``docs/lenses.md`` says what each format must hold.
+
+    Parameters
+    ----------
+    kalibr : path, optional
+        Kalibr's ``camchain.yaml``: ``cam0`` left, ``cam1`` right.
+    ros : (path, path), optional
+        The ROS ``camera_info`` YAML of the left and of the right camera.
+    opencv : path, optional
+        OpenCV ``FileStorage`` YAML with ``K1 D1 K2 D2 R T``, ``width``, ``height`` (and
+        ``model: equidistant`` for ``cv2.fisheye.stereoCalibrate``'s).
+
+    Returns
+    -------
+    RigConfig
+        The rig, exactly as the file ``stereonav rig import --out`` writes reads back; its
+        ``to_toml()`` is that file, byte for byte (with the comments and the defaults marked
+        ``DEFAULT, fill in``).
+
+    Raises
+    ------
+    InputTypeError
+        Not exactly one of ``kalibr``, ``ros`` and ``opencv``; a path that is not a ``str`` or
+        ``os.PathLike``; ``ros`` not a pair.
+    InputError
+        ``ros`` with other than two paths; a calibration that cannot be imported, with the
+        command line's one-line message naming the file, the key and the problem.
+
+    Warns
+    -----
+    UserWarning
+        A baseline over 2: the rig file takes metres (the command line's warning).
+    """
+    given = [name for name, value in (("kalibr", kalibr), ("ros", ros), ("opencv", opencv)) if value is not None]
+    if len(given) > 1:
+        raise InputTypeError(f"import_rig takes one calibration, got {' and '.join(given)}")
+    if kalibr is not None:
+        imported = _native.import_rig_kalibr(_calibration_path("kalibr", kalibr))
+    elif ros is not None:
+        if isinstance(ros, (str, bytes, os.PathLike)) or not isinstance(ros, (tuple, list)):
+            raise InputTypeError(f"ros must be a pair of paths (left, right), got {type(ros).__qualname__}")
+        if len(ros) != 2:
+            raise InputError(f"ros must be two paths (left, right), got {len(ros)}")
+        imported = _native.import_rig_ros(_calibration_path("ros[0]", ros[0]), _calibration_path("ros[1]", ros[1]))
+    elif opencv is not None:
+        imported = _native.import_rig_opencv(_calibration_path("opencv", opencv))
+    else:
+        raise InputTypeError(
+            "import_rig needs one of kalibr=CAMCHAIN.yaml, ros=(LEFT.yaml, RIGHT.yaml) or opencv=STEREO.yml"
+        )
+    if imported.baseline_warning is not None:
+        warnings.warn(imported.baseline_warning, UserWarning, stacklevel=2)
+    return RigConfig._from_native(imported.rig, imported.toml)
+
+
+def _calibration_path(name: str, value: object) -> str:
+    """The ``str`` path of a calibration file argument, or :class:`InputTypeError`."""
+    if not isinstance(value, (str, os.PathLike)):
+        raise InputTypeError(f"{name} must be a path (str or os.PathLike), got {type(value).__qualname__}")
+    path = os.fspath(value)
+    if not isinstance(path, str):
+        raise InputTypeError(f"{name} must be a str path, got {type(path).__qualname__}")
+    return path
 
 
 def rectify_points(
