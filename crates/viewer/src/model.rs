@@ -616,6 +616,8 @@ impl Model {
                     nis: Vec::new(),
                     rejected: 0,
                     landmarks: landmark_count,
+                    // The localiser reports how many lamps it matched, not which.
+                    associations: None,
                 }
             })
             .collect();
@@ -1095,6 +1097,7 @@ mod tests {
             observed,
             rejected: 0,
             landmarks: 2,
+            associations: None,
         }
     }
 
