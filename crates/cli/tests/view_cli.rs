@@ -74,6 +74,54 @@ fn an_estimates_file_is_rendered_at_a_time_and_size() {
     assert_screenshot(&png, 1440, 900);
 }
 
+/// A log through EuRoC's radtan lenses, simulated and viewed by the command line: the
+/// screenshot is the library's picture of the same log and rig at the same time (the viewer's
+/// `tests/lens.rs` checks that picture: the rings taken through the lens, each around its
+/// accepted raw feature), a frame at which the navigator's update accepted observations.
+#[test]
+fn a_lens_log_is_rendered_headless_as_the_library_renders_it() {
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/scenarios/paper-experiment-radtan.toml");
+    let (log, rig) = (scratch("radtan.mcap"), scratch("radtan.rig.toml"));
+    ok(&stereonav(&[
+        "simulate",
+        s(&scenario),
+        "--out",
+        s(&log),
+        "--rig",
+        s(&rig),
+    ]));
+    let png = scratch("radtan.png");
+    let out = stereonav(&[
+        "view",
+        s(&log),
+        "--rig",
+        s(&rig),
+        "--screenshot",
+        s(&png),
+        "--time",
+        "15",
+    ]);
+    ok(&out);
+    assert!(out.stdout.is_empty() && out.stderr.is_empty());
+    assert_screenshot(&png, 1280, 800);
+
+    let options = viewer::LoadOptions {
+        rig: Some(rig_model::Rig::load(&rig).unwrap()),
+        ..viewer::LoadOptions::default()
+    };
+    let model = viewer::load(&log, &options, &mut |_, _| {}).unwrap();
+    assert!(model.lens.is_some());
+    let marks = model.marks(model.frame_at(15.0).unwrap());
+    assert!(marks.on_landmarks.unwrap() > 0, "{marks:?}");
+    let shot = viewer::screenshot(model, Some(15.0), viewer::MIN_SCREENSHOT_SIZE).unwrap();
+    let img = image::open(&png).unwrap().to_rgba8();
+    assert!(
+        img.as_raw() == &shot.frame.rgba,
+        "the command line's picture is the library's"
+    );
+}
+
 /// `--map`: the log localised on a map that `stereonav replay --save-map` made from it, shown
 /// while still lost and at the end; the map's one-line errors.
 #[test]

@@ -49,7 +49,7 @@ pub use reader::read_estimates;
 pub use summary::{end_summary_json, summary_json};
 pub use topics::Topic;
 pub use types::{
-    CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
-    Phase, Replay, ReplayEnd, TruthErrors,
+    Association, CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot,
+    ParamEstimate, Phase, Replay, ReplayEnd, TruthErrors,
 };
 pub use writer::{EstimatesWriter, write_estimates};

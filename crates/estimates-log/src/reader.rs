@@ -32,8 +32,8 @@ use serde_json::Value;
 use crate::error::MCAP_MAGIC;
 use crate::topics::{CAMERA, ELLIPSOID_SIGMAS, FRAME, LANDMARKS, NS_PER_US, SUMMARY, US_PER_S};
 use crate::{
-    CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
-    Phase, ReadError, Replay, TruthErrors,
+    Association, CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot,
+    ParamEstimate, Phase, ReadError, Replay, TruthErrors,
 };
 
 /// Reads the estimates file `EST.mcap` at `path` (written by [`crate::write_estimates`]) back
@@ -242,6 +242,16 @@ impl At<'_> {
             .iter()
             .map(|n| Ok((self.uint(n, "id")?, self.float(n, "nis")?)))
             .collect::<Result<Vec<(u64, f64)>, _>>()?;
+        // Absent in files written before the associations were recorded.
+        let associations = match v.get("associations") {
+            None => None,
+            Some(_) => Some(
+                self.array(v, "associations")?
+                    .iter()
+                    .map(|a| self.association(a))
+                    .collect::<Result<Vec<Association>, _>>()?,
+            ),
+        };
         Ok(FrameEstimate {
             t_us: self.uint(v, "t_us")?,
             phase: self.phase(v)?,
@@ -255,6 +265,23 @@ impl At<'_> {
             nis,
             rejected: u32::try_from(self.uint(v, "rejected")?).unwrap_or(u32::MAX),
             landmarks: usize::try_from(self.uint(v, "landmarks")?).unwrap_or(usize::MAX),
+            associations,
+        })
+    }
+
+    fn association(&self, a: &Value) -> Result<Association, ReadError> {
+        let index = |field: &str| -> Result<usize, ReadError> {
+            let i = self.uint(a, field)?;
+            usize::try_from(i).map_err(|_| self.bad(field, "a feature index", a.get(field)))
+        };
+        let accepted = a.get("accepted");
+        Ok(Association {
+            id: self.uint(a, "id")?,
+            left: index("left")?,
+            right: index("right")?,
+            accepted: accepted
+                .and_then(Value::as_bool)
+                .ok_or_else(|| self.bad("accepted", "true or false", accepted))?,
         })
     }
 

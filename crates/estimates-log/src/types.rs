@@ -110,6 +110,26 @@ pub struct FrameEstimate {
     pub rejected: u32,
     /// Landmarks in the map after the frame.
     pub landmarks: usize,
+    /// The observations of landmarks the filter's update was given at this frame (accepted
+    /// and rejected), each with the two board features it was made of: the navigator's own
+    /// association (`nav::Association`). `None` when the source did not record them (an
+    /// estimates file written before they were, a localisation run).
+    pub associations: Option<Vec<Association>>,
+}
+
+/// An observation of a landmark the filter's update was given at a frame, and the two board
+/// features it was made of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Association {
+    /// The landmark's id.
+    pub id: u64,
+    /// Index of the left feature in the frame's left list as the board sent it (the vehicle
+    /// log's `/fpga/features`, raw: before any lens mapping).
+    pub left: usize,
+    /// Index of the right feature in the frame's right list, likewise.
+    pub right: usize,
+    /// The gate accepted it (the landmark was updated with it); else it was rejected.
+    pub accepted: bool,
 }
 
 /// The camera parameters after a phase-1 solve or a phase-2 frame.

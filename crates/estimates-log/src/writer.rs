@@ -484,7 +484,7 @@ fn frame_info_json(frame: &FrameEstimate) -> Value {
         .iter()
         .map(|(id, nis)| json!({"id": id, "nis": nis}))
         .collect();
-    json!({
+    let mut info = json!({
         "t_us": frame.t_us,
         "phase": frame.phase.name(),
         "pose": {"x": x, "y": y, "theta": theta},
@@ -493,5 +493,14 @@ fn frame_info_json(frame: &FrameEstimate) -> Value {
         "observed": frame.observed,
         "nis": nis,
         "rejected": frame.rejected,
-    })
+    });
+    // Left out when not recorded: an empty list would say "no association".
+    if let (Some(associations), Some(object)) = (&frame.associations, info.as_object_mut()) {
+        let list: Vec<Value> = associations
+            .iter()
+            .map(|a| json!({"id": a.id, "left": a.left, "right": a.right, "accepted": a.accepted}))
+            .collect();
+        object.insert("associations".to_string(), Value::Array(list));
+    }
+    info
 }

@@ -6,9 +6,9 @@
 use std::path::PathBuf;
 
 use estimates_log::{
-    CameraSample, Consistency, Counts, EstimatesWriter, FrameEstimate, LandmarkEstimate,
-    MapSnapshot, ParamEstimate, Phase, ReadError, Replay, Topic, TruthErrors, read_estimates,
-    summary_json, topics, write_estimates,
+    Association, CameraSample, Consistency, Counts, EstimatesWriter, FrameEstimate,
+    LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, ReadError, Replay, Topic, TruthErrors,
+    read_estimates, summary_json, topics, write_estimates,
 };
 use rig_model::camera::Param;
 
@@ -63,6 +63,17 @@ fn synthetic() -> Replay {
                 nis: (0..i).map(|id| (id, 0.5 + id as f64)).collect(),
                 rejected: u32::try_from(i % 2).unwrap(),
                 landmarks: usize::try_from(i).unwrap(),
+                // Frame 0 as a file written before the associations were recorded.
+                associations: (i > 0).then(|| {
+                    (0..i)
+                        .map(|id| Association {
+                            id,
+                            left: usize::try_from(2 * id).unwrap(),
+                            right: usize::try_from(2 * id + 1).unwrap(),
+                            accepted: id + 1 < i || i % 2 == 0,
+                        })
+                        .collect()
+                }),
             }
         })
         .collect();

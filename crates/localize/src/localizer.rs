@@ -502,9 +502,9 @@ impl Localizer {
     fn observe(&mut self, t_us: u64, left: &[Pixel], right: &[Pixel]) -> Vec<Observation> {
         let rectified = track::rectify_features(&self.rig, left, right);
         let (left, right) = match &rectified {
-            Some((l, r, dropped)) => {
-                self.stats.features_unmapped += dropped;
-                (l.as_slice(), r.as_slice())
+            Some(r) => {
+                self.stats.features_unmapped += r.dropped;
+                (r.left.pixels.as_slice(), r.right.pixels.as_slice())
             }
             None => (left, right),
         };

@@ -178,12 +178,31 @@ pub struct FrameOutcome {
     pub removed: Vec<LandmarkId>,
     /// Tracks bound to an existing landmark by map matching at this frame.
     pub rematched: Vec<(u64, LandmarkId)>,
+    /// The observations of landmarks the filter's update was given at this frame (those of
+    /// [`FrameOutcome::accepted`] and [`FrameOutcome::rejected`]), each with the two board
+    /// features it was made of: the navigator's own association, feature by feature.
+    pub associations: Vec<Association>,
     /// Phase 1 solved at this frame (a new calibration estimate).
     pub solved: bool,
     /// The switch to phase 2 happened at this frame.
     pub switched: bool,
     /// The odometry did not cover the interval since the previous frame: the pose was held.
     pub no_odometry: bool,
+}
+
+/// A landmark's observation the filter's update was given at a frame, and the board features
+/// it was made of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Association {
+    /// The landmark.
+    pub landmark: LandmarkId,
+    /// Index of the left feature in the frame's left list as given to
+    /// [`Navigator::push_frame`] (the board's raw list, before any lens mapping).
+    pub left: usize,
+    /// Index of the right feature in the frame's right list, likewise.
+    pub right: usize,
+    /// The gate accepted it: the landmark was updated with it (else it was rejected).
+    pub accepted: bool,
 }
 
 /// Counters over the navigator's life.
@@ -750,9 +769,9 @@ impl Navigator {
         // model; a feature that cannot be mapped is dropped and counted.
         let rectified = track::rectify_features(&self.rig, left, right);
         let (left, right) = match &rectified {
-            Some((l, r, dropped)) => {
-                self.stats.features_unmapped += dropped;
-                (l.as_slice(), r.as_slice())
+            Some(r) => {
+                self.stats.features_unmapped += r.dropped;
+                (r.left.pixels.as_slice(), r.right.pixels.as_slice())
             }
             None => (left, right),
         };
@@ -774,6 +793,19 @@ impl Navigator {
             }
             self.phase2(&tracked, &mut outcome)?;
             self.smooth(&tracked, phase1_motion, &outcome);
+        }
+        // The associations name the features the front end was given: with a lens, the
+        // rectified ones, whose indices skip the features the lens dropped.
+        if let Some(r) = &rectified {
+            outcome.associations.retain_mut(|a| {
+                match (r.left.raw_index.get(a.left), r.right.raw_index.get(a.right)) {
+                    (Some(&l), Some(&rr)) => {
+                        (a.left, a.right) = (l, rr);
+                        true
+                    }
+                    _ => false,
+                }
+            });
         }
         Ok(outcome)
     }
@@ -994,6 +1026,19 @@ impl Navigator {
             .filter(|o| o.confirmed || self.candidates.landmark_of(o.track.0).is_some())
             .map(|o| (o.track.0, o.measurement))
             .collect();
+        // Each bound landmark's stereo match, taken before the update (which may remove a
+        // landmark and its binding): `(landmark, left, right)`, indices of the features given
+        // to the front end.
+        let matches = self.front_end.stereo_matches();
+        let bound: Vec<(LandmarkId, usize, usize)> = tracked
+            .observations
+            .iter()
+            .filter_map(|o| {
+                let id = self.candidates.landmark_of(o.track.0)?;
+                let m = matches.get(o.index)?;
+                Some((id, m.left, m.right))
+            })
+            .collect();
         let report = match self.candidates.observe(ekf, &frame) {
             Ok(r) => r,
             Err(e) => {
@@ -1008,6 +1053,20 @@ impl Navigator {
             .map(|g| (g.id, g.nis))
             .collect();
         outcome.rejected = report.update.rejected.iter().map(|g| g.id).collect();
+        let accepted = report.update.accepted.iter().map(|g| (g.id, true));
+        let rejected = report.update.rejected.iter().map(|g| (g.id, false));
+        outcome.associations = accepted
+            .chain(rejected)
+            .filter_map(|(id, accepted)| {
+                let &(_, left, right) = bound.iter().find(|(l, _, _)| *l == id)?;
+                Some(Association {
+                    landmark: id,
+                    left,
+                    right,
+                    accepted,
+                })
+            })
+            .collect();
         self.stats.rejected += outcome.rejected.len() as u64;
         outcome.added = report.added.iter().map(|(_, id)| *id).collect();
         outcome.removed = report.removed.iter().map(|(_, id)| *id).collect();

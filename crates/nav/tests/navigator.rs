@@ -144,3 +144,51 @@ fn frames_without_odometry_hold_the_pose() {
     assert_eq!(nav.stats().frames_without_odometry, 19);
     assert_eq!(nav.pose().0, rig_model::Pose2::default());
 }
+
+/// Through EuRoC's radtan lenses (the board's features raw, the rig's `[lens.*]` mapping them):
+/// every observation the update is given names the two raw board features it was made of,
+/// both images of one lamp, always the same lamp for a landmark; accepted and rejected as the
+/// outcome counts them.
+#[test]
+fn associations_name_the_raw_features_of_one_lamp() {
+    let run = run("paper-experiment-radtan");
+    assert!(run.rig.lens.is_some());
+    let mut nav = Navigator::new(run.rig.clone(), NavSettings::default()).unwrap();
+    let mut odom = run.odometry.iter().peekable();
+    let mut lamp_of: std::collections::BTreeMap<u64, u32> = Default::default();
+    let mut accepted_total = 0;
+    for f in &run.frames {
+        while let Some(s) = odom.next_if(|s| s.t_us <= f.t_us) {
+            nav.push_odometry(OdomSample {
+                t_us: s.t_us,
+                vx: s.vx,
+                vy: s.vy,
+                vtheta: s.vtheta,
+            })
+            .unwrap();
+        }
+        let o = nav
+            .push_frame(f.t_us, &pixels(&f.left), &pixels(&f.right))
+            .unwrap();
+        let accepted: Vec<_> = o.associations.iter().filter(|a| a.accepted).collect();
+        let ids: Vec<_> = accepted.iter().map(|a| a.landmark).collect();
+        let expected: Vec<_> = o.accepted.iter().map(|(id, _)| *id).collect();
+        assert_eq!(ids, expected, "frame {}", f.index);
+        assert_eq!(
+            o.associations.len() - accepted.len(),
+            o.rejected.len(),
+            "frame {}",
+            f.index
+        );
+        for a in &o.associations {
+            let left = f.left.features[a.left].lamp.unwrap();
+            let right = f.right.features[a.right].lamp.unwrap();
+            assert_eq!(left, right, "frame {}: {a:?}", f.index);
+            let lamp = *lamp_of.entry(a.landmark.0).or_insert(left);
+            assert_eq!(lamp, left, "frame {}: {a:?}", f.index);
+        }
+        accepted_total += accepted.len();
+    }
+    assert_eq!(lamp_of.len(), 5, "{lamp_of:?}");
+    assert!(accepted_total > 1000, "{accepted_total}");
+}

@@ -62,9 +62,9 @@ pub use calibration_json::{calibration_json, is_estimated, solve_status_name};
 pub use error::Error;
 pub use estimates_log::topics::FRAME as ESTIMATES_FRAME_TOPIC;
 pub use estimates_log::{
-    CameraSample, Consistency, Counts, EstimatesWriter, FrameEstimate, LandmarkEstimate,
-    MapSnapshot, ParamEstimate, Phase, ReadError as EstimatesError, Replay, ReplayEnd, TruthErrors,
-    end_summary_json, read_estimates, summary_json,
+    Association, CameraSample, Consistency, Counts, EstimatesWriter, FrameEstimate,
+    LandmarkEstimate, MapSnapshot, ParamEstimate, Phase, ReadError as EstimatesError, Replay,
+    ReplayEnd, TruthErrors, end_summary_json, read_estimates, summary_json,
 };
 pub use localization::{
     LocalizeEnd, LocalizeTruth, LocalizedFrame, LocalizedTrajectoryWriter, MAX_LAMP_SIGMA_M,

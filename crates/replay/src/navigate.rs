@@ -13,8 +13,8 @@ use vehicle_log::{TruthCamera, TruthPose};
 
 use crate::stream::{Input, LogStream, TruthStream};
 use crate::{
-    CameraSample, DecodedFrame, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
-    Phase, Replay, ReplayEnd, RigSource, TruthErrors,
+    Association, CameraSample, DecodedFrame, Error, FrameEstimate, LandmarkEstimate, MapSnapshot,
+    ParamEstimate, Phase, Replay, ReplayEnd, RigSource, TruthErrors,
 };
 
 /// Data time between two map snapshots in the replay, microseconds.
@@ -363,6 +363,18 @@ impl Replayer {
             nis: outcome.accepted.iter().map(|(id, v)| (id.0, *v)).collect(),
             rejected: u32::try_from(outcome.rejected.len()).unwrap_or(u32::MAX),
             landmarks,
+            associations: Some(
+                outcome
+                    .associations
+                    .iter()
+                    .map(|a| Association {
+                        id: a.landmark.0,
+                        left: a.left,
+                        right: a.right,
+                        accepted: a.accepted,
+                    })
+                    .collect(),
+            ),
         };
         let camera = (phase == Phase::Navigating || outcome.solved).then(|| {
             let (c, cov) = self.navigator.camera();

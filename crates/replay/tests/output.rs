@@ -12,8 +12,9 @@ use mcap::records::Record;
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use replay::{
-    CameraSample, Counts, Error, FrameEstimate, LandmarkEstimate, MapSnapshot, ParamEstimate,
-    Phase, Replay, TruthErrors, summary_json, write_estimates, write_summary, write_trajectory,
+    Association, CameraSample, Counts, Error, FrameEstimate, LandmarkEstimate, MapSnapshot,
+    ParamEstimate, Phase, Replay, TruthErrors, summary_json, write_estimates, write_summary,
+    write_trajectory,
 };
 use rig_model::Param;
 use serde_json::Value;
@@ -103,6 +104,18 @@ fn synthetic() -> Replay {
                     .iter()
                     .map(|&id| (id, 1.0 + 0.1 * id as f64))
                     .collect(),
+                associations: Some(
+                    observed
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &id)| Association {
+                            id,
+                            left: i,
+                            right: i + 1,
+                            accepted: true,
+                        })
+                        .collect(),
+                ),
                 observed,
                 rejected: (k % 4) as u32,
                 landmarks: if k < 10 { 0 } else { 3 },
@@ -847,6 +860,7 @@ fn long_trajectories_are_thinned_and_end_at_the_last_pose() {
             nis: vec![],
             rejected: 0,
             landmarks: 0,
+            associations: Some(vec![]),
         })
         .collect();
     let dir = write_all("long", &replay);

@@ -68,7 +68,8 @@ pub use odometry::OdometryBuffer;
 pub use pairs::{PairBuilder, PairSettings, PairStats, PairingScheme, labelled_pairs};
 #[cfg(feature = "alloc")]
 pub use stereo::{
-    Pixel, StereoMatch, StereoMatcher, StereoSettings, StereoStats, rectify_features,
+    Pixel, RectifiedFeatures, RectifiedSide, StereoMatch, StereoMatcher, StereoSettings,
+    StereoStats, rectify_features,
 };
 #[cfg(feature = "alloc")]
 pub use tracker::{

@@ -60,33 +60,58 @@ impl Pixel {
     }
 }
 
+/// One camera's board features mapped through its lens ([`rectify_features`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RectifiedSide {
+    /// The features the lens could map, rectified pixels, in the board's order.
+    pub pixels: Vec<Pixel>,
+    /// For each of them, its index in the board's (raw) list: the features dropped leave gaps.
+    pub raw_index: Vec<usize>,
+}
+
+/// Both cameras' board features mapped through the rig's lenses ([`rectify_features`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RectifiedFeatures {
+    /// The left camera's.
+    pub left: RectifiedSide,
+    /// The right camera's.
+    pub right: RectifiedSide,
+    /// Features the lens could not map (dropped), both cameras.
+    pub dropped: u64,
+}
+
 /// The board's raw features of both cameras mapped into the rectified model through the
-/// rig's lens (vehicle-interfaces.md 1.1), with the count of features the lens could not map
-/// (dropped); `None` for a rig without `[lens]` tables (its features are rectified already).
+/// rig's lens (vehicle-interfaces.md 1.1), each with its index in the board's list, and the
+/// count of features the lens could not map (dropped); `None` for a rig without `[lens]`
+/// tables (its features are rectified already).
 pub fn rectify_features(
     rig: &rig_model::config::Rig,
     left: &[Pixel],
     right: &[Pixel],
-) -> Option<(Vec<Pixel>, Vec<Pixel>, u64)> {
+) -> Option<RectifiedFeatures> {
     let lens = rig.lens.as_ref()?;
     let c = &rig.nominal;
     let mut dropped = 0;
-    let mut map = |lens: &rig_model::lens::Lens, side: &[Pixel]| -> Vec<Pixel> {
-        side.iter()
-            .filter_map(|p| {
-                let r = lens
-                    .rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
-                    .map(|q| Pixel { u: q.x, v: q.y });
-                if r.is_none() {
-                    dropped += 1;
+    let mut map = |lens: &rig_model::lens::Lens, side: &[Pixel]| -> RectifiedSide {
+        let mut out = RectifiedSide::default();
+        for (i, p) in side.iter().enumerate() {
+            match lens.rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy) {
+                Some(q) => {
+                    out.pixels.push(Pixel { u: q.x, v: q.y });
+                    out.raw_index.push(i);
                 }
-                r
-            })
-            .collect()
+                None => dropped += 1,
+            }
+        }
+        out
     };
-    let l = map(&lens.left, left);
-    let r = map(&lens.right, right);
-    Some((l, r, dropped))
+    let left = map(&lens.left, left);
+    let right = map(&lens.right, right);
+    Some(RectifiedFeatures {
+        left,
+        right,
+        dropped,
+    })
 }
 
 /// The largest row-noise gain of one image's features (1 without a lens).

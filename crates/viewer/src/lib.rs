@@ -3,9 +3,10 @@
 //! file written by `stereonav replay`, shown in egui.
 //!
 //! - **Images**: the left and right image planes with the board's features at the current
-//!   frame, marked by landmark association (recovered by projecting the map, see
-//!   [`model::ASSOCIATION_RADIUS_PX`]), and the landmarks' projections. The logs carry no
-//!   images, so the planes are drawn empty.
+//!   frame, marked by the navigator's own associations (`FrameEstimate::associations`), and
+//!   the landmarks' projections, taken through the rig's lenses when it has them so that both
+//!   are in the board's raw pixels ([`Model::marks`]). The logs carry no images, so the planes
+//!   are drawn empty.
 //! - **Map**: the trajectory (estimate, and the simulator's truth when the log has it), the
 //!   landmarks with their 3-sigma covariance ellipses, the robot with its pose ellipse, and
 //!   the two cameras' fields of view on the lamp plane.

@@ -81,7 +81,7 @@ pub fn load(
         let nominal = rig
             .as_ref()
             .map(|r| (r.nominal, [f64::from(r.width), f64::from(r.height)]));
-        return Ok(Model::from_replay(
+        let mut model = Model::from_replay(
             path.to_path_buf(),
             SourceKind::VehicleLog,
             replay,
@@ -89,7 +89,9 @@ pub fn load(
             truth,
             nominal,
             truth_camera,
-        ));
+        );
+        model.lens = rig.and_then(|r| r.lens);
+        return Ok(model);
     }
     if log
         .ignored_topics
@@ -146,7 +148,7 @@ fn localize(
         },
         progress,
     )?;
-    Ok(Model::from_localization(
+    let mut model = Model::from_localization(
         path.to_path_buf(),
         map_path.to_path_buf(),
         frames,
@@ -154,7 +156,9 @@ fn localize(
         features,
         truth,
         nominal,
-    ))
+    );
+    model.lens = rig.lens;
+    Ok(model)
 }
 
 /// The board's stream (the `/fpga/features` chunks concatenated in log order) decoded into

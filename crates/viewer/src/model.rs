@@ -16,11 +16,12 @@ use replay::{
     MapSnapshot, Phase, Replay,
 };
 use rig_model::camera::{CameraParams, Param, Pose2};
+use rig_model::lens::StereoLens;
 
-/// A feature is marked as an observation of a landmark when it lies within this distance of
-/// the landmark's projection at the frame's estimated pose and camera, pixels. The association
-/// itself is the navigator's and is not logged; this is how the viewer recovers it (the pixel
-/// noise of the board is a fraction of a pixel, the pose after the update is good to about one).
+/// In a localisation run, a feature is marked as near a map lamp when it lies within this
+/// distance of the lamp's projection at the frame's pose, pixels: the localiser reports how many
+/// lamps it matched, not which. A replay's features are marked by the navigator's own
+/// associations instead ([`FrameEstimate::associations`]).
 pub const ASSOCIATION_RADIUS_PX: f64 = 4.0;
 
 /// Most points of one plotted series; longer series are thinned by time (see [`thin_by_time`]).
@@ -140,16 +141,20 @@ pub struct NisSeries {
     pub window: usize,
 }
 
-/// A feature of one image at the current frame, with what the viewer made of it.
+/// A board feature of one image at the current frame (raw pixels, as the board sent it), with
+/// what the navigator made of it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FeatureMark {
     /// Column, pixels.
     pub u: f32,
     /// Row, pixels.
     pub v: f32,
-    /// The landmark whose projection it lies near ([`ASSOCIATION_RADIUS_PX`]), if any.
+    /// The landmark the navigator's update was given it as an observation of at this frame
+    /// ([`FrameEstimate::associations`]); in a localisation run, the map lamp whose projection
+    /// it lies near ([`ASSOCIATION_RADIUS_PX`]).
     pub landmark: Option<u64>,
-    /// That landmark was updated (its observation accepted) at this frame.
+    /// The observation was accepted: the landmark was updated with it (else the gate rejected
+    /// it; in a localisation run, never set).
     pub observed: bool,
 }
 
@@ -158,15 +163,17 @@ pub struct FeatureMark {
 pub struct Projection {
     /// The landmark.
     pub id: u64,
-    /// Column, pixels.
+    /// Column, pixels: in the board's raw image when the rig has lens tables
+    /// ([`Model::lens`]), where the features are.
     pub u: f64,
-    /// Row, pixels.
+    /// Row, pixels, likewise.
     pub v: f64,
     /// It was updated at this frame.
     pub observed: bool,
 }
 
-/// The two images at one frame: features marked by association, and the landmarks' projections.
+/// The two images at one frame: the features marked by the navigator's associations, and the
+/// landmarks' projections, both in the board's pixels.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameMarks {
     /// Left image features.
@@ -177,6 +184,11 @@ pub struct FrameMarks {
     pub projected_left: Vec<Projection>,
     /// Landmarks projected into the right image (inside it).
     pub projected_right: Vec<Projection>,
+    /// The features of each image the navigator's update took as observations of landmarks
+    /// at this frame (its accepted associations: one left and one right feature each); `None`
+    /// when the source does not say which (an estimates file without associations, or without
+    /// features; a localisation run).
+    pub on_landmarks: Option<usize>,
 }
 
 /// Everything the viewer shows (see the module docs).
@@ -194,6 +206,11 @@ pub struct Model {
     pub image_size: [f64; 2],
     /// The rig's nominal camera, when known (vehicle logs).
     pub nominal: Option<CameraParams>,
+    /// The rig's lenses (`[lens.left]`, `[lens.right]`), when it has them: the board's
+    /// features are raw pixels, and the landmarks' projections (in the rectified model whose
+    /// `f, cx, cy` are [`Model::nominal`]'s, vehicle-interfaces.md 1.1) are taken back through
+    /// them to be drawn among the features. Unused without a nominal camera.
+    pub lens: Option<StereoLens>,
     /// The board's features (none for an estimates file).
     pub features: Features,
     /// The simulator's truth, when the log has it.
@@ -544,6 +561,7 @@ impl Model {
             t0_us,
             image_size,
             nominal: nominal.map(|(c, _)| c),
+            lens: None,
             features,
             truth,
             params,
@@ -616,6 +634,8 @@ impl Model {
                     nis: Vec::new(),
                     rejected: 0,
                     landmarks: landmark_count,
+                    // The localiser reports how many lamps it matched, not which.
+                    associations: None,
                 }
             })
             .collect();
@@ -944,9 +964,12 @@ impl Model {
         find(map).or_else(|| find(&self.replay.landmarks))
     }
 
-    /// The two images at frame `index`: the board's features marked by association (see
-    /// [`ASSOCIATION_RADIUS_PX`]) and the landmarks of the map projected at the frame's
-    /// estimated pose and camera. Work: the frame's features times the landmarks in view.
+    /// The two images at frame `index`: the board's features marked by the navigator's
+    /// associations at that frame ([`FrameEstimate::associations`]; in a localisation run, by
+    /// nearness to a map lamp's projection, [`ASSOCIATION_RADIUS_PX`]) and the landmarks of the
+    /// map projected at the frame's estimated pose and camera, taken through the rig's lenses
+    /// when it has them ([`Model::lens`]), so that both are in the board's pixels. Work: the
+    /// frame's features and associations, plus the landmarks in view.
     pub fn marks(&self, index: usize) -> FrameMarks {
         let Some(frame) = self.frame(index) else {
             return FrameMarks::default();
@@ -963,6 +986,24 @@ impl Model {
             right: right.iter().map(unmarked).collect(),
             ..FrameMarks::default()
         };
+        let has_features = !marks.left.is_empty() || !marks.right.is_empty();
+        if let Some(associations) = &frame.associations
+            && has_features
+        {
+            let mut on = 0;
+            for a in associations {
+                let (Some(l), Some(r)) = (marks.left.get_mut(a.left), marks.right.get_mut(a.right))
+                else {
+                    continue;
+                };
+                for f in [l, r] {
+                    f.landmark = Some(a.id);
+                    f.observed = a.accepted;
+                }
+                on += usize::from(a.accepted);
+            }
+            marks.on_landmarks = Some(on);
+        }
         let Some(camera) = self.camera_at(frame.t_us) else {
             return marks;
         };
@@ -970,12 +1011,29 @@ impl Model {
         let map = self.map_at(frame.t_us);
         let [w, h] = self.image_size;
         let inside = |u: f64, v: f64| (0.0..w).contains(&u) && (0.0..h).contains(&v);
-        let observed_ids = frame
+        // Landmarks the frame names that the last snapshot predates (drawn from the final map).
+        let mut named: Vec<u64> = frame
             .observed
             .iter()
-            .filter(|id| map.binary_search_by_key(*id, |l| l.id).is_err())
-            .copied();
-        let ids = map.iter().map(|l| l.id).chain(observed_ids);
+            .copied()
+            .chain(frame.associations.iter().flatten().map(|a| a.id))
+            .filter(|id| map.binary_search_by_key(id, |l| l.id).is_err())
+            .collect();
+        named.sort_unstable();
+        named.dedup();
+        let ids = map.iter().map(|l| l.id).chain(named);
+        // The rectified model's pixels into the board's raw ones. The rings are markers of a
+        // fixed size on the screen, not uncertainties, so only their centres go through the
+        // lens (no covariance to carry through its Jacobian).
+        let lens = self.lens.as_ref().zip(self.nominal.as_ref());
+        let to_raw = |left: bool, u: f64, v: f64| -> Option<(f64, f64)> {
+            let Some((lens, c)) = lens else {
+                return Some((u, v));
+            };
+            let side = if left { &lens.left } else { &lens.right };
+            let raw = side.unrectify(nalgebra::Vector2::new(u, v), c.f, c.cx, c.cy)?;
+            (raw.x.is_finite() && raw.y.is_finite()).then_some((raw.x, raw.y))
+        };
         for id in ids {
             let Some(p) = self.landmark_position(map, id) else {
                 continue;
@@ -984,26 +1042,23 @@ impl Model {
                 continue;
             };
             let observed = frame.observed.contains(&id);
-            let (ul, vl, ur, vr) = (z[0], z[1], z[2], z[3]);
-            if inside(ul, vl) {
-                marks.projected_left.push(Projection {
-                    id,
-                    u: ul,
-                    v: vl,
-                    observed,
-                });
+            if let Some((u, v)) = to_raw(true, z[0], z[1])
+                && inside(u, v)
+            {
+                marks.projected_left.push(Projection { id, u, v, observed });
             }
-            if inside(ur, vr) {
-                marks.projected_right.push(Projection {
-                    id,
-                    u: ur,
-                    v: vr,
-                    observed,
-                });
+            if let Some((u, v)) = to_raw(false, z[2], z[3])
+                && inside(u, v)
+            {
+                marks
+                    .projected_right
+                    .push(Projection { id, u, v, observed });
             }
         }
-        associate(&mut marks.left, &marks.projected_left);
-        associate(&mut marks.right, &marks.projected_right);
+        if self.localization.is_some() {
+            associate(&mut marks.left, &marks.projected_left);
+            associate(&mut marks.right, &marks.projected_right);
+        }
         marks
     }
 
@@ -1045,7 +1100,8 @@ impl Model {
     }
 }
 
-/// Marks each feature with the nearest projection within [`ASSOCIATION_RADIUS_PX`].
+/// Marks each feature with the nearest projection within [`ASSOCIATION_RADIUS_PX`] (a
+/// localisation run: its localiser does not say which features it matched), never as observed.
 fn associate(features: &mut [FeatureMark], projections: &[Projection]) {
     let r2 = ASSOCIATION_RADIUS_PX * ASSOCIATION_RADIUS_PX;
     for f in features {
@@ -1059,7 +1115,6 @@ fn associate(features: &mut [FeatureMark], projections: &[Projection]) {
             .min_by(|a, b| a.0.total_cmp(&b.0));
         if let Some((_, p)) = nearest {
             f.landmark = Some(p.id);
-            f.observed = p.observed;
         }
     }
 }
@@ -1085,15 +1140,30 @@ mod tests {
         }
     }
 
-    fn frame(t_us: u64, pose: [f64; 3], observed: Vec<u64>) -> FrameEstimate {
+    /// A frame whose update accepted the observations of `observed` and rejected those of
+    /// `rejected`; landmark `id`'s features are at index `id` of both images (see [`model`]).
+    fn frame(t_us: u64, pose: [f64; 3], observed: Vec<u64>, rejected: Vec<u64>) -> FrameEstimate {
+        let association = |id: u64, accepted: bool| replay::Association {
+            id,
+            left: id as usize,
+            right: id as usize,
+            accepted,
+        };
         FrameEstimate {
             t_us,
             phase: Phase::Navigating,
             pose,
             pose_covariance: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
             nis: observed.iter().map(|id| (*id, 4.0)).collect(),
+            associations: Some(
+                observed
+                    .iter()
+                    .map(|id| association(*id, true))
+                    .chain(rejected.iter().map(|id| association(*id, false)))
+                    .collect(),
+            ),
+            rejected: rejected.len() as u32,
             observed,
-            rejected: 0,
             landmarks: 2,
         }
     }
@@ -1119,13 +1189,14 @@ mod tests {
     }
 
     /// Two frames 1 s apart, two landmarks 2 m above the robot (one added after the first
-    /// snapshot), features at the landmarks' projections and one of clutter.
+    /// snapshot), features at the landmarks' projections and one of clutter (index 0); at the
+    /// second frame the gate rejected landmark 1's observation.
     fn model(pitch: f64) -> Model {
         let c = camera(pitch);
         let lamps = [landmark(1, [0.2, 0.1, 2.8]), landmark(2, [-0.1, -0.2, 2.8])];
         let frames = vec![
-            frame(1_000_000, [0.0, 0.0, 0.0], vec![1]),
-            frame(2_000_000, [0.1, 0.0, 0.1], vec![2]),
+            frame(1_000_000, [0.0, 0.0, 0.0], vec![1], vec![]),
+            frame(2_000_000, [0.1, 0.0, 0.1], vec![2], vec![1]),
         ];
         let replay = Replay {
             camera: frames
@@ -1355,7 +1426,7 @@ mod tests {
     }
 
     #[test]
-    fn features_near_a_projection_are_marked_with_its_landmark() {
+    fn features_are_marked_by_the_navigators_associations() {
         let m = model(0.0);
         let first = m.marks(0);
         assert_eq!(first.left.len(), 3);
@@ -1367,8 +1438,9 @@ mod tests {
             (Some(1), true)
         );
         assert_eq!(first.left[2].landmark, None, "landmark 2 is not mapped yet");
+        assert_eq!(first.on_landmarks, Some(1));
         // Frame 1: landmark 2 was updated although the snapshot predates it: its position
-        // comes from the final map. Landmark 1 is mapped but was not updated.
+        // comes from the final map. Landmark 1's observation was rejected by the gate.
         let second = m.marks(1);
         assert_eq!(second.projected_right.len(), 2);
         assert_eq!(
@@ -1380,7 +1452,82 @@ mod tests {
             (Some(2), true)
         );
         assert_eq!(second.right[0].landmark, None);
+        assert_eq!(second.on_landmarks, Some(1), "the rejected one is not on");
         assert_eq!(m.marks(7), FrameMarks::default());
+    }
+
+    /// Nearness is not association: a feature on a landmark's ring that the navigator did not
+    /// give the update is not marked, and a frame whose source did not record the
+    /// associations has no count (not a 0).
+    #[test]
+    fn nearness_alone_marks_nothing_and_unrecorded_associations_have_no_count() {
+        let mut m = model(0.0);
+        m.replay.frames[0].associations = Some(Vec::new());
+        let marks = m.marks(0);
+        assert_eq!(marks.projected_left.len(), 1);
+        assert!(marks.left.iter().all(|f| f.landmark.is_none()));
+        assert_eq!(marks.on_landmarks, Some(0));
+        m.replay.frames[0].associations = None;
+        assert_eq!(m.marks(0).on_landmarks, None);
+        m.features = Features::default();
+        m.replay.frames[1].associations = Some(Vec::new());
+        assert_eq!(
+            m.marks(1).on_landmarks,
+            None,
+            "no features: nothing to count"
+        );
+    }
+
+    /// With lens tables the rings are the rectified projections taken back through each
+    /// camera's lens, with the nominal camera's `f, cx, cy`.
+    #[test]
+    fn rings_go_through_the_lens_into_the_raw_image() {
+        use rig_model::lens::{Lens, LensModel};
+        let lens = |fx: f64, k1: f64| Lens {
+            model: LensModel::PlumbBob {
+                k1,
+                k2: 0.07,
+                p1: 0.0,
+                p2: 0.0,
+                k3: 0.0,
+            },
+            fx,
+            fy: fx,
+            cx: 370.0,
+            cy: 245.0,
+            rectification: nalgebra::Matrix3::identity(),
+        };
+        let stereo = StereoLens {
+            left: lens(720.0, -0.28),
+            right: lens(715.0, -0.2),
+        };
+        let plain = model(0.0);
+        let mut through = model(0.0);
+        through.lens = Some(stereo);
+        let c = camera(0.0);
+        for i in 0..2 {
+            let (a, b) = (plain.marks(i), through.marks(i));
+            assert_eq!(a.projected_left.len(), b.projected_left.len());
+            for (side, pa, pb) in [
+                (&stereo.left, &a.projected_left, &b.projected_left),
+                (&stereo.right, &a.projected_right, &b.projected_right),
+            ] {
+                for (p, q) in pa.iter().zip(pb) {
+                    let raw = side
+                        .unrectify(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy)
+                        .unwrap();
+                    assert_eq!(p.id, q.id);
+                    assert!((raw.x - q.u).abs() < 1e-9 && (raw.y - q.v).abs() < 1e-9);
+                    assert!(
+                        (p.u - q.u).abs() + (p.v - q.v).abs() > 1.0,
+                        "the lens moved it"
+                    );
+                }
+            }
+            // The features are marked by the associations, wherever the rings are.
+            assert_eq!(a.left, b.left);
+            assert_eq!(a.on_landmarks, b.on_landmarks);
+        }
     }
 
     #[test]

@@ -637,6 +637,24 @@ impl Viewer {
         let height = (width * aspect).min(ui.available_height() * 0.45);
         let width = height / aspect;
         let no_features = self.model.features.frames.is_empty();
+        let current = frame.and_then(|i| self.model.frame(i));
+        // What the source says of the frame's observations: the navigator's associations (a
+        // replay), or, in an estimates file without features, the landmarks updated. Never a
+        // count the viewer made up: a localisation run's count of map lamps matched is in the
+        // header (the localiser does not say which features).
+        let observations = match (marks.and_then(|m| m.on_landmarks), &self.model.localization) {
+            (_, Some(_)) => None,
+            (Some(on), None) => Some(format!("{on} on landmarks")),
+            (None, None) if no_features => {
+                current.map(|f| format!("{} landmarks updated", f.observed.len()))
+            }
+            (None, None) => None,
+        };
+        let landmarks = if self.model.localization.is_some() {
+            "map lamps"
+        } else {
+            "landmarks"
+        };
         ui.horizontal(|ui| {
             for side in [Side::Left, Side::Right] {
                 ui.vertical(|ui| {
@@ -645,13 +663,15 @@ impl Viewer {
                         (Some(m), Side::Right) => (&m.right[..], &m.projected_right[..]),
                         (None, _) => (&[][..], &[][..]),
                     };
-                    let on = features.iter().filter(|f| f.landmark.is_some()).count();
-                    ui.label(format!(
-                        "{} image: {} features, {on} on landmarks, {} landmarks in view",
-                        side.name(),
-                        features.len(),
-                        projected.len()
-                    ));
+                    let mut label = format!("{} image: ", side.name());
+                    if !no_features {
+                        label.push_str(&format!("{} features, ", features.len()));
+                    }
+                    if let Some(o) = &observations {
+                        label.push_str(&format!("{o}, "));
+                    }
+                    label.push_str(&format!("{} {landmarks} in view", projected.len()));
+                    ui.label(label);
                     let (rect, _) = ui.allocate_exact_size(vec2(width, height), Sense::hover());
                     match side {
                         Side::Left => self.regions.left_image = rect,
@@ -717,16 +737,23 @@ impl Viewer {
                 ui.painter().circle_filled(r.center(), 3.5, colour);
                 ui.label(text);
             };
+            // Where the rings are: projected in the rectified model, or taken on through the
+            // rig's lenses into the board's raw pixels.
+            let rings = if self.model.lens.is_some() {
+                "through the lens"
+            } else {
+                "projected"
+            };
             if self.model.localization.is_some() {
                 // The localiser reports how many lamps it matched, not which.
                 key(ui, MAPPED, "near a map lamp");
                 key(ui, UNASSOCIATED, "no map lamp");
-                ui.label("(rings: the map's lamps projected at the pose)");
+                ui.label(format!("(rings: the map's lamps at the pose, {rings})"));
             } else {
                 key(ui, UPDATED, "observation accepted");
-                key(ui, MAPPED, "near a landmark, not updated");
+                key(ui, MAPPED, "rejected by the gate");
                 key(ui, UNASSOCIATED, "no landmark");
-                ui.label("(rings: landmarks projected)");
+                ui.label(format!("(rings: landmarks {rings}, green if updated)"));
             }
         });
     }
