@@ -267,6 +267,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<logs::LostSpan>()?;
     m.add_function(wrap_pyfunction!(logs::read_log, m)?)?;
     m.add("MAP_VERSION", map_file::VERSION)?;
+    m.add("ODOMETRY_LOOKAHEAD_US", nav::ODOMETRY_LOOKAHEAD_US)?;
     m.add_function(wrap_pyfunction!(maps::read_map, m)?)?;
     m.add_function(wrap_pyfunction!(maps::write_map, m)?)?;
     m.add_class::<localization::LocalizeResult>()?;

@@ -333,15 +333,19 @@ def test_a_rig_with_every_table_replays_as_the_command_line_does(
 # --- Navigator, calibrate_log, localize and the fleet on a real-lens log ------------------------------
 
 
-def test_the_navigator_fed_by_hand_maps_as_the_command_line_does(cli: pathlib.Path, scratch: pathlib.Path) -> None:
-    log, rig = simulated(cli, scratch, "paper-experiment-radtan")
+@pytest.mark.parametrize("name", ["paper-experiment-radtan", "paper-experiment-fisheye", "paper-experiment-vehicle"])
+def test_the_navigator_fed_by_hand_maps_as_the_command_line_does(
+    cli: pathlib.Path, scratch: pathlib.Path, name: str
+) -> None:
+    log, rig = simulated(cli, scratch, name)
     expected = cli_summary(cli, "replay", log, "--rig", rig)
     data = stereonav.read_log(log)
     nav = stereonav.Navigator(rig)
     odometry = data.odometry
     start = 0
     for frame in sorted(data.frames, key=lambda f: f.t_us):
-        end = int(np.searchsorted(odometry["t_us"], frame.t_us, side="right"))
+        # As the replay feeds a log's odometry: up to the look-ahead past the frame's stamp.
+        end = int(np.searchsorted(odometry["t_us"], frame.t_us + stereonav.ODOMETRY_LOOKAHEAD_US, side="right"))
         nav.push_odometry_samples(odometry[start:end])
         start = end
         nav.push_frame(frame.t_us, frame.left, frame.right)

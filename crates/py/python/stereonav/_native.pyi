@@ -11,6 +11,7 @@ import numpy.typing as npt
 __all__ = [
     "__version__",
     "MAP_VERSION",
+    "ODOMETRY_LOOKAHEAD_US",
     "read_map",
     "write_map",
     "LocalizeResult",
@@ -825,6 +826,7 @@ def replay(
 
 #: The map format version written, and the newest read (docs/maps.md).
 MAP_VERSION: Final[int]
+ODOMETRY_LOOKAHEAD_US: Final[int]
 
 def read_map(path: str) -> str:
     """The JSON body of a map file after every check of ``map_file::Map::load``; raises

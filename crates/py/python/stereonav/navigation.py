@@ -44,6 +44,7 @@ __all__ = [
     "FRAME_INFO_DTYPE",
     "MAP_LANDMARK_DTYPE",
     "NIS_DTYPE",
+    "ODOMETRY_LOOKAHEAD_US",
     "PHASES",
     "CameraHistory",
     "FrameOutcome",
@@ -58,6 +59,11 @@ __all__ = [
 #: ``"calibrating"`` (phase 1: self-calibration, dead reckoning), code 1 is ``"navigating"``
 #: (phase 2: EKF SLAM).
 PHASES: tuple[str, ...] = tuple(_native.phase_names())
+#: How far past a frame's timestamp a log's replay feeds the odometry before the frame,
+#: microseconds: a frame stamped ``t`` was exposed at odometry time ``t - time_offset``
+#: (``vehicle-interfaces.md`` 1.2), after ``t`` for a negative offset. Feeding a
+#: :class:`Navigator` the same way gives exactly what :func:`replay` gives.
+ODOMETRY_LOOKAHEAD_US: int = _native.ODOMETRY_LOOKAHEAD_US
 #: One landmark of the map: ``id`` (``<u8``, stable for its life), its world position ``x, y,
 #: z`` (``<f8``, metres), its per-axis 1-sigma ``sx, sy, sz`` (``<f8``, metres), its position
 #: ``covariance`` (``<f8``, shape (3, 3), m**2) and ``observations`` (``<u8``: the measurement
@@ -586,7 +592,9 @@ class Navigator:
 
     Feed the odometry up to a frame's time (:meth:`push_odometry`) before the frame
     (:meth:`push_frame`); both must come in time order. The world frame is the robot at the
-    first frame.
+    first frame. A log's replay feeds the odometry up to :data:`ODOMETRY_LOOKAHEAD_US` past
+    each frame's time (the board's clock offset may put the exposure after the stamp): fed
+    that way, the navigator gives exactly what :func:`replay` gives.
 
     Parameters
     ----------
