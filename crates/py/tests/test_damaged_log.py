@@ -16,6 +16,8 @@ from stereonav import InputError, LogDamage, LostSpan
 mcap_reader = pytest.importorskip("mcap.reader")
 mcap_writer = pytest.importorskip("mcap.writer")
 
+import mcap_copy  # noqa: E402  (after the skip: it imports mcap)
+
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 LOG = ROOT / "fixtures" / "logs" / "paper-experiment.mcap"
 ODOMETRY = 4801
@@ -23,21 +25,7 @@ ODOMETRY = 4801
 
 def rewrite(dst: pathlib.Path) -> None:
     """The committed log, every message, rewritten by the Python writer in 32 KiB zstd chunks."""
-    with LOG.open("rb") as src, dst.open("wb") as f:
-        w = mcap_writer.Writer(f, chunk_size=32 * 1024, compression=mcap_writer.CompressionType.ZSTD)
-        w.start(profile="", library="python mcap (test)")
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in mcap_reader.make_reader(src).iter_messages(log_time_order=False):
-            if channel.id not in channels:
-                schema_id = 0
-                if schema is not None and schema.id != 0:
-                    if schema.id not in schemas:
-                        schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
-                    schema_id = schemas[schema.id]
-                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding, schema_id)
-            w.add_message(channels[channel.id], message.log_time, message.data, message.publish_time, message.sequence)
-        w.finish()
+    mcap_copy.rewrite(LOG, dst)
 
 
 def chunks(path: pathlib.Path) -> list[tuple[int, int, int]]:

@@ -75,30 +75,13 @@ def simulated(cli: pathlib.Path, scratch: pathlib.Path, name: str) -> tuple[path
 def rewritten(log: pathlib.Path) -> pathlib.Path:
     """The log rewritten by the reference Python ``mcap`` writer: 16 KiB chunks, no
     compression, its own indexes and summary."""
-    from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import CompressionType
 
-    target = log.with_name(log.stem + "-pymcap.mcap")
-    with log.open("rb") as src, target.open("wb") as dst:
-        writer = Writer(dst, chunk_size=16 * 1024, compression=CompressionType.NONE)
-        writer.start(profile="", library="mcap-python (stereonav parity test)")
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in make_reader(src).iter_messages(log_time_order=False):
-            if channel.id not in channels:
-                schema_id = 0
-                if schema is not None and schema.id != 0:
-                    if schema.id not in schemas:
-                        schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
-                    schema_id = schemas[schema.id]
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schema_id, dict(channel.metadata)
-                )
-            writer.add_message(
-                channels[channel.id], message.log_time, message.data, message.publish_time, message.sequence
-            )
-        writer.finish()
-    return target
+    import mcap_copy
+
+    return mcap_copy.rewrite(
+        log, log.with_name(log.stem + "-pymcap.mcap"), chunk_size=16 * 1024, compression=CompressionType.NONE
+    )
 
 
 def cli_summary(cli: pathlib.Path, command: str, log: pathlib.Path, *args: object) -> dict[str, Any]:
