@@ -171,12 +171,9 @@ fn rig() -> Rig {
         },
         estimate: alloc::vec![Param::F, Param::Baseline],
         prior,
-        noise: Noise {
-            pixel: 0.3,
-            velocity: 0.02,
-            yaw_rate: 0.01,
-        },
+        noise: Noise::white(0.3, 0.02, 0.01),
         lens: None,
+        board: rig_model::Board::DEFAULT,
     }
 }
 
