@@ -1,12 +1,92 @@
 #!/usr/bin/env bash
-# The project's whole test suite, runnable on a fresh machine with only Rust and Python:
-#   bash scripts/test.sh
-# It installs its Python tools into .venv, then runs formatting, lints, every Rust test, the
-# no_std proof of the firmware crates, and the Python tests against a fresh build of the module.
+# The project's tests, runnable on a fresh machine with only Rust and Python:
+#
+#   bash scripts/test.sh          the fast tier, what CI runs (.ci/run): formatting, lints,
+#                                 every Rust and Python test but the slow tier's, the no_std
+#                                 proof, the Python stubs and types. Budget: 25 minutes cold on
+#                                 the 2-core CI machine (docs/testing.md has where the time goes).
+#   bash scripts/test.sh --slow   the slow tier: the long statistical runs and the replays of
+#                                 the big scenarios that the fast tier leaves out (Rust tests
+#                                 named `slow_*`, Python tests marked `slow`). Run it before
+#                                 resolving an issue that touches an estimator.
+#
+# Both install the Python tools into .venv first. Every step prints how long it took.
+#
+# One build serves every step after the lints: the `ci` profile (Cargo.toml: optimised, debug
+# assertions and overflow checks on, no debug info) builds the Rust tests, the `stereonav`
+# binary the Python tests call, and the Python module, so the dependency tree is compiled once
+# for all three.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-step() { printf '\n==> %s\n' "$*"; }
+tier=fast
+case "${1:-}" in
+    "") ;;
+    --slow) tier=slow ;;
+    *)
+        echo "usage: bash scripts/test.sh [--slow]" >&2
+        exit 2
+        ;;
+esac
+
+started=$SECONDS
+step_started=$SECONDS
+step_name=""
+end_step() {
+    if [ -n "$step_name" ]; then
+        printf '    (%s: %d s)\n' "$step_name" $((SECONDS - step_started))
+    fi
+}
+step() {
+    end_step
+    step_name="$*"
+    step_started=$SECONDS
+    printf '\n==> %s\n' "$*"
+}
+finish() {
+    local status=$?
+    end_step
+    step_name=""
+    if [ "$status" -eq 0 ]; then
+        printf '\n==> all checks of the %s tier passed in %d s\n' "$tier" $((SECONDS - started))
+    else
+        printf '\n==> FAILED (exit %d) after %d s\n' "$status" $((SECONDS - started)) >&2
+    fi
+}
+trap finish EXIT
+
+PROFILE=ci
+TARGET_DIR="${CARGO_TARGET_DIR:-target}"
+# The slow tier's Rust tests: every test whose name starts with `slow_` (in any module). No
+# other test has `slow_` in its name.
+SLOW_RUST='test(/(^|::)slow_/)'
+# cargo-nextest runs the test binaries side by side (both cores busy to the end, each test's
+# time shown); without it, cargo test runs the same tests.
+if cargo nextest --version > /dev/null 2>&1; then
+    nextest=yes
+else
+    nextest=no
+    echo "cargo-nextest not found: cargo test runs the Rust tests instead" >&2
+fi
+rust_tests() { # rust_tests fast|slow|build
+    if [ "$nextest" = yes ]; then
+        case "$1" in
+            build) cargo nextest run --workspace --locked --cargo-profile "$PROFILE" --no-run ;;
+            fast) cargo nextest run --workspace --locked --cargo-profile "$PROFILE" --no-fail-fast \
+                -E "not $SLOW_RUST" ;;
+            slow) cargo nextest run --workspace --locked --cargo-profile "$PROFILE" --no-fail-fast \
+                --no-tests=warn -E "$SLOW_RUST" ;;
+        esac
+    else
+        case "$1" in
+            build) cargo test --workspace --locked --profile "$PROFILE" --no-run ;;
+            fast) cargo test --workspace --locked --profile "$PROFILE" --no-fail-fast --tests \
+                -- --skip slow_ ;;
+            slow) cargo test --workspace --locked --profile "$PROFILE" --no-fail-fast --tests \
+                -- slow_ ;;
+        esac
+    fi
+}
 
 step "Python tools into .venv"
 if [ ! -x .venv/bin/python ]; then
@@ -14,31 +94,50 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt
 
-step "cargo fmt --check"
-cargo fmt --all -- --check
+if [ "$tier" = fast ]; then
+    step "cargo fmt --check"
+    cargo fmt --all -- --check
 
-step "cargo clippy (-D warnings)"
-cargo clippy --workspace --all-targets --locked -- -D warnings
-cargo clippy -p harris-core -p fpga-link --no-default-features --locked -- -D warnings
-cargo clippy -p rig-model -p selfcal -p track -p vslam-ekf -p nav --no-default-features --features alloc --locked -- -D warnings
+    step "cargo clippy (-D warnings): the workspace, the firmware crates without std"
+    cargo clippy --workspace --all-targets --locked -- -D warnings
+    cargo clippy -p harris-core -p fpga-link --no-default-features --locked -- -D warnings
+    cargo clippy -p rig-model -p selfcal -p track -p vslam-ekf -p nav --no-default-features \
+        --features alloc --locked -- -D warnings
+fi
 
-step "cargo test"
-cargo test --workspace --locked
+step "build the Rust tests and the stereonav binary (profile $PROFILE)"
+rust_tests build
 
-step "no_std proof: firmware crates linked into a #![no_std] staticlib with its own panic handler, run from C"
-cargo build --locked --manifest-path ci/nostd-proof/Cargo.toml --target-dir target/nostd-proof
-cc -Wall -Wextra -Werror ci/nostd-proof/main.c target/nostd-proof/debug/libnostd_proof.a \
-    -o target/nostd-proof/run
-target/nostd-proof/run
+if [ "$tier" = fast ]; then
+    step "Rust tests (the slow tier's left out) and doc tests"
+    rust_tests fast
+    cargo test --workspace --locked --profile "$PROFILE" --doc
 
-step "Python module (maturin develop --release) and pytest"
+    step "no_std proof: firmware crates linked into a #![no_std] staticlib with its own panic handler, run from C"
+    cargo build --locked --manifest-path ci/nostd-proof/Cargo.toml --target-dir target/nostd-proof
+    cc -Wall -Wextra -Werror ci/nostd-proof/main.c target/nostd-proof/debug/libnostd_proof.a \
+        -o target/nostd-proof/run
+    target/nostd-proof/run
+else
+    step "Rust tests of the slow tier"
+    rust_tests slow
+fi
+
+step "Python module (maturin develop, profile $PROFILE)"
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
-    .venv/bin/maturin develop --release --locked --quiet -m crates/py/Cargo.toml
-# pytest exits 5 when it collects nothing; under `set -e` that fails the run, as it should.
-.venv/bin/python -m pytest crates/py/tests -q
+    .venv/bin/maturin develop --profile "$PROFILE" --locked --quiet -m crates/py/Cargo.toml
 
-step "Python stubs against the built module (mypy stubtest) and strict typing"
-(cd crates/py/python && ../../../.venv/bin/python -m mypy.stubtest stereonav)
-.venv/bin/python -m mypy --strict crates/py/python/stereonav
+# The command line the Python tests compare with: the binary the Rust tests were built with.
+export STEREONAV_BIN="$PWD/$TARGET_DIR/$PROFILE/stereonav"
+if [ "$tier" = fast ]; then
+    step "pytest (the slow tier's left out)"
+    # pytest exits 5 when it collects nothing; under `set -e` that fails the run, as it should.
+    .venv/bin/python -m pytest crates/py/tests -q -m "not slow" --durations=15
 
-step "all checks passed"
+    step "Python stubs against the built module (mypy stubtest) and strict typing"
+    (cd crates/py/python && ../../../.venv/bin/python -m mypy.stubtest stereonav)
+    .venv/bin/python -m mypy --strict crates/py/python/stereonav
+else
+    step "pytest of the slow tier"
+    .venv/bin/python -m pytest crates/py/tests -q -m slow --durations=15
+fi
