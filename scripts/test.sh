@@ -57,6 +57,12 @@ trap finish EXIT
 
 PROFILE=ci
 TARGET_DIR="${CARGO_TARGET_DIR:-target}"
+# The test build: every library, binary and test of the workspace. The examples and benches are
+# left out: clippy --all-targets checks that they compile, and nothing runs them here.
+TARGETS="--workspace --locked --lib --bins --tests"
+# The interpreter pyo3's build script configures itself for, the same in the test build as under
+# maturin, so that maturin finds pyo3 compiled already.
+export PYO3_PYTHON="$PWD/.venv/bin/python"
 # The slow tier's Rust tests: every test whose name starts with `slow_` (in any module). No
 # other test has `slow_` in its name.
 SLOW_RUST='test(/(^|::)slow_/)'
@@ -71,19 +77,15 @@ fi
 rust_tests() { # rust_tests fast|slow|build
     if [ "$nextest" = yes ]; then
         case "$1" in
-            build) cargo nextest run --workspace --locked --cargo-profile "$PROFILE" --no-run ;;
-            fast) cargo nextest run --workspace --locked --cargo-profile "$PROFILE" --no-fail-fast \
-                -E "not $SLOW_RUST" ;;
-            slow) cargo nextest run --workspace --locked --cargo-profile "$PROFILE" --no-fail-fast \
-                --no-tests=warn -E "$SLOW_RUST" ;;
+            build) cargo nextest run $TARGETS --cargo-profile "$PROFILE" --no-run ;;
+            fast) cargo nextest run $TARGETS --cargo-profile "$PROFILE" --no-fail-fast -E "not $SLOW_RUST" ;;
+            slow) cargo nextest run $TARGETS --cargo-profile "$PROFILE" --no-fail-fast --no-tests=warn -E "$SLOW_RUST" ;;
         esac
     else
         case "$1" in
-            build) cargo test --workspace --locked --profile "$PROFILE" --no-run ;;
-            fast) cargo test --workspace --locked --profile "$PROFILE" --no-fail-fast --tests \
-                -- --skip slow_ ;;
-            slow) cargo test --workspace --locked --profile "$PROFILE" --no-fail-fast --tests \
-                -- slow_ ;;
+            build) cargo test $TARGETS --profile "$PROFILE" --no-run ;;
+            fast) cargo test $TARGETS --profile "$PROFILE" --no-fail-fast -- --skip slow_ ;;
+            slow) cargo test $TARGETS --profile "$PROFILE" --no-fail-fast -- slow_ ;;
         esac
     fi
 }
@@ -123,9 +125,10 @@ else
     rust_tests slow
 fi
 
-step "Python module (maturin develop, profile $PROFILE)"
+step "Python module (maturin develop, profile $PROFILE, on the test build's compiled tree)"
+.venv/bin/python scripts/check-module-features.py
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
-    .venv/bin/maturin develop --profile "$PROFILE" --locked --quiet -m crates/py/Cargo.toml
+    .venv/bin/maturin develop --profile "$PROFILE" --locked -m crates/py/Cargo.toml
 
 # The command line the Python tests compare with: the binary the Rust tests were built with.
 export STEREONAV_BIN="$PWD/$TARGET_DIR/$PROFILE/stereonav"

@@ -7,7 +7,7 @@ use rig_model::camera::Param;
 use rig_model::config::Rig;
 use selfcal::solve::{SolverSettings, calibrate};
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/integration/common/mod.rs"]
 mod common;
 
 /// The synthetic data of the phase-1 tests: tilted head, turns, nominal f and baseline off by

@@ -62,7 +62,7 @@ pub fn integrate_samples(samples: &[OdomSample], start: Pose2, t_us: u64) -> Pos
 /// An angle in `(-pi, pi]`, by `rem_euclid`. Not the rig model's
 /// (`rig_model::camera::wrap_angle`, by `floor`, no_std): the two round differently in the
 /// last bit outside `(-pi, pi]`, and the committed fixture logs hold this one's truth bit for
-/// bit (`tests/fixture_logs.rs`); changing it means regenerating them.
+/// bit (`tests/integration/fixture_logs.rs`); changing it means regenerating them.
 pub fn wrap_angle(a: f64) -> f64 {
     let w = a.rem_euclid(std::f64::consts::TAU);
     if w > std::f64::consts::PI {

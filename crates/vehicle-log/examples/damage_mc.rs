@@ -9,7 +9,7 @@
 //! ```
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stdout)]
 
-#[path = "../tests/common/layout.rs"]
+#[path = "../tests/integration/common/layout.rs"]
 mod layout;
 
 use std::io::Cursor;

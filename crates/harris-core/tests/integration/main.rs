@@ -1,0 +1,14 @@
+//! The integration tests of the board's Harris detector, one module per subject, in one test binary:
+//! one link of the crate's dependencies instead of one per file (docs/testing.md).
+//! A new file here needs its `mod` line below; a file directly in `tests/` would be a test
+//! binary of its own.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
+
+mod common;
+mod errors_and_memory;
+mod euroc_frames;
+mod extremes;
+mod float_and_blobs;
+mod icd_steps;
+mod stream_vs_reference;

@@ -1,0 +1,16 @@
+//! The integration tests of replaying vehicle logs, one module per subject, in one test binary:
+//! one link of the crate's dependencies instead of one per file (docs/testing.md).
+//! A new file here needs its `mod` line below; a file directly in `tests/` would be a test
+//! binary of its own.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
+
+mod calibrate_log;
+mod estimates_reader;
+mod hall;
+mod lens;
+mod navigate;
+mod output;
+mod real_log;
+mod streaming;
+mod vehicle;
