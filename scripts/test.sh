@@ -12,10 +12,11 @@
 #
 # Both install the Python tools into .venv first. Every step prints how long it took.
 #
-# One build serves every step after the lints: the `ci` profile (Cargo.toml: optimised, debug
-# assertions and overflow checks on, no debug info) builds the Rust tests, the `stereonav`
+# One profile serves every step: the `ci` profile (Cargo.toml: the workspace and the numeric
+# kernels optimised, the rest of the tree at opt-level 1, debug assertions and overflow checks
+# on, no debug info) checks the code for clippy and builds the Rust tests, the `stereonav`
 # binary the Python tests call, and the Python module, so the dependency tree is compiled once
-# for all three.
+# for all three (and its proc macros and build scripts once for all four).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -61,7 +62,8 @@ TARGET_DIR="${CARGO_TARGET_DIR:-target}"
 # left out: clippy --all-targets checks that they compile, and nothing runs them here.
 TARGETS="--workspace --locked --lib --bins --tests"
 # The interpreter pyo3's build script configures itself for, the same in the test build as under
-# maturin, so that maturin finds pyo3 compiled already.
+# maturin. (maturin also sets PYO3_BUILD_EXTENSION_MODULE, which the test build cannot: its test
+# binaries link libpython. So maturin compiles pyo3 and the module again, about 25 s.)
 export PYO3_PYTHON="$PWD/.venv/bin/python"
 # The slow tier's Rust tests: every test whose name starts with `slow_` (in any module). No
 # other test has `slow_` in its name.
@@ -101,10 +103,11 @@ if [ "$tier" = fast ]; then
     cargo fmt --all -- --check
 
     step "cargo clippy (-D warnings): the workspace, the firmware crates without std"
-    cargo clippy --workspace --all-targets --locked -- -D warnings
-    cargo clippy -p harris-core -p fpga-link --no-default-features --locked -- -D warnings
+    cargo clippy --workspace --all-targets --locked --profile "$PROFILE" -- -D warnings
+    cargo clippy -p harris-core -p fpga-link --no-default-features --locked --profile "$PROFILE" \
+        -- -D warnings
     cargo clippy -p rig-model -p selfcal -p track -p vslam-ekf -p nav --no-default-features \
-        --features alloc --locked -- -D warnings
+        --features alloc --locked --profile "$PROFILE" -- -D warnings
 fi
 
 step "build the Rust tests and the stereonav binary (profile $PROFILE)"

@@ -75,7 +75,7 @@ fn a_jittered_grid_fixes_again_after_a_kidnap() {
 /// fix on a wrong one. Before the relocaliser's fixes it did, in 97 of 100 seeds (2.5 m to
 /// 35 m off, or turned; docs/benchmarks.md, "Localisation on a saved map (issue 20)").
 #[test]
-fn a_regular_grid_never_fixes_falsely() {
+fn slow_a_regular_grid_never_fixes_falsely() {
     for seed in SEEDS {
         let o = outcome(Grid::regular(16, 10), seed, &[2 * FRAMES_10_S]);
         assert_no_false_fix(&o, "regular");

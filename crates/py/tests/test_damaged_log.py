@@ -134,6 +134,9 @@ def test_a_log_cut_inside_a_chunk_keeps_every_whole_chunk(written: pathlib.Path,
     assert {"/fpga/features", "/odom"} <= set(log.topics)
 
 
+# The slow tier (docs/testing.md): ten copies with up to ten flips each, every damaged chunk
+# searched bit by bit for a mend (vehicle-log's `repair`, bounded by its work limit), 100 s.
+@pytest.mark.slow
 def test_many_flips_never_raise_and_lose_at_most_the_chunks_they_hit(
     written: pathlib.Path, tmp_path: pathlib.Path
 ) -> None:

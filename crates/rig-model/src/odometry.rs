@@ -4,7 +4,9 @@
 #[cfg(feature = "alloc")]
 use alloc::vec::Vec;
 
-use nalgebra::{Matrix3, Matrix3x4, Vector3};
+#[cfg(feature = "alloc")]
+use nalgebra::Matrix3;
+use nalgebra::{Matrix3x4, Vector3};
 
 use crate::camera::{Pose2, Vehicle};
 
