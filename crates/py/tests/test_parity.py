@@ -41,6 +41,7 @@ SLOW = {
     "hall-dense-map",
     "hall-localize",
     "hall-map",
+    "hall-radtan",
     "warehouse",
     "warehouse-shift",
 }
