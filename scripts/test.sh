@@ -10,7 +10,8 @@
 #                                 named `slow_*`, Python tests marked `slow`). Run it before
 #                                 resolving an issue that touches an estimator.
 #
-# Both install the Python tools into .venv first. Every step prints how long it took.
+# Both install the Python tools into .venv (in the background, while cargo works). Every step
+# prints how long it took.
 #
 # One profile serves every step: the `ci` profile (Cargo.toml: the workspace and the numeric
 # kernels optimised, the rest of the tree at opt-level 1, debug assertions and overflow checks
@@ -46,6 +47,9 @@ step() {
 }
 finish() {
     local status=$?
+    if [ -n "${pip_pid:-}" ]; then
+        kill "$pip_pid" 2> /dev/null || true
+    fi
     end_step
     step_name=""
     if [ "$status" -eq 0 ]; then
@@ -92,11 +96,26 @@ rust_tests() { # rust_tests fast|slow|build
     fi
 }
 
-step "Python tools into .venv"
+step "Python tools into .venv (pip in the background until the Python module's step)"
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt
+mkdir -p "$TARGET_DIR"
+pip_log="$TARGET_DIR/pip-install.log"
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt \
+    > "$pip_log" 2>&1 &
+pip_pid=$!
+wait_for_pip() {
+    step "wait for the Python tools"
+    local pid=$pip_pid
+    pip_pid=""
+    if ! wait "$pid"; then
+        cat "$pip_log" >&2
+        echo "pip install -r requirements-dev.txt failed" >&2
+        return 1
+    fi
+    cat "$pip_log"
+}
 
 if [ "$tier" = fast ]; then
     step "cargo fmt --check"
@@ -128,6 +147,7 @@ else
     rust_tests slow
 fi
 
+wait_for_pip
 step "Python module (maturin develop, profile $PROFILE, on the test build's compiled tree)"
 .venv/bin/python scripts/check-module-features.py
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
@@ -138,12 +158,12 @@ export STEREONAV_BIN="$PWD/$TARGET_DIR/$PROFILE/stereonav"
 if [ "$tier" = fast ]; then
     step "pytest (the slow tier's left out)"
     # pytest exits 5 when it collects nothing; under `set -e` that fails the run, as it should.
-    .venv/bin/python -m pytest crates/py/tests -q -m "not slow" --durations=15
+    .venv/bin/python -m pytest crates/py/tests -q -m "not slow" --durations=15 -n auto
 
     step "Python stubs against the built module (mypy stubtest) and strict typing"
     (cd crates/py/python && ../../../.venv/bin/python -m mypy.stubtest stereonav)
     .venv/bin/python -m mypy --strict crates/py/python/stereonav
 else
     step "pytest of the slow tier"
-    .venv/bin/python -m pytest crates/py/tests -q -m slow --durations=15
+    .venv/bin/python -m pytest crates/py/tests -q -m slow --durations=15 -n auto
 fi

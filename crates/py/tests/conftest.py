@@ -17,8 +17,9 @@ ROOT = pathlib.Path(__file__).resolve().parents[3]
 def cli() -> pathlib.Path:
     """The ``stereonav`` binary: ``$STEREONAV_BIN``, or built here (a no-op when it is fresh).
 
-    The dev profile: ``scripts/test.sh`` has built it for the CLI tests before pytest runs, and
-    a release build of the binary (the viewer's window toolkit with it) would add minutes.
+    ``scripts/test.sh`` sets ``$STEREONAV_BIN`` to the binary its test build made (profile
+    ``ci``); run by hand, pytest builds the dev profile's (a release build of the binary, the
+    viewer's window toolkit with it, would add minutes).
     """
     if "STEREONAV_BIN" in os.environ:
         return pathlib.Path(os.environ["STEREONAV_BIN"])
