@@ -206,10 +206,11 @@ fn human_summary(log: &std::path::Path, r: &ReplayEnd, took: Duration) -> String
     if let Some(t) = &r.truth {
         let _ = writeln!(
             s,
-            "against the log's truth: landmark RMS {:.2} mm ({} matched, {} unmatched, {} lamps missed), trajectory error RMS {:.2} mm (max {:.2} mm), heading RMS {:.3} deg",
+            "against the log's truth: landmark RMS {:.2} mm ({} matched, {} unmatched, {} duplicates, {} lamps missed), trajectory error RMS {:.2} mm (max {:.2} mm), heading RMS {:.3} deg",
             t.landmark_rms * 1e3,
             t.landmarks_matched,
             t.landmarks_unmatched,
+            t.landmarks_duplicate,
             t.lamps_missed,
             t.ate_rms * 1e3,
             t.ate_max * 1e3,

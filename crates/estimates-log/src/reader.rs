@@ -415,6 +415,11 @@ impl At<'_> {
             landmark_rms_aligned: self.float(t, "landmark_rms_aligned_m")?,
             landmarks_matched: count("landmarks_matched")?,
             landmarks_unmatched: count("landmarks_unmatched")?,
+            // Absent from estimates files written before it was reported: none counted then.
+            landmarks_duplicate: match t.get("landmarks_duplicate") {
+                None => 0,
+                Some(_) => count("landmarks_duplicate")?,
+            },
             lamps_missed: count("lamps_missed")?,
             match_radius: self.float(t, "match_radius_m")?,
             ate_rms: self.float(t, "ate_rms_m")?,

@@ -41,7 +41,7 @@ struct SummaryParts<'a> {
 /// - `counts`: the other counters, by their [`Counts`] names, and `frames_processed` (the
 ///   frames in the trajectory);
 /// - `truth`: `null`, or the errors against the simulator's truth: `landmark_rms_m`,
-///   `landmark_rms_aligned_m`, `landmarks_matched`, `landmarks_unmatched`, `lamps_missed`,
+///   `landmark_rms_aligned_m`, `landmarks_matched`, `landmarks_unmatched`, `landmarks_duplicate`, `lamps_missed`,
 ///   `match_radius_m`, `ate_rms_m`, `ate_max_m`, `heading_rms_rad`, `camera` and `vehicle`
 ///   (`{name: estimate - truth}`);
 /// - `log_damage`: `null` for a log read whole, or what the reader could not read:
@@ -214,6 +214,7 @@ fn truth_json(t: &TruthErrors) -> Value {
         "landmark_rms_aligned_m": t.landmark_rms_aligned,
         "landmarks_matched": t.landmarks_matched,
         "landmarks_unmatched": t.landmarks_unmatched,
+        "landmarks_duplicate": t.landmarks_duplicate,
         "lamps_missed": t.lamps_missed,
         "match_radius_m": t.match_radius,
         "ate_rms_m": t.ate_rms,

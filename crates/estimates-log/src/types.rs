@@ -228,8 +228,11 @@ pub struct TruthErrors {
     pub landmark_rms_aligned: f64,
     /// Landmarks matched to a lamp (the nearest lamp within `match_radius`, one-to-one).
     pub landmarks_matched: usize,
-    /// Landmarks not within the match radius of any lamp (clutter or duplicates).
+    /// Landmarks not matched to a lamp (clutter, or a lamp's second landmark).
     pub landmarks_unmatched: usize,
+    /// Of the unmatched, those within the match radius of a lamp another landmark was matched
+    /// to: a lamp mapped twice.
+    pub landmarks_duplicate: usize,
     /// Lamps seen by both cameras at some frame with no landmark matched to them.
     pub lamps_missed: usize,
     /// The radius used to match landmarks to lamps, metres.

@@ -99,6 +99,7 @@ fn synthetic() -> Replay {
         landmark_rms_aligned: 0.0008,
         landmarks_matched: 3,
         landmarks_unmatched: 0,
+        landmarks_duplicate: 0,
         lamps_missed: 1,
         match_radius: 0.1,
         ate_rms: 0.002,

@@ -51,7 +51,7 @@ extern crate std;
 mod error;
 mod frame_pairs;
 
-use alloc::collections::BTreeMap;
+use alloc::collections::{BTreeMap, BTreeSet};
 use alloc::vec::Vec;
 
 use nalgebra::{Matrix3, Matrix4, Vector4};
@@ -178,6 +178,9 @@ pub struct FrameOutcome {
     pub removed: Vec<LandmarkId>,
     /// Tracks bound to an existing landmark by map matching at this frame.
     pub rematched: Vec<(u64, LandmarkId)>,
+    /// Landmarks merged at this frame, `(kept, merged into it)`: two estimates of one lamp
+    /// (never observed in the same frame, within their joint uncertainty of each other).
+    pub merged: Vec<(LandmarkId, LandmarkId)>,
     /// The observations of landmarks the filter's update was given at this frame (those of
     /// [`FrameOutcome::accepted`] and [`FrameOutcome::rejected`]), each with the two board
     /// features it was made of: the navigator's own association, feature by feature.
@@ -238,6 +241,8 @@ pub struct NavStats {
     pub observations_skipped: u64,
     /// Brief landmarks removed (`CandidateSettings::brief_observations`).
     pub landmarks_pruned: u64,
+    /// Landmarks merged into another: a lamp mapped twice ([`FrameOutcome::merged`]).
+    pub landmarks_merged: u64,
     /// Distance the odometry travelled, counting only motion beyond 3 sigma of its noise
     /// in each frame interval, metres.
     pub significant_translation_m: f64,
@@ -271,6 +276,12 @@ pub struct Navigator {
     stats: NavStats,
     /// Map landmark -> its index in the smoother, while the smoother runs in phase 2.
     smoothed: BTreeMap<LandmarkId, usize>,
+    /// Landmarks within [`MERGE_SEARCH_M`] of each other that were observed in the same frame:
+    /// two lamps, never merged. `(smaller id, larger id)`.
+    co_observed: BTreeSet<(LandmarkId, LandmarkId)>,
+    /// The 3-dof chi-square bound under which two landmarks never observed together are one
+    /// (the map-match probability's).
+    merge_gate: f64,
     /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
     frame_pairs: Option<FramePairCalibration>,
 }
@@ -330,6 +341,8 @@ impl Navigator {
             match_gate: chi2_quantile(p, 4.0),
             stats: NavStats::default(),
             smoothed: BTreeMap::new(),
+            co_observed: BTreeSet::new(),
+            merge_gate: chi2_quantile(p, 3.0),
             frame_pairs,
         };
         Ok(navigator)
@@ -428,6 +441,7 @@ impl Navigator {
             if self.smoother.is_mapping() && self.smoother.flush() {
                 self.reseed();
             }
+            self.merge_duplicates();
             return Ok(false);
         }
         let Some(t) = self.last_frame_t else {
@@ -1073,6 +1087,143 @@ impl Navigator {
         outcome.removed.extend(report.pruned.iter().copied());
         self.stats.observations_skipped += report.skipped as u64;
         self.stats.landmarks_pruned += report.pruned.len() as u64;
+        // The map-level guard against a lamp mapped twice: the frame's co-observations noted,
+        // then each new landmark (and, every `MERGE_PASS_FRAMES`, every landmark) against its
+        // neighbours. While the smoother maps, it holds the landmarks as it saw them and its
+        // re-seed would undo a merge: the guard waits for it to stop (or for `finish`).
+        let observed: Vec<LandmarkId> = outcome
+            .accepted
+            .iter()
+            .map(|(id, _)| *id)
+            .chain(outcome.rejected.iter().copied())
+            .collect();
+        self.note_co_observed(&observed);
+        if !self.smoother.is_mapping() {
+            let merged = if self.stats.frames.is_multiple_of(MERGE_PASS_FRAMES) {
+                self.merge_twins(None)
+            } else if outcome.added.is_empty() {
+                Vec::new()
+            } else {
+                let added = outcome.added.clone();
+                self.merge_twins(Some(&added))
+            };
+            outcome
+                .added
+                .retain(|id| !merged.iter().any(|(_, d)| d == id));
+            outcome.merged = merged;
+        }
         Ok(())
     }
+
+    /// Notes the pairs of landmarks within [`MERGE_SEARCH_M`] of each other among those
+    /// observed in one frame: two lamps, never to be merged.
+    fn note_co_observed(&mut self, ids: &[LandmarkId]) {
+        let Some(ekf) = self.ekf.as_ref() else {
+            return;
+        };
+        let near: Vec<(LandmarkId, nalgebra::Vector3<f64>)> = ids
+            .iter()
+            .filter_map(|&id| ekf.landmark(id).map(|l| (id, l.position)))
+            .collect();
+        for (i, (a, pa)) in near.iter().enumerate() {
+            for (b, pb) in near.iter().skip(i + 1) {
+                if (pa - pb).norm() <= MERGE_SEARCH_M {
+                    self.co_observed.insert(ordered(*a, *b));
+                }
+            }
+        }
+    }
+
+    /// Merges every pair of landmarks that are one lamp mapped twice: never observed in the
+    /// same frame, within [`MERGE_SEARCH_M`] of each other and within their joint uncertainty
+    /// (the 3-dof gate of the map-match probability). The older landmark is kept and takes
+    /// the other's track when it has none; the filter merges the two consistently
+    /// ([`Ekf::merge_landmarks`]). Run on every new landmark and every
+    /// `MERGE_PASS_FRAMES` frames in phase 2, and by [`Navigator::finish`] before the map is
+    /// final. Returns how many landmarks were merged into another.
+    pub fn merge_duplicates(&mut self) -> usize {
+        let merged = self.merge_twins(None);
+        merged.len()
+    }
+
+    /// [`Navigator::merge_duplicates`] over `among` (every landmark: `None`) against all.
+    fn merge_twins(&mut self, among: Option<&[LandmarkId]>) -> Vec<(LandmarkId, LandmarkId)> {
+        let Some(ekf) = self.ekf.as_mut() else {
+            return Vec::new();
+        };
+        let mut merged: Vec<(LandmarkId, LandmarkId)> = Vec::new();
+        let all: Vec<(LandmarkId, nalgebra::Vector3<f64>)> =
+            ekf.landmarks().map(|l| (l.id, l.position)).collect();
+        let probe: Vec<LandmarkId> = match among {
+            Some(ids) => ids.to_vec(),
+            None => all.iter().map(|(id, _)| *id).collect(),
+        };
+        for id in probe {
+            let Some(l) = ekf.landmark(id) else {
+                continue;
+            };
+            let mut best: Option<(LandmarkId, f64)> = None;
+            for &(other, position) in &all {
+                if other == id
+                    || !ekf.contains(other)
+                    || (position - l.position).norm() > MERGE_SEARCH_M
+                    || self.co_observed.contains(&ordered(id, other))
+                {
+                    continue;
+                }
+                let Ok(d2) = ekf.landmark_pair_distance(id, other) else {
+                    continue;
+                };
+                if d2 <= self.merge_gate && best.is_none_or(|(_, b)| d2 < b) {
+                    best = Some((other, d2));
+                }
+            }
+            let Some((other, _)) = best else {
+                continue;
+            };
+            let (keep, drop) = ordered(id, other);
+            let drop_track = self.candidates.track_of(drop);
+            let keep_track = self.candidates.track_of(keep);
+            if ekf.merge_landmarks(keep, drop).is_err() {
+                continue;
+            }
+            if let Some(t) = drop_track {
+                self.candidates.forget_track(t);
+                if keep_track.is_none() {
+                    // Cannot fail: `keep` is in the filter.
+                    let _ = self.candidates.bind(ekf, t, keep);
+                }
+            }
+            // What was noted of the dropped landmark is now the kept one's.
+            let pairs: Vec<(LandmarkId, LandmarkId)> = self
+                .co_observed
+                .iter()
+                .filter(|(a, b)| *a == drop || *b == drop)
+                .copied()
+                .collect();
+            for (a, b) in pairs {
+                self.co_observed.remove(&(a, b));
+                let other = if a == drop { b } else { a };
+                if other != keep {
+                    self.co_observed.insert(ordered(keep, other));
+                }
+            }
+            self.smoothed.remove(&drop);
+            self.stats.landmarks_merged += 1;
+            merged.push((keep, drop));
+        }
+        merged
+    }
+}
+
+/// Two landmarks further apart than this are never compared by the merge guard, metres: lamps
+/// are metres apart, and a lamp's second landmark lies where the drift of its day put it.
+pub const MERGE_SEARCH_M: f64 = 1.0;
+
+/// Frames between the merge guard's passes over the whole map (5 s at 20 Hz).
+const MERGE_PASS_FRAMES: u64 = 100;
+
+/// A pair of landmark ids, the smaller first.
+fn ordered(a: LandmarkId, b: LandmarkId) -> (LandmarkId, LandmarkId) {
+    if a <= b { (a, b) } else { (b, a) }
 }

@@ -840,6 +840,20 @@ impl TruthAccumulator {
                 pairs.push((l.position, [t.x, t.y, t.z]));
             }
         }
+        // A lamp mapped twice: a landmark left unmatched within the radius of a lamp that
+        // another landmark took (counted among the unmatched too).
+        let landmarks_duplicate = landmarks
+            .iter()
+            .zip(&used_l)
+            .filter(|&(l, &used)| {
+                !used && {
+                    let moved = gauge.apply(l.position);
+                    truth.landmarks.iter().zip(&used_t).any(|(t, &taken)| {
+                        taken && distance(moved, [t.x, t.y, t.z]) <= LAMP_MATCH_RADIUS_M
+                    })
+                }
+            })
+            .count();
         let lamps_missed = self
             .seen
             .iter()
@@ -862,6 +876,7 @@ impl TruthAccumulator {
             landmark_rms_aligned: aligned_rms(&pairs),
             landmarks_matched: matched,
             landmarks_unmatched: landmarks.len() - matched,
+            landmarks_duplicate,
             lamps_missed,
             match_radius: LAMP_MATCH_RADIUS_M,
             ate_rms: if n > 0 {

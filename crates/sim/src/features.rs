@@ -134,12 +134,20 @@ pub fn in_candidate_area(u: f64, v: f64, width: usize, height: usize) -> bool {
 }
 
 /// The lamps seen from `pose`: lit, in front of both cameras and inside the candidate area of
-/// at least one, with their exact projections by [`rig_model::project`].
+/// at least one, with their exact (rectified) projections by [`rig_model::project`].
+///
+/// With `lens` (the true raw lenses and the true camera), "inside" is tested where the board
+/// sees the lamp: at its raw pixel ([`rig_model::lens::Lens::unrectify`]), against the raw
+/// image. A raw image's rectified view is not the rectified rectangle (a barrel lens sees past
+/// the rectangle's corners, a fisheye far past its edges), and a real camera sees all of it
+/// (issue 35: a simulator that cropped the view to the rectangle hid the navigator's mistakes
+/// there).
 pub fn lamp_views(
     c: &CameraParams,
     pose: &Pose2,
     lamps: &[Lamp],
     regs: &Registers,
+    lens: Option<&rig_model::lens::StereoLens>,
 ) -> Vec<LampView> {
     let rig_from_world = RigFromWorld::new(c, pose);
     #[allow(clippy::cast_precision_loss)]
@@ -156,14 +164,23 @@ pub fn lamp_views(
             continue;
         }
         let (x_l, x_r, y) = ((p.x + half_b) / p.z, (p.x - half_b) / p.z, p.y / p.z);
-        if !(y >= v_lo && y <= v_hi) || (x_l < u_lo || x_l > u_hi) && (x_r < u_lo || x_r > u_hi) {
+        if lens.is_none()
+            && (!(y >= v_lo && y <= v_hi)
+                || (x_l < u_lo || x_l > u_hi) && (x_r < u_lo || x_r > u_hi))
+        {
             continue;
         }
         let Ok(m) = rig_model::project(c, pose, &lamp.position) else {
             continue;
         };
-        let in_left = in_candidate_area(m[0], m[1], regs.width, regs.height);
-        let in_right = in_candidate_area(m[2], m[3], regs.width, regs.height);
+        let inside = |lens: Option<&rig_model::lens::Lens>, u: f64, v: f64| match lens {
+            None => in_candidate_area(u, v, regs.width, regs.height),
+            Some(l) => l
+                .unrectify(nalgebra::Vector2::new(u, v), c.f, c.cx, c.cy)
+                .is_some_and(|raw| in_candidate_area(raw.x, raw.y, regs.width, regs.height)),
+        };
+        let in_left = inside(lens.map(|l| &l.left), m[0], m[1]);
+        let in_right = inside(lens.map(|l| &l.right), m[2], m[3]);
         if in_left || in_right {
             out.push(LampView {
                 id: lamp.id,

@@ -183,7 +183,13 @@ pub fn simulate_with_progress(
     let one_frame = |index: usize, exposed_us: u64| -> Result<FrameTruth> {
         let pose = motion.pose_at(exposed_us);
         let t_us = stamp(exposed_us);
-        let views = lamp_views(&camera, &pose, &landmarks, &regs);
+        let views = lamp_views(
+            &camera,
+            &pose,
+            &landmarks,
+            &regs,
+            scenario.rig.lens.as_ref(),
+        );
         let (left, right) = match &renderer {
             None => fast_frame(
                 &views,

@@ -146,6 +146,21 @@ pub enum Error {
         /// Index in the state vector.
         index: usize,
     },
+    /// The covariance of two landmarks' difference is not positive definite (`P` has lost its
+    /// definiteness); nothing was merged.
+    #[error("{a} and {b}: the covariance of their difference is not positive definite")]
+    PairNotPositiveDefinite {
+        /// The first landmark.
+        a: LandmarkId,
+        /// The second landmark.
+        b: LandmarkId,
+    },
+    /// A landmark cannot be merged into itself.
+    #[error("{id} cannot be merged into itself")]
+    MergeIntoItself {
+        /// The landmark.
+        id: LandmarkId,
+    },
     /// The landmark is already bound to the given track.
     #[error("{id} is already bound to track {track}")]
     LandmarkBound {

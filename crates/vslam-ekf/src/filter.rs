@@ -140,6 +140,9 @@ pub struct Ekf {
     pub(crate) noise: Noise,
     /// The rectified pixel noise through the rig's lenses ([`rig_model::Rig::pixel_noise`]).
     pub(crate) pixel_noise: PixelNoise,
+    /// The rig's raw lenses: what the cameras see is the raw images, whose rectified view is
+    /// not the rectified rectangle ([`Ekf::visible_landmarks`]).
+    pub(crate) lens: Option<rig_model::lens::StereoLens>,
     pub(crate) width: u32,
     pub(crate) height: u32,
     pub(crate) settings: Settings,

@@ -10,6 +10,7 @@ use rig_model::{Measurement, N_PARAMS};
 use crate::error::Error;
 use crate::filter::Ekf;
 use crate::kernels::gather_columns;
+use crate::linalg::{mirror_lower, sym};
 use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout, at};
 
 /// A landmark's id: stable for its life, never reused after it is removed.
@@ -92,6 +93,89 @@ impl Ekf {
             .iter()
             .enumerate()
             .map(|(s, slot)| self.estimate_at(s, slot))
+    }
+
+    /// How far apart two landmarks are in their joint uncertainty: the squared Mahalanobis
+    /// distance of `a - b` under its covariance `P_aa + P_bb - P_ab - P_ba` (3 dof). Small
+    /// (below the 3-dof chi-square bound) when they may be one point seen twice.
+    pub fn landmark_pair_distance(&self, a: LandmarkId, b: LandmarkId) -> Result<f64, Error> {
+        let (d, s) = self.pair_difference(a, b)?;
+        let c = s
+            .cholesky()
+            .ok_or(Error::PairNotPositiveDefinite { a, b })?;
+        Ok(d.dot(&c.solve(&d)))
+    }
+
+    /// `a - b` and its covariance.
+    fn pair_difference(
+        &self,
+        a: LandmarkId,
+        b: LandmarkId,
+    ) -> Result<(Vector3<f64>, Matrix3<f64>), Error> {
+        let ia = self
+            .slot(a)
+            .map(StateLayout::landmark)
+            .ok_or(Error::UnknownLandmark { id: a })?;
+        let ib = self
+            .slot(b)
+            .map(StateLayout::landmark)
+            .ok_or(Error::UnknownLandmark { id: b })?;
+        let d = self.x.fixed_rows::<3>(ia) - self.x.fixed_rows::<3>(ib);
+        let n = self.x.len();
+        // `P` keeps its lower triangle only (see the crate docs).
+        let cross = Matrix3::from_fn(|r, c| sym(self.p.as_slice(), n, ia + r, ib + c));
+        let s = self.block3(ia) + self.block3(ib) - cross - cross.transpose();
+        Ok((d, s))
+    }
+
+    /// Merges landmark `drop` into `keep`, two estimates of one point (a lamp mapped twice):
+    /// the constraint `x_keep - x_drop = 0` applied as an exact measurement (a Kalman update
+    /// with `H = [.. I .. -I ..]` and no noise), which moves `keep`, the pose, the camera and
+    /// every correlated landmark by what `drop` knew and shrinks their covariance accordingly;
+    /// then `drop`, now a copy of `keep`, leaves the state. Returns the squared Mahalanobis
+    /// distance the two were apart ([`Ekf::landmark_pair_distance`]); the caller gates on it.
+    /// `O(n^2)` in the state's length.
+    pub fn merge_landmarks(&mut self, keep: LandmarkId, drop: LandmarkId) -> Result<f64, Error> {
+        if keep == drop {
+            return Err(Error::MergeIntoItself { id: keep });
+        }
+        let (d, s) = self.pair_difference(keep, drop)?;
+        let c = s
+            .cholesky()
+            .ok_or(Error::PairNotPositiveDefinite { a: keep, b: drop })?;
+        let d2 = d.dot(&c.solve(&d));
+        let ia = self
+            .slot(keep)
+            .map(StateLayout::landmark)
+            .ok_or(Error::UnknownLandmark { id: keep })?;
+        let ib = self
+            .slot(drop)
+            .map(StateLayout::landmark)
+            .ok_or(Error::UnknownLandmark { id: drop })?;
+        let n = self.x.len();
+        // The whole of `P` (its lower triangle is kept; the update below is dense).
+        mirror_lower(self.p.as_mut_slice(), n);
+        // P H^T (n x 3): the covariance of the state with x_keep - x_drop.
+        let pht = self.p.columns(ia, 3) - self.p.columns(ib, 3);
+        // K = P H^T S^-1, solved column-block by column-block through S's Cholesky factor.
+        let k = c.solve(&pht.transpose()).transpose();
+        // x += K (0 - (x_keep - x_drop)); P -= K S K^T = K (P H^T)^T.
+        self.x -= &k * d;
+        self.p -= &k * pht.transpose();
+        // The lower triangle, symmetric to rounding (the upper one is not read).
+        for j in 0..n {
+            for i in j + 1..n {
+                self.p[(i, j)] = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
+            }
+        }
+        let observations = self.observations_of(drop).unwrap_or(0);
+        self.remove_landmark(drop)?;
+        if let Some(s) = self.slot(keep)
+            && let Some(slot) = self.landmarks.get_mut(s)
+        {
+            slot.observations += observations;
+        }
+        Ok(d2)
     }
 
     /// Adds a landmark triangulated from a measurement at the current pose and camera, with

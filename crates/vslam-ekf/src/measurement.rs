@@ -135,12 +135,24 @@ impl Ekf {
         Ok((z, h))
     }
 
-    /// The landmarks whose predicted measurement falls inside both images, with it.
+    /// The landmarks whose predicted measurement falls inside both images, with it. With
+    /// raw lenses ([`rig_model::Rig::lens`]) the images are the raw ones: the prediction is
+    /// mapped through each lens ([`rig_model::lens::Lens::unrectify`]) and tested against the
+    /// raw image, whose rectified view is not the rectified rectangle (a barrel lens sees past
+    /// its corners, a fisheye far past its edges; issue 35).
     pub fn visible_landmarks(&self) -> Vec<(LandmarkId, Measurement)> {
         let camera = self.camera();
         let pose = self.pose();
         let (w, h) = (f64::from(self.width), f64::from(self.height));
-        let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
+        let inside_image = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
+        let through = |lens: &rig_model::lens::Lens, u: f64, v: f64| {
+            lens.unrectify(nalgebra::Vector2::new(u, v), camera.f, camera.cx, camera.cy)
+                .is_some_and(|raw| inside_image(raw.x, raw.y))
+        };
+        let inside = |z: &Measurement| match &self.lens {
+            None => inside_image(z[0], z[1]) && inside_image(z[2], z[3]),
+            Some(lens) => through(&lens.left, z[0], z[1]) && through(&lens.right, z[2], z[3]),
+        };
         self.landmarks
             .iter()
             .enumerate()
@@ -150,7 +162,7 @@ impl Ekf {
                     .fixed_rows::<3>(StateLayout::landmark(s))
                     .into_owned();
                 let z = rig_model::project(&camera, &pose, &l).ok()?;
-                (inside(z[0], z[1]) && inside(z[2], z[3])).then_some((slot.id, z))
+                inside(&z).then_some((slot.id, z))
             })
             .collect()
     }

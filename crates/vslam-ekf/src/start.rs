@@ -141,6 +141,7 @@ impl Ekf {
             camera_base: start.camera,
             noise: rig.noise,
             pixel_noise: rig.pixel_noise(),
+            lens: rig.lens,
             width: rig.width,
             height: rig.height,
             settings,

@@ -66,7 +66,12 @@ _TRUTH_FLOATS: tuple[str, ...] = (
     "ate_max_m",
     "heading_rms_rad",
 )
-_TRUTH_INTS: tuple[str, ...] = ("landmarks_matched", "landmarks_unmatched", "lamps_missed")
+_TRUTH_INTS: tuple[str, ...] = (
+    "landmarks_matched",
+    "landmarks_unmatched",
+    "landmarks_duplicate",
+    "lamps_missed",
+)
 #: ``SUMMARY.json``'s ``counts`` (the reader's, the decoder's and the association's counters).
 _COUNTS: tuple[str, ...] = (
     "frames_processed",

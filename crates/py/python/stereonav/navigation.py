@@ -228,8 +228,9 @@ class Replay:
     truth : dict or None
         When the log carries the simulator's truth, the errors against it (``SUMMARY.json``'s
         ``truth``): ``landmark_rms_m``, ``landmark_rms_aligned_m``, ``landmarks_matched``,
-        ``landmarks_unmatched``, ``lamps_missed``, ``match_radius_m``, ``ate_rms_m``,
-        ``ate_max_m``, ``heading_rms_rad``, ``camera`` (``{name: estimate - truth}``) and
+        ``landmarks_unmatched``, ``landmarks_duplicate`` (of the unmatched, a lamp's second
+        landmark), ``lamps_missed``, ``match_radius_m``, ``ate_rms_m``, ``ate_max_m``,
+        ``heading_rms_rad``, ``camera`` (``{name: estimate - truth}``) and
         ``consistency`` (``pose_nees``, ``pose_frames``, ``final_pose_nees``, ``state_nees``,
         ``state_dof``: the filter's NEES against the truth; ``None`` without a phase 2).
     """

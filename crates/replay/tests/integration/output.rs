@@ -184,6 +184,7 @@ fn synthetic() -> Replay {
             landmark_rms_aligned: 0.01,
             landmarks_matched: 3,
             landmarks_unmatched: 0,
+            landmarks_duplicate: 0,
             lamps_missed: 1,
             match_radius: 0.1,
             ate_rms: 0.015,
@@ -744,6 +745,7 @@ fn summary_has_the_contract_keys_and_types() {
             "landmark_rms_aligned_m",
             "landmarks_matched",
             "landmarks_unmatched",
+            "landmarks_duplicate",
             "lamps_missed",
             "match_radius_m",
             "ate_rms_m",
@@ -765,7 +767,12 @@ fn summary_has_the_contract_keys_and_types() {
     ] {
         assert!(truth[k].is_f64(), "{k}");
     }
-    for k in ["landmarks_matched", "landmarks_unmatched", "lamps_missed"] {
+    for k in [
+        "landmarks_matched",
+        "landmarks_unmatched",
+        "landmarks_duplicate",
+        "lamps_missed",
+    ] {
         assert!(truth[k].is_u64(), "{k}");
     }
     assert_eq!(truth["ate_rms_m"].as_f64(), Some(0.015));

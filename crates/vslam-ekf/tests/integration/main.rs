@@ -9,6 +9,7 @@ mod candidates;
 mod common;
 mod consider;
 mod jacobians;
+mod merge;
 mod simulation;
 mod update;
 mod vehicle;
