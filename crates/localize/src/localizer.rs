@@ -500,7 +500,10 @@ impl Localizer {
 
     /// The frame's features through the lens and the front end: its stereo observations.
     fn observe(&mut self, t_us: u64, left: &[Pixel], right: &[Pixel]) -> Vec<Observation> {
-        let rectified = track::rectify_features(&self.rig, left, right);
+        // The localiser uses the whole raw view (the navigator's field of use,
+        // vslam_ekf::Settings::max_off_axis_deg, is for mapping).
+        let rectified =
+            track::rectify_features(&self.rig, left, right, core::f64::consts::FRAC_PI_2);
         let (left, right) = match &rectified {
             Some(r) => {
                 self.stats.features_unmapped += r.dropped;

@@ -237,6 +237,9 @@ pub struct NavStats {
     pub phase2_smoother_stopped_at: u64,
     /// Board features the lens model could not map into the rectified image (dropped).
     pub features_unmapped: u64,
+    /// Board features mapped, but outside the field of use and left out
+    /// ([`vslam_ekf::Settings::max_off_axis_deg`]).
+    pub features_outside_field: u64,
     /// Bound observations the update's budget left out (`CandidateSettings::max_observations`).
     pub observations_skipped: u64,
     /// Brief landmarks removed (`CandidateSettings::brief_observations`).
@@ -781,10 +784,16 @@ impl Navigator {
 
         // Real lenses (vehicle-interfaces.md 1.1): the board's raw features into the rectified
         // model; a feature that cannot be mapped is dropped and counted.
-        let rectified = track::rectify_features(&self.rig, left, right);
+        let rectified = track::rectify_features(
+            &self.rig,
+            left,
+            right,
+            self.settings.ekf.max_off_axis_deg.to_radians(),
+        );
         let (left, right) = match &rectified {
             Some(r) => {
                 self.stats.features_unmapped += r.dropped;
+                self.stats.features_outside_field += r.outside_field;
                 (r.left.pixels.as_slice(), r.right.pixels.as_slice())
             }
             None => (left, right),

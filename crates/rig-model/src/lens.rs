@@ -390,6 +390,37 @@ impl Lens {
     }
 }
 
+/// The rectified pixels whose ray lies within an angle of the rectified optical axis: the
+/// cone `hypot(u - cx, v - cy) <= f tan(angle)`; every pixel for an angle of `pi / 2` or more
+/// (or NaN).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldOfUse {
+    /// `(f tan(angle))^2`, infinite for the whole view.
+    radius2: f64,
+    cx: f64,
+    cy: f64,
+}
+
+impl FieldOfUse {
+    /// The cone of half-angle `max_off_axis_rad` of a rectified camera of focal length `f`
+    /// and principal point `(cx, cy)`.
+    pub fn new(max_off_axis_rad: f64, f: f64, cx: f64, cy: f64) -> Self {
+        let radius2 = if max_off_axis_rad < core::f64::consts::FRAC_PI_2 {
+            let r = f * libm::tan(max_off_axis_rad);
+            r * r
+        } else {
+            f64::INFINITY
+        };
+        Self { radius2, cx, cy }
+    }
+
+    /// Whether the rectified pixel `(u, v)` is inside.
+    pub fn contains(&self, u: f64, v: f64) -> bool {
+        let (du, dv) = (u - self.cx, v - self.cy);
+        du * du + dv * dv <= self.radius2
+    }
+}
+
 /// The noise of a stereo measurement `(uL, vL, uR, vR)` in the rectified image.
 ///
 /// The rig's `[noise] pixel` is the noise of a raw board feature (vehicle-interfaces.md 1.1);

@@ -78,28 +78,40 @@ pub struct RectifiedFeatures {
     pub right: RectifiedSide,
     /// Features the lens could not map (dropped), both cameras.
     pub dropped: u64,
+    /// Features mapped, but outside the field of use (left out), both cameras.
+    pub outside_field: u64,
 }
 
 /// The board's raw features of both cameras mapped into the rectified model through the
-/// rig's lens (vehicle-interfaces.md 1.1), each with its index in the board's list, and the
-/// count of features the lens could not map (dropped); `None` for a rig without `[lens]`
-/// tables (its features are rectified already).
+/// rig's lens (vehicle-interfaces.md 1.1), each with its index in the board's list, the
+/// count of features the lens could not map (dropped) and of those whose ray lies more than
+/// `max_off_axis_rad` from the rectified optical axis (outside the field of use; `pi / 2` or
+/// more keeps every ray in front of the camera); `None` for a rig without `[lens]` tables
+/// (its features are rectified already).
+///
+/// The field of use exists for wide lenses: a fisheye's raw image reaches rays far from the
+/// axis, whose rectified pixels carry the raw noise stretched many times and bias the
+/// estimate of the map's scale (docs/halls.md, "A fisheye's outer band").
 pub fn rectify_features(
     rig: &rig_model::config::Rig,
     left: &[Pixel],
     right: &[Pixel],
+    max_off_axis_rad: f64,
 ) -> Option<RectifiedFeatures> {
     let lens = rig.lens.as_ref()?;
     let c = &rig.nominal;
+    let field = rig_model::lens::FieldOfUse::new(max_off_axis_rad, c.f, c.cx, c.cy);
     let mut dropped = 0;
+    let mut outside_field = 0;
     let mut map = |lens: &rig_model::lens::Lens, side: &[Pixel]| -> RectifiedSide {
         let mut out = RectifiedSide::default();
         for (i, p) in side.iter().enumerate() {
             match lens.rectify_point(nalgebra::Vector2::new(p.u, p.v), c.f, c.cx, c.cy) {
-                Some(q) => {
+                Some(q) if field.contains(q.x, q.y) => {
                     out.pixels.push(Pixel { u: q.x, v: q.y });
                     out.raw_index.push(i);
                 }
+                Some(_) => outside_field += 1,
                 None => dropped += 1,
             }
         }
@@ -111,6 +123,7 @@ pub fn rectify_features(
         left,
         right,
         dropped,
+        outside_field,
     })
 }
 

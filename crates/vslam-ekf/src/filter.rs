@@ -62,6 +62,15 @@ pub struct Settings {
     pub covariance_update: CovarianceUpdate,
     /// Refine the camera parameters, or only consider them.
     pub camera_update: CameraUpdate,
+    /// Through real lenses ([`rig_model::Rig::lens`]): the field of use, degrees from the
+    /// rectified optical axis. Features whose rays lie farther out are not used
+    /// (`track::rectify_features`) and landmarks predicted there are not in view
+    /// ([`Ekf::visible_landmarks`]), so that the two agree. A fisheye's raw image reaches
+    /// rays near 90 degrees, whose rectified pixels carry the raw noise stretched tens of
+    /// times; used, they pulled the map's scale 0.5 to 0.9 % off (5 sigma) on a hall
+    /// (docs/halls.md, "A fisheye's outer band"). 90 uses every ray in front of the camera;
+    /// no effect without lens tables.
+    pub max_off_axis_deg: f64,
 }
 
 impl Default for Settings {
@@ -72,6 +81,7 @@ impl Default for Settings {
             max_consecutive_rejections: 5,
             covariance_update: CovarianceUpdate::Auto,
             camera_update: CameraUpdate::Refine,
+            max_off_axis_deg: 50.0,
         }
     }
 }
@@ -91,6 +101,14 @@ impl Settings {
                 name: "Settings.nis_window",
                 value: 0.0,
                 expected: "at least 1",
+            });
+        }
+        let a = self.max_off_axis_deg;
+        if !(a.is_finite() && a > 0.0 && a <= 90.0) {
+            return Err(Error::BadValue {
+                name: "Settings.max_off_axis_deg",
+                value: a,
+                expected: "in (0, 90] degrees",
             });
         }
         if self.max_consecutive_rejections == 0 {

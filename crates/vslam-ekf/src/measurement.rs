@@ -139,7 +139,8 @@ impl Ekf {
     /// raw lenses ([`rig_model::Rig::lens`]) the images are the raw ones: the prediction is
     /// mapped through each lens ([`rig_model::lens::Lens::unrectify`]) and tested against the
     /// raw image, whose rectified view is not the rectified rectangle (a barrel lens sees past
-    /// its corners, a fisheye far past its edges; issue 35).
+    /// its corners, a fisheye far past its edges; issue 35), and only within the field of use
+    /// ([`crate::Settings::max_off_axis_deg`]), where the navigator takes features.
     pub fn visible_landmarks(&self) -> Vec<(LandmarkId, Measurement)> {
         let camera = self.camera();
         let pose = self.pose();
@@ -149,9 +150,20 @@ impl Ekf {
             lens.unrectify(nalgebra::Vector2::new(u, v), camera.f, camera.cx, camera.cy)
                 .is_some_and(|raw| inside_image(raw.x, raw.y))
         };
+        let field = rig_model::lens::FieldOfUse::new(
+            self.settings.max_off_axis_deg.to_radians(),
+            camera.f,
+            camera.cx,
+            camera.cy,
+        );
         let inside = |z: &Measurement| match &self.lens {
             None => inside_image(z[0], z[1]) && inside_image(z[2], z[3]),
-            Some(lens) => through(&lens.left, z[0], z[1]) && through(&lens.right, z[2], z[3]),
+            Some(lens) => {
+                field.contains(z[0], z[1])
+                    && field.contains(z[2], z[3])
+                    && through(&lens.left, z[0], z[1])
+                    && through(&lens.right, z[2], z[3])
+            }
         };
         self.landmarks
             .iter()

@@ -229,7 +229,7 @@ impl Ekf {
                 // Eq. (6)'s innovation, nu = z - h(x).
                 let nu = z - predicted;
                 o.nu = [nu[0], nu[1], nu[2], nu[3]];
-                o.r = self.measurement_variances(z);
+                o.r = self.measurement_variances(&predicted);
                 obs.push(o);
                 projected.push(b);
             }
