@@ -172,7 +172,12 @@ fn human_summary(log: &std::path::Path, r: &ReplayEnd, took: Duration) -> String
         (false, None) => "no frame: no map".to_string(),
     };
     let _ = writeln!(s, "{phases}");
-    let _ = writeln!(s, "map: {} landmarks", r.landmarks.len());
+    let merged = match r.counts.landmarks_merged {
+        0 => String::new(),
+        1 => " (1 more merged into another as the same lamp)".to_string(),
+        n => format!(" ({n} more merged into others as the same lamps)"),
+    };
+    let _ = writeln!(s, "map: {} landmarks{merged}", r.landmarks.len());
     for p in r.final_camera.iter().filter(|p| p.sigma > 0.0) {
         let name = p.param.name();
         let (scale, unit) = p.param.display_unit();

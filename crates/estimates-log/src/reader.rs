@@ -392,6 +392,9 @@ impl At<'_> {
             log_bytes_lost: self.uint(c, "log_bytes_lost").unwrap_or(0),
             log_chunks_lost: self.uint(c, "log_chunks_lost").unwrap_or(0),
             log_time_lost_ms: self.uint(c, "log_time_lost_ms").unwrap_or(0),
+            // Absent from estimates files written before the map-level guard (issue 35).
+            landmarks_merged: self.uint(c, "landmarks_merged").unwrap_or(0),
+            features_outside_field: self.uint(c, "features_outside_field").unwrap_or(0),
         })
     }
 

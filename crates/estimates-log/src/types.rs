@@ -190,11 +190,17 @@ pub struct Counts {
     pub log_chunks_lost: u64,
     /// Log time the lost stretches covered, milliseconds (where both ends are known).
     pub log_time_lost_ms: u64,
+    /// Landmarks merged into another as the same lamp by the navigator's map-level guard
+    /// (`nav::NavStats::landmarks_merged`).
+    pub landmarks_merged: u64,
+    /// Board features outside the navigator's field of use through a lens, left out
+    /// (`nav::NavStats::features_outside_field`).
+    pub features_outside_field: u64,
 }
 
 impl Counts {
     /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 17] {
+    pub fn named(&self) -> [(&'static str, u64); 19] {
         [
             ("frames", self.frames),
             ("corrupt", self.corrupt),
@@ -213,6 +219,8 @@ impl Counts {
             ("log_bytes_lost", self.log_bytes_lost),
             ("log_chunks_lost", self.log_chunks_lost),
             ("log_time_lost_ms", self.log_time_lost_ms),
+            ("landmarks_merged", self.landmarks_merged),
+            ("features_outside_field", self.features_outside_field),
         ]
     }
 }

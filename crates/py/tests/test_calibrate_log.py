@@ -51,6 +51,8 @@ COUNTS = {
     "log_bytes_lost",
     "log_chunks_lost",
     "log_time_lost_ms",
+    "landmarks_merged",
+    "features_outside_field",
 }
 
 

@@ -511,6 +511,8 @@ impl Replayer {
         counts.confirmed_tracks = tracker.confirmed;
         counts.tracker_resets = tracker.resets;
         counts.phase1_solves = stats.phase1_solves;
+        counts.landmarks_merged = stats.landmarks_merged;
+        counts.features_outside_field = stats.features_outside_field;
         let damage = self.stream.reader().damage();
         counts.log_spans_lost = damage.spans_total;
         counts.log_bytes_lost = damage.bytes_lost;
@@ -767,12 +769,22 @@ impl TruthAccumulator {
         let true_camera = truth.camera.as_ref().map_or(rig.nominal, truth_camera);
         let (w, h) = (f64::from(rig.width), f64::from(rig.height));
         let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
+        // Through real lenses the cameras see their whole raw images (vehicle-interfaces.md
+        // 1.1): a lamp is in view where its raw pixel is, as the simulator decides.
+        let through = |lens: &rig_model::lens::Lens, u: f64, v: f64| {
+            let c = &rig.nominal;
+            lens.unrectify(nalgebra::Vector2::new(u, v), c.f, c.cx, c.cy)
+                .is_some_and(|raw| inside(raw.x, raw.y))
+        };
+        let in_view = |z: &rig_model::Measurement| match &rig.lens {
+            None => inside(z[0], z[1]) && inside(z[2], z[3]),
+            Some(lens) => through(&lens.left, z[0], z[1]) && through(&lens.right, z[2], z[3]),
+        };
         let pose = Pose2::new(p.x, p.y, p.theta);
         for (lamp, count) in truth.landmarks.iter().zip(self.seen.iter_mut()) {
             let l = nalgebra::Vector3::new(lamp.x, lamp.y, lamp.z);
             if let Ok(z) = rig_model::project(&true_camera, &pose, &l)
-                && inside(z[0], z[1])
-                && inside(z[2], z[3])
+                && in_view(&z)
             {
                 *count += 1;
             }

@@ -364,7 +364,20 @@ impl StereoMatcher {
                 }
                 let Some(r) = right.get(j) else { continue };
                 let d = l.u - r.u;
-                if !(d > 0.0 && d >= d_min && d <= d_max) {
+                // Through a lens the window is widened by the pair's own disparity noise (the
+                // row gate's sigmas): far from the axis a fisheye stretches it past the
+                // disparity itself, and a window that cut it off kept the pairs whose noise
+                // made them nearer, which shrank the map (docs/halls.md). Without a lens the
+                // window is the depth range's.
+                let slack = if model.pixel_noise.is_uniform() {
+                    0.0
+                } else {
+                    let (gl, _) = model.pixel_noise.point_gains(true, l.u, l.v);
+                    let (gr, _) = model.pixel_noise.point_gains(false, r.u, r.v);
+                    self.settings.row_gate_sigmas
+                        * libm::sqrt((gl + gr) * model.pixel_variance_px2())
+                };
+                if !((slack > 0.0 || d > 0.0) && d >= d_min - slack && d <= d_max + slack) {
                     continue;
                 }
                 let mut cost = libm::fabs(l.v - v);

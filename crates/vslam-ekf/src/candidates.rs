@@ -90,12 +90,14 @@ impl Default for CandidateSettings {
 
 /// At most `budget` of a frame's observations: a 4 x 4 grid over the left image taken in
 /// turn, so that they stay spread over the image (the pose and the camera parameters are
-/// best informed by lamps in every direction), and within a cell the landmarks with the most
-/// observations first (the best known anchor the pose). Keeps the input order otherwise.
+/// best informed by lamps in every direction), and within a cell the landmarks with at most
+/// `brief` observations first (a new landmark gets its first updates), then those with the
+/// most (the best known anchor the pose). Keeps the input order otherwise.
 fn select_observations(
     ekf: &Ekf,
     batch: Vec<(LandmarkId, Measurement)>,
     budget: usize,
+    brief: u64,
 ) -> Vec<(LandmarkId, Measurement)> {
     if batch.len() <= budget {
         return batch;
@@ -118,7 +120,10 @@ fn select_observations(
         cell.sort_by_key(|&i| {
             let id = batch.get(i).map(|(id, _)| *id);
             let seen = id.and_then(|id| ekf.observations_of(id)).unwrap_or(0);
-            (core::cmp::Reverse(seen), id)
+            // A landmark still brief first: else a crowded frame never updates a new one,
+            // and it is pruned as brief once out of view (issue 35: lamps passed once along
+            // a wall were mapped and then lost).
+            (seen > brief, core::cmp::Reverse(seen), id)
         });
         cell.reverse(); // taken from the back
     }
@@ -327,12 +332,14 @@ impl Candidates {
             0 => observation_budget(ekf.state_len(), ekf.uses_joseph()),
             k => k,
         };
-        let batch = select_observations(ekf, batch, budget);
+        // Seen is tracked: a landmark the budget leaves out of this update is still in view
+        // (it is not brief while it is).
+        for (id, _) in &batch {
+            self.last_seen.insert(*id, self.frame + 1);
+        }
+        let batch = select_observations(ekf, batch, budget, self.settings.brief_observations);
         report.skipped = frame.len() - report.ignored - unbound.len() - batch.len();
         report.update = ekf.update(&batch)?;
-        for g in &report.update.accepted {
-            self.last_seen.insert(g.id, self.frame + 1);
-        }
         // Bindings to landmarks the caller removed from the filter directly.
         let stale: Vec<u64> = self
             .landmark_of

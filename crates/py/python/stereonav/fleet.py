@@ -87,6 +87,8 @@ _COUNTS: tuple[str, ...] = (
     "log_bytes_lost",
     "log_chunks_lost",
     "log_time_lost_ms",
+    "landmarks_merged",
+    "features_outside_field",
 )
 
 _PARAMETERS: tuple[str, ...] = CAMERA_PARAMETERS + VEHICLE_PARAMETERS

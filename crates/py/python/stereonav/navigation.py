@@ -221,7 +221,9 @@ class Replay:
         (frame pairs: ``calibrate_log`` only), ``tracker_resets``, ``phase1_solves`` (solves
         of phase 1's batch over every frame), and what a damaged log lost:
         ``log_spans_lost``, ``log_bytes_lost``, ``log_chunks_lost``, ``log_time_lost_ms``
-        (docs/logs.md).
+        (docs/logs.md), ``landmarks_merged`` (landmarks the map-level guard merged into
+        another as the same lamp) and ``features_outside_field`` (board features outside the
+        field of use through a lens; docs/halls.md).
     warnings : tuple of str
         What limits the result without stopping it (a log cut short, phase 1 never stable,
         frames without odometry, updates the filter refused), one line each.

@@ -731,6 +731,8 @@ fn summary_has_the_contract_keys_and_types() {
             "log_bytes_lost",
             "log_chunks_lost",
             "log_time_lost_ms",
+            "landmarks_merged",
+            "features_outside_field",
         ])
     );
     assert!(s["counts"].as_object().unwrap().values().all(Value::is_u64));
