@@ -9,6 +9,7 @@ mod calibrate_log;
 mod estimates_reader;
 mod hall;
 mod lens;
+mod mapped_once;
 mod navigate;
 mod output;
 mod real_log;

@@ -215,3 +215,47 @@ fn bad_frames_are_refused() {
         assert!(matches!(Candidates::new(bad), Err(Error::BadValue { .. })));
     }
 }
+
+/// Issue 35: in a crowded map the update's budget leaves observations out. A landmark left
+/// out is still tracked, so it is not brief (it used to be pruned once the map was crowded:
+/// lamps passed once along a wall were mapped and then lost), and a landmark with few
+/// observations gets the budget before the well-known ones, so that it gets established.
+#[test]
+fn a_landmark_the_budget_leaves_out_is_still_seen_and_a_new_one_comes_first() {
+    let mut w = World::new();
+    w.candidates = Candidates::new(CandidateSettings {
+        max_observations: 1,
+        prune_above: 0,
+        brief_frames: 2,
+        ..CandidateSettings::default()
+    })
+    .unwrap();
+    // Lamp 0 alone for 20 frames: a well-known landmark.
+    for frame in 0..20 {
+        if frame > 0 {
+            w.step();
+        }
+        let meas = vec![(0, w.lamp(0))];
+        w.candidates.observe(&mut w.ekf, &meas).unwrap();
+    }
+    let old = w.candidates.landmark_of(0).unwrap();
+    // Then lamps 0 and 1 in every frame, one observation a frame in the update.
+    let mut new = None;
+    for _ in 0..30 {
+        w.step();
+        let meas = vec![(0, w.lamp(0)), (1, w.lamp(1))];
+        let report = w.candidates.observe(&mut w.ekf, &meas).unwrap();
+        assert!(report.pruned.is_empty(), "{report:?}");
+        if let Some(&(_, id)) = report.added.first() {
+            new = Some(id);
+        }
+    }
+    let new = new.expect("lamp 1 confirmed");
+    assert!(w.ekf.contains(old) && w.ekf.contains(new));
+    let obs = |id| w.ekf.landmark(id).unwrap().observations;
+    // The new landmark took the budget until it had more than `brief_observations` (5),
+    // then the old one (the best known) took it back.
+    let brief = CandidateSettings::default().brief_observations;
+    assert!(obs(new) > brief, "new {}", obs(new));
+    assert!(obs(old) > 20, "old {}", obs(old));
+}

@@ -1,0 +1,73 @@
+//! Issue 35: a hall mapped once. Mapping drives through real lenses, simulated with the
+//! cameras' whole raw views (a lamp is in view where its raw pixel is), replayed with no
+//! flags: every lamp in view for 20 frames or more is one landmark (none twice, none
+//! missed but for the odd lamp seen only far out in a fisheye's edge), and the map is honest.
+//! docs/halls.md has the measurements behind the bounds.
+
+use std::path::Path;
+
+use replay::{NavSettings, Replayer, TruthErrors};
+
+/// `name` simulated with `seed` (the scenario's own without), replayed with no flags.
+fn replayed(name: &str, seed: Option<u64>) -> (TruthErrors, u64) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/scenarios")
+        .join(name);
+    let mut scenario = sim::Scenario::load(&path).unwrap();
+    if let Some(seed) = seed {
+        scenario = scenario.with_seed(seed);
+    }
+    let run = sim::simulate(&scenario, sim::Mode::Fast).unwrap();
+    static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let log = std::env::temp_dir().join(format!(
+        "stereonav-once-{}-{k}-{name}.mcap",
+        std::process::id()
+    ));
+    run.write_log(&log).unwrap();
+    let replayer = Replayer::open(&log, None, &NavSettings::default()).unwrap();
+    let mut sink = replay::ReplayCollector::default();
+    let end = replayer.run(&mut sink, &mut |_, _| {}).unwrap();
+    std::fs::remove_file(&log).ok();
+    (end.truth.unwrap(), end.counts.landmarks_merged)
+}
+
+fn assert_once(t: &TruthErrors, what: &str, missed: usize, rms_m: f64) {
+    let d = format!("{what}: {t:?}");
+    assert_eq!(t.landmarks_duplicate, 0, "{d}");
+    assert!(t.lamps_missed <= missed, "{d}");
+    // At most 2 % spurious (and one on a small map).
+    let total = t.landmarks_matched + t.landmarks_unmatched;
+    assert!(t.landmarks_unmatched <= (total / 50).max(1), "{d}");
+    assert!(t.landmark_rms <= rms_m, "{d}");
+}
+
+/// Our writing of wave 2's held-out fisheye log (36 lamps, three passes, U-turns), which
+/// mapped 99 landmarks for 36 lamps: through the fisheye's whole raw view, over three seeds.
+/// The landmark error is mostly the map's scale (the baseline's prior, 0.3 mm of 119 mm:
+/// 20 mm at 15 m).
+#[test]
+fn a_fisheye_over_three_passes_maps_each_lamp_once() {
+    for seed in [None, Some(37), Some(38)] {
+        let (t, _) = replayed("fisheye-passes.toml", seed);
+        assert_once(&t, &format!("seed {seed:?}"), 1, 0.030);
+    }
+}
+
+/// The sparse hall (70 lamps, the TUM VI fisheye at 4.8 m) through the whole raw view: its
+/// outer band once made 269 landmarks, then a map 0.9 % small (docs/halls.md).
+#[test]
+fn the_sparse_fisheye_hall_maps_each_lamp_once_and_to_scale() {
+    let (t, _) = replayed("hall-map.toml", None);
+    assert_once(&t, "hall-map", 1, 0.080);
+}
+
+/// The radtan hall (187 lamps and 160 sprinkler heads, five aisles, the first again): 486
+/// landmarks with 158 twins before the fixes. Four lamps seen only from the side on the
+/// return along the wall are still missed (the issue's target is none). A 5-minute drive
+/// replayed in about 10 s.
+#[test]
+fn the_radtan_hall_maps_each_lamp_once() {
+    let (t, _) = replayed("hall-radtan.toml", None);
+    assert_once(&t, "hall-radtan", 4, 0.070);
+}
