@@ -46,8 +46,8 @@ fn run() -> Result<(), String> {
     };
     let input =
         replay::read_vehicle_log(std::path::Path::new(log), rig).map_err(|e| e.to_string())?;
-    let mut nav = Navigator::new(input.rig.clone(), NavSettings::default())
-        .map_err(|e| e.to_string())?;
+    let mut nav =
+        Navigator::new(input.rig.clone(), NavSettings::default()).map_err(|e| e.to_string())?;
     let mut odometry = input.odometry.iter().peekable();
     // (milliseconds, frame index, landmarks after it)
     let mut times: Vec<(f64, usize, usize)> = Vec::with_capacity(input.frames.len());

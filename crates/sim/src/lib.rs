@@ -35,6 +35,7 @@
 
 mod error;
 pub mod features;
+pub mod hall;
 pub mod link;
 pub mod motion;
 pub mod render;

@@ -1,0 +1,205 @@
+//! A seeded Monte Carlo over generated halls (issue 35, item 6): each seed draws a hall
+//! ([`sim::hall::HallSpec::draw`]: aisles, lamp grid and height, sprinkler heads, beam corners,
+//! tubes, radtan or fisheye lens, a real vehicle's errors), simulates its mapping drive through
+//! the whole raw views, and replays it with no flags. Per hall: lamps and landmarks,
+//! duplicates, lamps missed (in view of both raw images for 20 frames or more, unmapped),
+//! unmatched landmarks, landmark and trajectory RMS, the landmarks within 3 sigma of their lamp
+//! on every axis, the vehicle's parameters within 3 sigma, and the replay's speed; then the
+//! totals and the process's peak memory.
+//!
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye]`
+//! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
+//! `--lens`: every hall through that lens)
+#![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use replay::{NavSettings, Replayer};
+use rig_model::Param;
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("hall_mc: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The process's peak resident memory, MiB (Linux: `VmHWM` of /proc/self/status).
+fn peak_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+#[derive(Default)]
+struct Totals {
+    halls: usize,
+    lamps_mapped: usize,
+    landmarks: usize,
+    duplicates: usize,
+    missed: usize,
+    unmatched: usize,
+    inside: usize,
+    matched: usize,
+    vehicle_inside: usize,
+    vehicle_total: usize,
+    data_s: f64,
+    replay_s: f64,
+}
+
+fn run() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye]";
+    let mut settings = NavSettings::default();
+    let mut lens = None;
+    let mut positional = Vec::new();
+    let mut rest = args.iter();
+    while let Some(a) = rest.next() {
+        match a.as_str() {
+            "--field" => {
+                let v = rest.next().ok_or(usage)?;
+                settings.ekf.max_off_axis_deg =
+                    v.parse().map_err(|_| format!("--field {v:?}: {usage}"))?;
+            }
+            "--lens" => {
+                lens = Some(match rest.next().map(String::as_str) {
+                    Some("radtan") => sim::hall::HallLens::Radtan,
+                    Some("fisheye") => sim::hall::HallLens::Fisheye,
+                    _ => return Err(usage.to_string()),
+                });
+            }
+            _ => positional.push(a),
+        }
+    }
+    let halls: u64 = positional
+        .first()
+        .ok_or(usage)?
+        .parse()
+        .map_err(|_| usage.to_string())?;
+    let first: u64 = match positional.get(1) {
+        Some(s) => s.parse().map_err(|_| usage.to_string())?,
+        None => 1,
+    };
+    let mut totals = Totals::default();
+    println!(
+        "seed | hall | lamps seen | landmarks | duplicates | missed | unmatched | landmark RMS | inside 3 sigma | trajectory RMS | vehicle inside 3 sigma | speed"
+    );
+    for seed in first..first + halls {
+        let mut spec = sim::hall::HallSpec::draw(seed);
+        if let Some(lens) = lens {
+            spec.lens = lens;
+        }
+        let scenario = sim::hall::scenario(&spec, seed).map_err(|e| e.to_string())?;
+        let run = sim::simulate(&scenario, sim::Mode::Fast).map_err(|e| e.to_string())?;
+        let log = std::env::temp_dir().join(format!(
+            "stereonav-hall-mc-{}-{seed}.mcap",
+            std::process::id()
+        ));
+        run.write_log(&log).map_err(|e| e.to_string())?;
+        let t0 = Instant::now();
+        let replayer = Replayer::open(&log, None, &settings).map_err(|e| e.to_string())?;
+        let mut sink = replay::ReplayCollector::default();
+        let end = replayer
+            .run(&mut sink, &mut |_, _| {})
+            .map_err(|e| e.to_string())?;
+        let took = t0.elapsed().as_secs_f64();
+        std::fs::remove_file(&log).ok();
+        let truth = end.truth.as_ref().ok_or("the log has no truth")?;
+        // Each landmark against its nearest lamp within the match radius: inside 3 sigma on
+        // every axis.
+        let mut inside = 0;
+        let mut matched = 0;
+        for l in &end.landmarks {
+            let nearest = run
+                .landmarks
+                .iter()
+                .map(|lamp| {
+                    let d = [
+                        l.position[0] - lamp.position.x,
+                        l.position[1] - lamp.position.y,
+                        l.position[2] - lamp.position.z,
+                    ];
+                    (d, (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((d, dist)) = nearest
+                && dist <= truth.match_radius
+            {
+                matched += 1;
+                if (0..3).all(|k| d[k].abs() <= 3.0 * l.covariance[k][k].max(0.0).sqrt()) {
+                    inside += 1;
+                }
+            }
+        }
+        let vehicle: Vec<(Param, f64)> = truth
+            .camera
+            .iter()
+            .filter(|(p, _)| p.is_vehicle())
+            .copied()
+            .collect();
+        let sigma = |p: Param| {
+            end.final_camera
+                .iter()
+                .find(|e| e.param == p)
+                .map_or(0.0, |e| e.sigma)
+        };
+        let estimated: Vec<&(Param, f64)> =
+            vehicle.iter().filter(|(p, _)| sigma(*p) > 0.0).collect();
+        let vehicle_inside = estimated
+            .iter()
+            .filter(|(p, err)| err.abs() <= 3.0 * sigma(*p))
+            .count();
+        let data_s = match (end.first_t_us, end.last_frame.as_ref()) {
+            (Some(a), Some(b)) => (b.t_us - a) as f64 * 1e-6,
+            _ => 0.0,
+        };
+        let seen = truth.landmarks_matched + truth.lamps_missed;
+        println!(
+            "{seed} | {} | {seen} | {} | {} | {} | {} | {:.1} mm | {inside} of {matched} | {:.1} mm | {vehicle_inside} of {} | {:.0}x",
+            spec.describe(),
+            end.landmarks.len(),
+            truth.landmarks_duplicate,
+            truth.lamps_missed,
+            truth.landmarks_unmatched,
+            truth.landmark_rms * 1e3,
+            truth.ate_rms * 1e3,
+            estimated.len(),
+            data_s / took
+        );
+        totals.halls += 1;
+        totals.lamps_mapped += truth.landmarks_matched;
+        totals.landmarks += end.landmarks.len();
+        totals.duplicates += truth.landmarks_duplicate;
+        totals.missed += truth.lamps_missed;
+        totals.unmatched += truth.landmarks_unmatched;
+        totals.inside += inside;
+        totals.matched += matched;
+        totals.vehicle_inside += vehicle_inside;
+        totals.vehicle_total += estimated.len();
+        totals.data_s += data_s;
+        totals.replay_s += took;
+    }
+    println!(
+        "{} halls: {} landmarks, {} duplicates, {} lamps missed, {} unmatched; {} of {} landmarks inside 3 sigma; vehicle parameters inside 3 sigma {} of {}; {:.0} s of data replayed in {:.1} s ({:.0}x); peak memory {}",
+        totals.halls,
+        totals.landmarks,
+        totals.duplicates,
+        totals.missed,
+        totals.unmatched,
+        totals.inside,
+        totals.matched,
+        totals.vehicle_inside,
+        totals.vehicle_total,
+        totals.data_s,
+        totals.replay_s,
+        totals.data_s / totals.replay_s.max(1e-9),
+        peak_mib().map_or_else(|| "unknown".to_string(), |m| format!("{m:.0} MiB"))
+    );
+    let _ = totals.lamps_mapped;
+    Ok(())
+}
