@@ -82,3 +82,31 @@ fn the_radtan_hall_maps_each_lamp_once() {
     let (t, _) = replayed("hall-radtan.toml", None);
     assert_once(&t, "hall-radtan", 4, 0.070);
 }
+
+/// Item 2 of the issue, a loop closed when drift has grown past the gate: `hall-loop.toml`
+/// (poor odometry, 100 m without lamps, then the first lamps again). Lamps there are at least
+/// 2.4 m apart (a 3 m grid, 0.3 m of jitter); two landmarks closer than 1.5 m are one lamp
+/// mapped twice. Today 15 such pairs (docs/halls.md, "Not done yet").
+#[test]
+#[ignore = "unfinished: loop closure (issue 35 item 2) is not built"]
+fn a_loop_through_a_dark_stretch_is_closed() {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/hall-loop.toml");
+    let run = sim::simulate(&sim::Scenario::load(&path).unwrap(), sim::Mode::Fast).unwrap();
+    let log = std::env::temp_dir().join(format!("stereonav-loop-{}.mcap", std::process::id()));
+    run.write_log(&log).unwrap();
+    let replayer = Replayer::open(&log, None, &NavSettings::default()).unwrap();
+    let mut sink = replay::ReplayCollector::default();
+    let end = replayer.run(&mut sink, &mut |_, _| {}).unwrap();
+    std::fs::remove_file(&log).ok();
+    let mut twins = Vec::new();
+    for (i, a) in end.landmarks.iter().enumerate() {
+        for b in &end.landmarks[i + 1..] {
+            let d = (a.position[0] - b.position[0]).hypot(a.position[1] - b.position[1]);
+            if d < 1.5 {
+                twins.push((a.id, b.id, d));
+            }
+        }
+    }
+    assert!(twins.is_empty(), "{} twin pairs: {twins:?}", twins.len());
+}
