@@ -1002,15 +1002,18 @@ impl Navigator {
             .map(|(i, _)| i)
             .collect();
         if !unbound.is_empty() {
+            // The landmarks in view, and those near it: a match is unique only if no other
+            // landmark the feature might be, in view or just outside it, is in its gate.
             let predicted: Vec<(LandmarkId, Vector4<f64>, Matrix4<f64>)> = ekf
                 .visible_landmarks()
                 .into_iter()
-                .filter(|(id, _)| !observed.contains(id))
                 .filter_map(|(id, _)| {
                     let (z, s) = ekf.predict_measurement(id).ok()?;
-                    let s_inv = s.try_inverse()?;
-                    Some((id, z, s_inv))
+                    Some((id, z, s))
                 })
+                .chain(ekf.landmarks_near_view(NEAR_VIEW_SIGMAS))
+                .filter(|(id, _, _)| !observed.contains(id))
+                .filter_map(|(id, z, s)| Some((id, z, s.try_inverse()?)))
                 .collect();
             let mut taken: Vec<LandmarkId> = Vec::new();
             for &i in &unbound {
@@ -1172,6 +1175,7 @@ impl Navigator {
                 continue;
             };
             let mut best: Option<(LandmarkId, f64)> = None;
+            let mut inside = 0usize;
             for &(other, position) in &all {
                 if other == id
                     || !ekf.contains(other)
@@ -1183,11 +1187,16 @@ impl Navigator {
                 let Ok(d2) = ekf.landmark_pair_distance(id, other) else {
                     continue;
                 };
-                if d2 <= self.merge_gate && best.is_none_or(|(_, b)| d2 < b) {
-                    best = Some((other, d2));
+                if d2 <= self.merge_gate {
+                    inside += 1;
+                    if best.is_none_or(|(_, b)| d2 < b) {
+                        best = Some((other, d2));
+                    }
                 }
             }
-            let Some((other, _)) = best else {
+            // Two candidates in the gate: which lamp it is, is not known (a regular grid seen
+            // with an uncertain pose); no merge.
+            let Some((other, _)) = best.filter(|_| inside == 1) else {
                 continue;
             };
             let (keep, drop) = ordered(id, other);
@@ -1228,6 +1237,10 @@ impl Navigator {
 /// Two landmarks further apart than this are never compared by the merge guard, metres: lamps
 /// are metres apart, and a lamp's second landmark lies where the drift of its day put it.
 pub const MERGE_SEARCH_M: f64 = 1.0;
+
+/// How far outside the image, in standard deviations of its predicted pixel, a landmark still
+/// counts for map matching's uniqueness ([`vslam_ekf::Ekf::landmarks_near_view`]).
+const NEAR_VIEW_SIGMAS: f64 = 3.0;
 
 /// Frames between the merge guard's passes over the whole map (5 s at 20 Hz).
 const MERGE_PASS_FRAMES: u64 = 100;

@@ -135,6 +135,53 @@ impl Ekf {
         Ok((z, h))
     }
 
+    /// The landmarks not in view ([`Ekf::visible_landmarks`]) whose predicted pixels, left and
+    /// right, lie within `k_sigma` standard deviations of the prediction (the innovation
+    /// covariance's variances) of the rectified image, with the prediction and its innovation
+    /// covariance: the landmarks a feature in the image might be when the pose is uncertain.
+    /// Map matching needs them to call a match unique: with the pose metres off, a lamp's own
+    /// landmark may be predicted outside the image while its neighbour's is inside (issue 35,
+    /// `hall-loop.toml`). Landmarks predicted more than an image's size outside are skipped
+    /// before their covariance is formed.
+    pub fn landmarks_near_view(
+        &self,
+        k_sigma: f64,
+    ) -> Vec<(LandmarkId, Measurement, Matrix4<f64>)> {
+        let visible: Vec<LandmarkId> = self.visible_landmarks().iter().map(|(id, _)| *id).collect();
+        let camera = self.camera();
+        let pose = self.pose();
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let mut out = Vec::new();
+        for (s, slot) in self.landmarks.iter().enumerate() {
+            if visible.contains(&slot.id) {
+                continue;
+            }
+            let l = self
+                .x
+                .fixed_rows::<3>(StateLayout::landmark(s))
+                .into_owned();
+            let Ok(z) = rig_model::project(&camera, &pose, &l) else {
+                continue;
+            };
+            let coarse = |u: f64, v: f64| u > -w && u < 2.0 * w && v > -h && v < 2.0 * h;
+            if !(coarse(z[0], z[1]) && coarse(z[2], z[3])) {
+                continue;
+            }
+            let Ok((z, cov)) = self.predict_measurement(slot.id) else {
+                continue;
+            };
+            let near = |u: usize, v: usize| {
+                let su = k_sigma * cov[(u, u)].max(0.0).sqrt();
+                let sv = k_sigma * cov[(v, v)].max(0.0).sqrt();
+                z[u] + su >= 0.0 && z[u] - su < w && z[v] + sv >= 0.0 && z[v] - sv < h
+            };
+            if near(0, 1) && near(2, 3) {
+                out.push((slot.id, z, cov));
+            }
+        }
+        out
+    }
+
     /// The landmarks whose predicted measurement falls inside both images, with it. With
     /// raw lenses ([`rig_model::Rig::lens`]) the images are the raw ones: the prediction is
     /// mapped through each lens ([`rig_model::lens::Lens::unrectify`]) and tested against the

@@ -259,3 +259,37 @@ fn a_landmark_the_budget_leaves_out_is_still_seen_and_a_new_one_comes_first() {
     assert!(obs(new) > brief, "new {}", obs(new));
     assert!(obs(old) > 20, "old {}", obs(old));
 }
+
+/// Issue 35: map matching calls a match unique only if no other landmark the feature might be
+/// is in its gate, in view or just outside it. A landmark leaving the image is, for a while,
+/// predicted within three sigma of the image: `landmarks_near_view` gives it, and it is not
+/// among `visible_landmarks`.
+#[test]
+fn a_landmark_just_outside_the_image_is_near_the_view() {
+    let mut w = World::new();
+    // A lamp seen near the image's edge, mapped at once.
+    let lamp = Vector3::new(0.25, 0.0, 3.3);
+    let z = project(&w.truth, &w.pose, &lamp).unwrap();
+    let id = w.ekf.add_landmark(&z).unwrap();
+    let inside = |w: &World| w.ekf.visible_landmarks().iter().any(|(l, _)| *l == id);
+    assert!(inside(&w));
+    // Drive until it leaves the image (no observation: the pose grows uncertain).
+    let mut steps = 0;
+    while inside(&w) {
+        w.step();
+        steps += 1;
+        assert!(steps < 400, "the lamp never left the image");
+    }
+    let near = w.ekf.landmarks_near_view(3.0);
+    let (_, z, s) = near
+        .iter()
+        .find(|(l, _, _)| *l == id)
+        .expect("near the view");
+    let (width, height) = w.ekf.image_size();
+    let out =
+        |u: f64, v: f64| u < 0.0 || u >= f64::from(width) || v < 0.0 || v >= f64::from(height);
+    assert!(out(z[0], z[1]) || out(z[2], z[3]), "{z:?}");
+    assert!(s[(0, 0)] > 0.0 && s[(1, 1)] > 0.0);
+    // With no margin, nothing outside the image is near it.
+    assert!(w.ekf.landmarks_near_view(0.0).is_empty());
+}
