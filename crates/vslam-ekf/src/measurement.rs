@@ -171,8 +171,8 @@ impl Ekf {
                 continue;
             };
             let near = |u: usize, v: usize| {
-                let su = k_sigma * cov[(u, u)].max(0.0).sqrt();
-                let sv = k_sigma * cov[(v, v)].max(0.0).sqrt();
+                let su = k_sigma * libm::sqrt(cov[(u, u)].max(0.0));
+                let sv = k_sigma * libm::sqrt(cov[(v, v)].max(0.0));
                 z[u] + su >= 0.0 && z[u] - su < w && z[v] + sv >= 0.0 && z[v] - sv < h
             };
             if near(0, 1) && near(2, 3) {
