@@ -86,8 +86,8 @@ fn the_radtan_hall_maps_each_lamp_once() {
 /// Item 2 of the issue, a loop closed when drift has grown past the gate: `hall-loop.toml`
 /// (poor odometry, 100 m without lamps, then the first lamps again). Lamps there are at least
 /// 2.4 m apart (a 3 m grid, 0.3 m of jitter); two landmarks closer than 1.5 m are one lamp
-/// mapped twice. Today 15 such pairs: phase 1, still running after the straight first 60 m,
-/// takes the neighbouring lamps on the way back (docs/halls.md, "Not done yet").
+/// mapped twice. Today 15 such pairs: on the way back the pose jumps onto the neighbouring
+/// lamps, one grid spacing off (docs/halls.md, "Not done yet").
 #[test]
 #[ignore = "unfinished: loop closure (issue 35 item 2) is not built"]
 fn a_loop_through_a_dark_stretch_is_closed() {
