@@ -193,6 +193,17 @@ pub struct FrameOutcome {
     pub no_odometry: bool,
 }
 
+impl FrameOutcome {
+    /// The landmarks observed at this frame: updated or rejected by the gate.
+    pub fn observed(&self) -> Vec<LandmarkId> {
+        self.accepted
+            .iter()
+            .map(|(id, _)| *id)
+            .chain(self.rejected.iter().copied())
+            .collect()
+    }
+}
+
 /// A landmark's observation the filter's update was given at a frame, and the board features
 /// it was made of.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -1004,14 +1015,14 @@ impl Navigator {
         if !unbound.is_empty() {
             // The landmarks in view, and those near it: a match is unique only if no other
             // landmark the feature might be, in view or just outside it, is in its gate.
-            let predicted: Vec<(LandmarkId, Vector4<f64>, Matrix4<f64>)> = ekf
-                .visible_landmarks()
-                .into_iter()
-                .filter_map(|(id, _)| {
+            let in_view = ekf.visible_landmarks();
+            let predicted: Vec<(LandmarkId, Vector4<f64>, Matrix4<f64>)> = in_view
+                .iter()
+                .filter_map(|&(id, _)| {
                     let (z, s) = ekf.predict_measurement(id).ok()?;
                     Some((id, z, s))
                 })
-                .chain(ekf.landmarks_near_view(NEAR_VIEW_SIGMAS))
+                .chain(ekf.landmarks_near_view(NEAR_VIEW_SIGMAS, &in_view))
                 .filter(|(id, _, _)| !observed.contains(id))
                 .filter_map(|(id, z, s)| Some((id, z, s.try_inverse()?)))
                 .collect();
@@ -1103,13 +1114,7 @@ impl Navigator {
         // then each new landmark (and, every `MERGE_PASS_FRAMES`, every landmark) against its
         // neighbours. While the smoother maps, it holds the landmarks as it saw them and its
         // re-seed would undo a merge: the guard waits for it to stop (or for `finish`).
-        let observed: Vec<LandmarkId> = outcome
-            .accepted
-            .iter()
-            .map(|(id, _)| *id)
-            .chain(outcome.rejected.iter().copied())
-            .collect();
-        self.note_co_observed(&observed);
+        self.note_co_observed(&outcome.observed());
         if !self.smoother.is_mapping() {
             let merged = if self.stats.frames.is_multiple_of(MERGE_PASS_FRAMES) {
                 self.merge_twins(None)

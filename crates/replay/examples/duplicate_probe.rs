@@ -108,12 +108,7 @@ fn run() -> Result<(), String> {
         let Some(ekf) = nav.ekf() else {
             continue;
         };
-        let observed: Vec<LandmarkId> = outcome
-            .accepted
-            .iter()
-            .map(|(id, _)| *id)
-            .chain(outcome.rejected.iter().copied())
-            .collect();
+        let observed = outcome.observed();
         for &id in &outcome.added {
             added_total += 1;
             let (Some(new), Ok((z_new, _))) = (ekf.landmark(id), ekf.predict_measurement(id))

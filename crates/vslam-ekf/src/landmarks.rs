@@ -99,19 +99,11 @@ impl Ekf {
     /// distance of `a - b` under its covariance `P_aa + P_bb - P_ab - P_ba` (3 dof). Small
     /// (below the 3-dof chi-square bound) when they may be one point seen twice.
     pub fn landmark_pair_distance(&self, a: LandmarkId, b: LandmarkId) -> Result<f64, Error> {
-        let (d, s) = self.pair_difference(a, b)?;
-        let c = s
-            .cholesky()
-            .ok_or(Error::PairNotPositiveDefinite { a, b })?;
-        Ok(d.dot(&c.solve(&d)))
+        Ok(self.pair_difference(a, b)?.d2)
     }
 
-    /// `a - b` and its covariance.
-    fn pair_difference(
-        &self,
-        a: LandmarkId,
-        b: LandmarkId,
-    ) -> Result<(Vector3<f64>, Matrix3<f64>), Error> {
+    /// `a - b`, its covariance's Cholesky factor and the squared Mahalanobis distance.
+    fn pair_difference(&self, a: LandmarkId, b: LandmarkId) -> Result<PairDifference, Error> {
         let ia = self
             .slot(a)
             .map(StateLayout::landmark)
@@ -125,7 +117,11 @@ impl Ekf {
         // `P` keeps its lower triangle only (see the crate docs).
         let cross = Matrix3::from_fn(|r, c| sym(self.p.as_slice(), n, ia + r, ib + c));
         let s = self.block3(ia) + self.block3(ib) - cross - cross.transpose();
-        Ok((d, s))
+        let c = s
+            .cholesky()
+            .ok_or(Error::PairNotPositiveDefinite { a, b })?;
+        let d2 = d.dot(&c.solve(&d));
+        Ok(PairDifference { ia, ib, d, c, d2 })
     }
 
     /// Merges landmark `drop` into `keep`, two estimates of one point (a lamp mapped twice):
@@ -139,19 +135,7 @@ impl Ekf {
         if keep == drop {
             return Err(Error::MergeIntoItself { id: keep });
         }
-        let (d, s) = self.pair_difference(keep, drop)?;
-        let c = s
-            .cholesky()
-            .ok_or(Error::PairNotPositiveDefinite { a: keep, b: drop })?;
-        let d2 = d.dot(&c.solve(&d));
-        let ia = self
-            .slot(keep)
-            .map(StateLayout::landmark)
-            .ok_or(Error::UnknownLandmark { id: keep })?;
-        let ib = self
-            .slot(drop)
-            .map(StateLayout::landmark)
-            .ok_or(Error::UnknownLandmark { id: drop })?;
+        let PairDifference { ia, ib, d, c, d2 } = self.pair_difference(keep, drop)?;
         let n = self.x.len();
         // The whole of `P` (its lower triangle is kept; the update below is dense).
         mirror_lower(self.p.as_mut_slice(), n);
@@ -331,4 +315,18 @@ impl Ekf {
         self.health.landmarks_removed += 1;
         Ok(())
     }
+}
+
+/// Two landmarks compared ([`Ekf::landmark_pair_distance`], [`Ekf::merge_landmarks`]).
+struct PairDifference {
+    /// The state index of the first landmark's x.
+    ia: usize,
+    /// The state index of the second's.
+    ib: usize,
+    /// `x_a - x_b`.
+    d: Vector3<f64>,
+    /// The Cholesky factor of its covariance.
+    c: nalgebra::Cholesky<f64, nalgebra::U3>,
+    /// The squared Mahalanobis distance `d^T S^-1 d`.
+    d2: f64,
 }

@@ -135,7 +135,8 @@ impl Ekf {
         Ok((z, h))
     }
 
-    /// The landmarks not in view ([`Ekf::visible_landmarks`]) whose predicted pixels, left and
+    /// The landmarks not among `in_view` (the caller's [`Ekf::visible_landmarks`], computed
+    /// once a frame) whose predicted pixels, left and
     /// right, lie within `k_sigma` standard deviations of the prediction (the innovation
     /// covariance's variances) of the rectified image, with the prediction and its innovation
     /// covariance: the landmarks a feature in the image might be when the pose is uncertain.
@@ -146,14 +147,14 @@ impl Ekf {
     pub fn landmarks_near_view(
         &self,
         k_sigma: f64,
+        in_view: &[(LandmarkId, Measurement)],
     ) -> Vec<(LandmarkId, Measurement, Matrix4<f64>)> {
-        let visible: Vec<LandmarkId> = self.visible_landmarks().iter().map(|(id, _)| *id).collect();
         let camera = self.camera();
         let pose = self.pose();
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         let mut out = Vec::new();
         for (s, slot) in self.landmarks.iter().enumerate() {
-            if visible.contains(&slot.id) {
+            if in_view.iter().any(|(id, _)| *id == slot.id) {
                 continue;
             }
             let l = self

@@ -280,7 +280,7 @@ fn a_landmark_just_outside_the_image_is_near_the_view() {
         steps += 1;
         assert!(steps < 400, "the lamp never left the image");
     }
-    let near = w.ekf.landmarks_near_view(3.0);
+    let near = w.ekf.landmarks_near_view(3.0, &w.ekf.visible_landmarks());
     let (_, z, s) = near
         .iter()
         .find(|(l, _, _)| *l == id)
@@ -291,5 +291,9 @@ fn a_landmark_just_outside_the_image_is_near_the_view() {
     assert!(out(z[0], z[1]) || out(z[2], z[3]), "{z:?}");
     assert!(s[(0, 0)] > 0.0 && s[(1, 1)] > 0.0);
     // With no margin, nothing outside the image is near it.
-    assert!(w.ekf.landmarks_near_view(0.0).is_empty());
+    assert!(
+        w.ekf
+            .landmarks_near_view(0.0, &w.ekf.visible_landmarks())
+            .is_empty()
+    );
 }
