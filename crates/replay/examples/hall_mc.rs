@@ -39,7 +39,6 @@ fn peak_mib() -> Option<f64> {
 #[derive(Default)]
 struct Totals {
     halls: usize,
-    lamps_mapped: usize,
     landmarks: usize,
     duplicates: usize,
     missed: usize,
@@ -172,7 +171,6 @@ fn run() -> Result<(), String> {
             data_s / took
         );
         totals.halls += 1;
-        totals.lamps_mapped += truth.landmarks_matched;
         totals.landmarks += end.landmarks.len();
         totals.duplicates += truth.landmarks_duplicate;
         totals.missed += truth.lamps_missed;
@@ -200,6 +198,5 @@ fn run() -> Result<(), String> {
         totals.data_s / totals.replay_s.max(1e-9),
         peak_mib().map_or_else(|| "unknown".to_string(), |m| format!("{m:.0} MiB"))
     );
-    let _ = totals.lamps_mapped;
     Ok(())
 }
