@@ -455,6 +455,10 @@ impl Navigator {
             if self.smoother.is_mapping() && self.smoother.flush() {
                 self.reseed();
             }
+            if let Some(ekf) = self.ekf.as_mut() {
+                // The map is read whole from here on: its covariance written out once.
+                ekf.settle();
+            }
             self.merge_duplicates();
             return Ok(false);
         }
@@ -1140,7 +1144,7 @@ impl Navigator {
         };
         let near: Vec<(LandmarkId, nalgebra::Vector3<f64>)> = ids
             .iter()
-            .filter_map(|&id| ekf.landmark(id).map(|l| (id, l.position)))
+            .filter_map(|&id| ekf.landmark_position(id).map(|p| (id, p)))
             .collect();
         for (i, (a, pa)) in near.iter().enumerate() {
             for (b, pb) in near.iter().skip(i + 1) {
@@ -1169,14 +1173,13 @@ impl Navigator {
             return Vec::new();
         };
         let mut merged: Vec<(LandmarkId, LandmarkId)> = Vec::new();
-        let all: Vec<(LandmarkId, nalgebra::Vector3<f64>)> =
-            ekf.landmarks().map(|l| (l.id, l.position)).collect();
+        let all: Vec<(LandmarkId, nalgebra::Vector3<f64>)> = ekf.landmark_positions().collect();
         let probe: Vec<LandmarkId> = match among {
             Some(ids) => ids.to_vec(),
             None => all.iter().map(|(id, _)| *id).collect(),
         };
         for id in probe {
-            let Some(l) = ekf.landmark(id) else {
+            let Some(position_id) = ekf.landmark_position(id) else {
                 continue;
             };
             let mut best: Option<(LandmarkId, f64)> = None;
@@ -1184,8 +1187,15 @@ impl Navigator {
             for &(other, position) in &all {
                 if other == id
                     || !ekf.contains(other)
-                    || (position - l.position).norm() > MERGE_SEARCH_M
+                    || (position - position_id).norm() > MERGE_SEARCH_M
                     || self.co_observed.contains(&ordered(id, other))
+                {
+                    continue;
+                }
+                // A lower bound first (cheap while the filter works locally), then exactly.
+                if ekf
+                    .landmark_pair_distance_bound(id, other)
+                    .is_ok_and(|d2| d2 > self.merge_gate)
                 {
                     continue;
                 }

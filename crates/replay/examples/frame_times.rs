@@ -89,6 +89,26 @@ fn run() -> Result<(), String> {
         percentile(&sorted, 0.999),
         sorted.last().copied().unwrap_or(f64::NAN)
     );
+    if let Some(ekf) = nav.ekf() {
+        let h = ekf.health();
+        println!(
+            "filter: {} updates, {} local sessions, {} settled, state {}",
+            h.updates,
+            h.local_sessions,
+            h.local_settles,
+            ekf.state_len()
+        );
+    }
+    // Where along the log the time goes: mean per block of 500 frames.
+    for block in times.chunks(500) {
+        let (first, last) = (block[0], block[block.len() - 1]);
+        #[allow(clippy::cast_precision_loss)]
+        let mean = block.iter().map(|t| t.0).sum::<f64>() / block.len() as f64;
+        println!(
+            "  frames {}-{}: mean {mean:.3} ms, {} to {} landmarks",
+            first.1, last.1, first.2, last.2
+        );
+    }
     times.sort_by(|a, b| b.0.total_cmp(&a.0));
     for (ms, k, landmarks) in times.iter().take(5) {
         println!("  frame {k}: {ms:.2} ms, {landmarks} landmarks after it");

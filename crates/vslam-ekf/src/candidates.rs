@@ -421,8 +421,8 @@ impl Candidates {
             };
             if ready
                 && ekf
-                    .landmarks()
-                    .any(|l| (l.position - point).norm() < self.settings.min_separation_m)
+                    .landmark_positions()
+                    .any(|(_, position)| (position - point).norm() < self.settings.min_separation_m)
             {
                 // A second feature of something already mapped.
                 self.pending.remove(&track);

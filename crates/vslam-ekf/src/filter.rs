@@ -72,6 +72,13 @@ pub struct Settings {
     /// fisheye's outer band": 50 degrees kept the maps of 8 generated fisheye halls honest,
     /// 65 did not). 90 uses every ray in front of the camera; no effect without lens tables.
     pub max_off_axis_deg: f64,
+    /// Large states are updated in local sessions (`crate::local`, the compressed filter):
+    /// the active landmarks are those within this many metres (horizontally) beyond the
+    /// farthest one in view when a session opens, so that the vehicle can drive about as far
+    /// before an observation needs a passive one and the session is settled. Exact either
+    /// way; it moves cost between the updates (larger: more active states) and the settles
+    /// (smaller: more often). 0 keeps every update dense.
+    pub local_margin_m: f64,
 }
 
 impl Default for Settings {
@@ -83,6 +90,7 @@ impl Default for Settings {
             covariance_update: CovarianceUpdate::Auto,
             camera_update: CameraUpdate::Refine,
             max_off_axis_deg: 50.0,
+            local_margin_m: 3.0,
         }
     }
 }
@@ -110,6 +118,14 @@ impl Settings {
                 name: "Settings.max_off_axis_deg",
                 value: a,
                 expected: "in (0, 90] degrees",
+            });
+        }
+        let m = self.local_margin_m;
+        if !(m.is_finite() && m >= 0.0) {
+            return Err(Error::BadValue {
+                name: "Settings.local_margin_m",
+                value: m,
+                expected: "finite and at least 0",
             });
         }
         if self.max_consecutive_rejections == 0 {
@@ -174,6 +190,9 @@ pub struct Ekf {
     pub(crate) workspace: Workspace,
     /// Estimated camera parameters held this frame ([`Ekf::set_held`]), by [`Param::index`].
     pub(crate) held: [bool; N_PARAMS],
+    /// The open local session, if any (`crate::local`): while it is open, `p` is the
+    /// covariance as the session found it and [`Ekf::cov`] reads the current one.
+    pub(crate) local: Option<alloc::boxed::Box<crate::local::Local>>,
 }
 
 pub(crate) fn check_finite(what: &'static str, value: f64) -> Result<(), Error> {

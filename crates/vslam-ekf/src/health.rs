@@ -37,6 +37,11 @@ pub struct Health {
     pub landmarks_added: u64,
     /// Landmarks removed (by repeated rejection or on request), in all.
     pub landmarks_removed: u64,
+    /// Local sessions opened (`crate::local`: updates confined to the states near the
+    /// vehicle), in all.
+    pub local_sessions: u64,
+    /// Local sessions settled (their covariance written out), in all.
+    pub local_settles: u64,
     /// Gate outcomes in the window (at most its length).
     pub window_observations: usize,
     /// Rejections among them.
@@ -64,6 +69,8 @@ pub(crate) struct HealthState {
     pub(crate) rejected: u64,
     pub(crate) landmarks_added: u64,
     pub(crate) landmarks_removed: u64,
+    pub(crate) local_sessions: u64,
+    pub(crate) local_settles: u64,
     /// The last bound computed, by accepted count (the quantile costs a few microseconds).
     bound_cache: Cell<Option<(usize, f64)>>,
 }
@@ -79,6 +86,8 @@ impl HealthState {
             rejected: 0,
             landmarks_added: 0,
             landmarks_removed: 0,
+            local_sessions: 0,
+            local_settles: 0,
             bound_cache: Cell::new(None),
         }
     }
@@ -126,6 +135,8 @@ impl HealthState {
             rejected: self.rejected,
             landmarks_added: self.landmarks_added,
             landmarks_removed: self.landmarks_removed,
+            local_sessions: self.local_sessions,
+            local_settles: self.local_settles,
             window_observations: self.window.len(),
             window_rejected: self.window.len() - count,
             window_mean_nis_per_dof: mean,

@@ -10,7 +10,7 @@ use rig_model::{Measurement, N_PARAMS};
 use crate::error::Error;
 use crate::filter::Ekf;
 use crate::kernels::gather_columns;
-use crate::linalg::{mirror_lower, sym};
+use crate::linalg::mirror_lower;
 use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout, at};
 
 /// A landmark's id: stable for its life, never reused after it is removed.
@@ -89,21 +89,65 @@ impl Ekf {
 
     /// Every landmark's estimate, in state order (increasing id).
     pub fn landmarks(&self) -> impl Iterator<Item = LandmarkEstimate> + '_ {
-        self.landmarks
-            .iter()
-            .enumerate()
-            .map(|(s, slot)| self.estimate_at(s, slot))
+        // While a local session is open, the passive landmarks' blocks share one product
+        // (`P0_BA0 psi`, formed once here).
+        let shared = self.local.as_ref().map(|l| l.passive_products());
+        self.landmarks.iter().enumerate().map(move |(s, slot)| {
+            let i = StateLayout::landmark(s);
+            match (&self.local, &shared) {
+                (Some(l), Some(m)) => LandmarkEstimate {
+                    id: slot.id,
+                    position: self.x.fixed_rows::<3>(i).into_owned(),
+                    covariance: l.block3_with(self.p.as_slice(), i, m),
+                    observations: slot.observations,
+                },
+                _ => self.estimate_at(s, slot),
+            }
+        })
+    }
+
+    /// One landmark's position: [`Ekf::landmark`] without the covariance.
+    pub fn landmark_position(&self, id: LandmarkId) -> Option<Vector3<f64>> {
+        let i = StateLayout::landmark(self.slot(id)?);
+        Some(self.x.fixed_rows::<3>(i).into_owned())
+    }
+
+    /// Every landmark's id and position, in state order: [`Ekf::landmarks`] without the
+    /// covariances (which cost more to read while a local session is open, `crate::local`).
+    pub fn landmark_positions(&self) -> impl Iterator<Item = (LandmarkId, Vector3<f64>)> + '_ {
+        self.landmarks.iter().enumerate().map(|(s, slot)| {
+            (
+                slot.id,
+                self.x
+                    .fixed_rows::<3>(StateLayout::landmark(s))
+                    .into_owned(),
+            )
+        })
     }
 
     /// How far apart two landmarks are in their joint uncertainty: the squared Mahalanobis
     /// distance of `a - b` under its covariance `P_aa + P_bb - P_ab - P_ba` (3 dof). Small
     /// (below the 3-dof chi-square bound) when they may be one point seen twice.
     pub fn landmark_pair_distance(&self, a: LandmarkId, b: LandmarkId) -> Result<f64, Error> {
-        Ok(self.pair_difference(a, b)?.d2)
+        Ok(self.pair_difference(a, b, false)?.d2)
     }
 
-    /// `a - b`, its covariance's Cholesky factor and the squared Mahalanobis distance.
-    fn pair_difference(&self, a: LandmarkId, b: LandmarkId) -> Result<PairDifference, Error> {
+    /// A lower bound of [`Ekf::landmark_pair_distance`] that costs less while a local session
+    /// is open (the distance under an upper bound of the covariance, `crate::local`); the
+    /// distance itself when none is. For a first test of many pairs: a pair whose bound is
+    /// outside a gate is outside it.
+    pub fn landmark_pair_distance_bound(&self, a: LandmarkId, b: LandmarkId) -> Result<f64, Error> {
+        Ok(self.pair_difference(a, b, true)?.d2)
+    }
+
+    /// `a - b`, its covariance's Cholesky factor and the squared Mahalanobis distance (with
+    /// `upper`, under the upper bound of the covariance while a local session is open).
+    fn pair_difference(
+        &self,
+        a: LandmarkId,
+        b: LandmarkId,
+        upper: bool,
+    ) -> Result<PairDifference, Error> {
         let ia = self
             .slot(a)
             .map(StateLayout::landmark)
@@ -113,10 +157,12 @@ impl Ekf {
             .map(StateLayout::landmark)
             .ok_or(Error::UnknownLandmark { id: b })?;
         let d = self.x.fixed_rows::<3>(ia) - self.x.fixed_rows::<3>(ib);
-        let n = self.x.len();
-        // `P` keeps its lower triangle only (see the crate docs).
-        let cross = Matrix3::from_fn(|r, c| sym(self.p.as_slice(), n, ia + r, ib + c));
-        let s = self.block3(ia) + self.block3(ib) - cross - cross.transpose();
+        let cross = Matrix3::from_fn(|r, c| self.cov_with(ia + r, ib + c, upper));
+        let block = |i: usize| match (&self.local, upper) {
+            (Some(l), true) => l.block3_upper(self.p.as_slice(), i),
+            _ => self.block3(i),
+        };
+        let s = block(ia) + block(ib) - cross - cross.transpose();
         let c = s
             .cholesky()
             .ok_or(Error::PairNotPositiveDefinite { a, b })?;
@@ -135,21 +181,26 @@ impl Ekf {
         if keep == drop {
             return Err(Error::MergeIntoItself { id: keep });
         }
-        let PairDifference { ia, ib, d, c, d2 } = self.pair_difference(keep, drop)?;
-        let n = self.x.len();
-        // The whole of `P` (its lower triangle is kept; the update below is dense).
-        mirror_lower(self.p.as_mut_slice(), n);
-        // P H^T (n x 3): the covariance of the state with x_keep - x_drop.
-        let pht = self.p.columns(ia, 3) - self.p.columns(ib, 3);
-        // K = P H^T S^-1, solved column-block by column-block through S's Cholesky factor.
-        let k = c.solve(&pht.transpose()).transpose();
-        // x += K (0 - (x_keep - x_drop)); P -= K S K^T = K (P H^T)^T.
-        self.x -= &k * d;
-        self.p -= &k * pht.transpose();
-        // The lower triangle, symmetric to rounding (the upper one is not read).
-        for j in 0..n {
-            for i in j + 1..n {
-                self.p[(i, j)] = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
+        let PairDifference { ia, ib, d, c, d2 } = self.pair_difference(keep, drop, false)?;
+        if self.local.is_some() && !self.local_merge(ia, ib, &d)? {
+            self.settle();
+        }
+        if self.local.is_none() {
+            let n = self.x.len();
+            // The whole of `P` (its lower triangle is kept; the update below is dense).
+            mirror_lower(self.p.as_mut_slice(), n);
+            // P H^T (n x 3): the covariance of the state with x_keep - x_drop.
+            let pht = self.p.columns(ia, 3) - self.p.columns(ib, 3);
+            // K = P H^T S^-1, solved column-block by column-block through S's Cholesky factor.
+            let k = c.solve(&pht.transpose()).transpose();
+            // x += K (0 - (x_keep - x_drop)); P -= K S K^T = K (P H^T)^T.
+            self.x -= &k * d;
+            self.p -= &k * pht.transpose();
+            // The lower triangle, symmetric to rounding (the upper one is not read).
+            for j in 0..n {
+                for i in j + 1..n {
+                    self.p[(i, j)] = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
+                }
             }
         }
         let observations = self.observations_of(drop).unwrap_or(0);
@@ -203,82 +254,72 @@ impl Ekf {
             }
         }
         let q = POSE_DIM + m;
-        // Cross covariance P_xL (n x 3): column a = sum_t G[a][t] P[:, idx[t]].
-        let mut columns = alloc::vec![0.0; n * q];
-        gather_columns(self.p.as_slice(), n, &idx[..q], &mut columns);
-        let mut cross = [Vec::new(), Vec::new(), Vec::new()];
-        for (a, col) in cross.iter_mut().enumerate() {
-            col.resize(n, 0.0);
-            for (t, pcol) in columns.chunks_exact(n).enumerate() {
-                let gat = g[a][t];
-                if gat == 0.0 {
-                    continue;
-                }
-                for (c, &p) in col.iter_mut().zip(pcol) {
-                    *c += gat * p;
-                }
-            }
-        }
-        // P_LL = G P_qq G^T + Gz R Gz^T, Gz the measurement Jacobian in the world frame.
+        // The measurement's part of P_LL, Gz R Gz^T, Gz the measurement Jacobian in the world
+        // frame.
         let world_from_rig =
             pose.world_from_robot_rotation() * camera.mount.robot_from_rig_rotation();
         let gz = world_from_rig * tri.jac_measurement;
-        let mut pll = if self.pixel_noise.is_uniform() {
+        let noise = if self.pixel_noise.is_uniform() {
             let r2 = self.noise.pixel * self.noise.pixel;
             gz * gz.transpose() * r2
         } else {
             let r = nalgebra::Vector4::from(self.measurement_variances(z));
             gz * nalgebra::Matrix4::from_diagonal(&r) * gz.transpose()
         };
-        for a in 0..3 {
-            for b in 0..3 {
-                let mut v = 0.0;
-                for t in 0..q {
-                    v += g[a][t] * cross[b][idx[t]];
+        match self.local.as_deref_mut() {
+            None => self.p = grow(&self.p, c0, &idx[..q], &g, &noise)?,
+            Some(l) => {
+                // The same in P_AA (the camera block starts at its row kc0), and the new rows
+                // of phi: G phi over the involved rows.
+                let kc0 = l.n_active() - m;
+                let mut local_idx = idx;
+                for (t, v) in local_idx.iter_mut().enumerate().take(q) {
+                    *v = if t < POSE_DIM { t } else { kc0 + t - POSE_DIM };
                 }
-                pll[(a, b)] += v;
+                let paa = grow(&l.paa, kc0, &local_idx[..q], &g, &noise)?;
+                let na0 = l.n_a0;
+                let mut rows = alloc::vec![0.0; LANDMARK_DIM * na0];
+                for (a, row) in rows.chunks_exact_mut(na0).enumerate() {
+                    for (t, &k) in local_idx.iter().enumerate().take(q) {
+                        let gat = g[a][t];
+                        if gat == 0.0 {
+                            continue;
+                        }
+                        if let Some(col) = l.phit.get(k * na0..(k + 1) * na0) {
+                            for (r, &f) in row.iter_mut().zip(col) {
+                                *r += gat * f;
+                            }
+                        }
+                    }
+                }
+                l.paa = paa;
+                l.phit.splice(kc0 * na0..kc0 * na0, rows);
+                for place in &mut l.place {
+                    if let crate::local::Place::Active(k) = place
+                        && *k >= kc0
+                    {
+                        *k += LANDMARK_DIM;
+                    }
+                }
+                l.place.splice(
+                    c0..c0,
+                    (0..LANDMARK_DIM).map(|a| crate::local::Place::Active(kc0 + a)),
+                );
+                for i in &mut l.active {
+                    if *i >= c0 {
+                        *i += LANDMARK_DIM;
+                    }
+                }
+                l.active.splice(kc0..kc0, c0..c0 + LANDMARK_DIM);
             }
         }
-        let pll = 0.5 * (pll + pll.transpose());
-        if pll.iter().any(|v| !v.is_finite()) || cross.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(Error::NonFinite {
-                what: "new landmark covariance",
-                value: f64::NAN,
-            });
-        }
-        // Grow: insert 3 rows and columns at c0 (before the camera block).
         let n2 = n + LANDMARK_DIM;
-        let mut p2 = DMatrix::<f64>::zeros(n2, n2);
-        {
-            let old = self.p.as_slice();
-            let new = p2.as_mut_slice();
-            for j2 in 0..n2 {
-                let dst = &mut new[at(n2, 0, j2)..at(n2, 0, j2 + 1)];
-                if (c0..c0 + LANDMARK_DIM).contains(&j2) {
-                    let a = j2 - c0;
-                    dst[..c0].copy_from_slice(&cross[a][..c0]);
-                    for b in 0..LANDMARK_DIM {
-                        dst[c0 + b] = pll[(b, a)];
-                    }
-                    dst[c0 + LANDMARK_DIM..].copy_from_slice(&cross[a][c0..]);
-                } else {
-                    let j = if j2 < c0 { j2 } else { j2 - LANDMARK_DIM };
-                    let src = &old[at(n, 0, j)..at(n, 0, j + 1)];
-                    dst[..c0].copy_from_slice(&src[..c0]);
-                    for b in 0..LANDMARK_DIM {
-                        dst[c0 + b] = cross[b][j];
-                    }
-                    dst[c0 + LANDMARK_DIM..].copy_from_slice(&src[c0..]);
-                }
-            }
-        }
         let mut x2 = DVector::<f64>::zeros(n2);
         x2.rows_mut(0, c0).copy_from(&self.x.rows(0, c0));
         x2.fixed_rows_mut::<3>(c0).copy_from(&position);
         x2.rows_mut(c0 + LANDMARK_DIM, m)
             .copy_from(&self.x.rows(c0, m));
         self.x = x2;
-        self.p = p2;
         let id = LandmarkId(self.next_id);
         self.next_id += 1;
         self.landmarks.push(Slot {
@@ -295,26 +336,128 @@ impl Ekf {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
         let n = self.x.len();
         let li = StateLayout::landmark(s);
-        let n2 = n - LANDMARK_DIM;
         let keep = |i: usize| if i < li { i } else { i + LANDMARK_DIM };
-        let mut p2 = DMatrix::<f64>::zeros(n2, n2);
-        {
-            let old = self.p.as_slice();
-            let new = p2.as_mut_slice();
-            for j2 in 0..n2 {
-                let src = &old[at(n, 0, keep(j2))..at(n, 0, keep(j2) + 1)];
-                let dst = &mut new[at(n2, 0, j2)..at(n2, 0, j2 + 1)];
-                dst[..li].copy_from_slice(&src[..li]);
-                dst[li..].copy_from_slice(&src[li + LANDMARK_DIM..]);
+        match self.local.as_deref_mut() {
+            None => self.p = shrink(&self.p, li),
+            Some(l) => {
+                // An active landmark leaves P_AA and phi; a passive one only the index.
+                if let Some(&crate::local::Place::Active(k)) = l.place.get(li) {
+                    l.paa = shrink(&l.paa, k);
+                    let na0 = l.n_a0;
+                    l.phit.drain(k * na0..(k + LANDMARK_DIM) * na0);
+                    for place in &mut l.place {
+                        if let crate::local::Place::Active(j) = place
+                            && *j > k
+                        {
+                            *j -= LANDMARK_DIM;
+                        }
+                    }
+                    l.active.drain(k..k + LANDMARK_DIM);
+                }
+                l.place.drain(li..li + LANDMARK_DIM);
+                for i in &mut l.active {
+                    if *i > li {
+                        *i -= LANDMARK_DIM;
+                    }
+                }
             }
         }
-        let x2 = DVector::from_fn(n2, |i, _| self.x[keep(i)]);
+        let x2 = DVector::from_fn(n - LANDMARK_DIM, |i, _| self.x[keep(i)]);
         self.x = x2;
-        self.p = p2;
         self.landmarks.remove(s);
         self.health.landmarks_removed += 1;
         Ok(())
     }
+}
+
+/// `p` (`n x n`, lower triangle) with a new landmark's rows and columns inserted at `c0`:
+/// its cross-covariance `P_xL = P[:, idx] G^T` (`idx` the involved states, pose and estimated
+/// camera, and `g` the initialisation's Jacobian over them) and `P_LL = G P_qq G^T + noise`.
+/// Fails, changing nothing, when a value is not finite. `O(n^2)` (the copy).
+fn grow(
+    p: &DMatrix<f64>,
+    c0: usize,
+    idx: &[usize],
+    g: &[[f64; POSE_DIM + N_PARAMS]; 3],
+    noise: &Matrix3<f64>,
+) -> Result<DMatrix<f64>, Error> {
+    let n = p.nrows();
+    let q = idx.len();
+    // Cross covariance P_xL (n x 3): column a = sum_t G[a][t] P[:, idx[t]].
+    let mut columns = alloc::vec![0.0; n * q];
+    gather_columns(p.as_slice(), n, idx, &mut columns);
+    let mut cross = [Vec::new(), Vec::new(), Vec::new()];
+    for (a, col) in cross.iter_mut().enumerate() {
+        col.resize(n, 0.0);
+        for (t, pcol) in columns.chunks_exact(n).enumerate() {
+            let gat = g[a][t];
+            if gat == 0.0 {
+                continue;
+            }
+            for (c, &p) in col.iter_mut().zip(pcol) {
+                *c += gat * p;
+            }
+        }
+    }
+    let mut pll = *noise;
+    for a in 0..3 {
+        for b in 0..3 {
+            let mut v = 0.0;
+            for (t, &i) in idx.iter().enumerate() {
+                v += g[a][t] * cross[b].get(i).copied().unwrap_or(f64::NAN);
+            }
+            pll[(a, b)] += v;
+        }
+    }
+    let pll = 0.5 * (pll + pll.transpose());
+    if pll.iter().any(|v| !v.is_finite()) || cross.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(Error::NonFinite {
+            what: "new landmark covariance",
+            value: f64::NAN,
+        });
+    }
+    // Grow: insert 3 rows and columns at c0 (before the camera block).
+    let n2 = n + LANDMARK_DIM;
+    let mut p2 = DMatrix::<f64>::zeros(n2, n2);
+    let old = p.as_slice();
+    let new = p2.as_mut_slice();
+    for j2 in 0..n2 {
+        let dst = &mut new[at(n2, 0, j2)..at(n2, 0, j2 + 1)];
+        if (c0..c0 + LANDMARK_DIM).contains(&j2) {
+            let a = j2 - c0;
+            dst[..c0].copy_from_slice(&cross[a][..c0]);
+            for b in 0..LANDMARK_DIM {
+                dst[c0 + b] = pll[(b, a)];
+            }
+            dst[c0 + LANDMARK_DIM..].copy_from_slice(&cross[a][c0..]);
+        } else {
+            let j = if j2 < c0 { j2 } else { j2 - LANDMARK_DIM };
+            let src = &old[at(n, 0, j)..at(n, 0, j + 1)];
+            dst[..c0].copy_from_slice(&src[..c0]);
+            for b in 0..LANDMARK_DIM {
+                dst[c0 + b] = cross[b][j];
+            }
+            dst[c0 + LANDMARK_DIM..].copy_from_slice(&src[c0..]);
+        }
+    }
+    Ok(p2)
+}
+
+/// `p` (`n x n`) without the rows and columns `li..li + 3`.
+fn shrink(p: &DMatrix<f64>, li: usize) -> DMatrix<f64> {
+    let n = p.nrows();
+    let n2 = n - LANDMARK_DIM;
+    let keep = |i: usize| if i < li { i } else { i + LANDMARK_DIM };
+    let mut p2 = DMatrix::<f64>::zeros(n2, n2);
+    let old = p.as_slice();
+    let new = p2.as_mut_slice();
+    for j2 in 0..n2 {
+        let src = &old[at(n, 0, keep(j2))..at(n, 0, keep(j2) + 1)];
+        let dst = &mut new[at(n2, 0, j2)..at(n2, 0, j2 + 1)];
+        dst[..li].copy_from_slice(&src[..li]);
+        dst[li..].copy_from_slice(&src[li + LANDMARK_DIM..]);
+    }
+    p2
 }
 
 /// Two landmarks compared ([`Ekf::landmark_pair_distance`], [`Ekf::merge_landmarks`]).

@@ -34,7 +34,9 @@
 //! cache, and the update is bound by memory traffic; mirroring after every update would write
 //! the upper half once more (docs/benchmarks.md, "Phase 2 EKF SLAM"). Everything inside reads
 //! the lower triangle; [`Ekf::covariance`] hands out the whole, exactly symmetric matrix (a
-//! mirrored copy), [`Ekf::covariance_lower`] the buffer itself.
+//! mirrored copy). A large state is updated in local sessions ([`local`]): the update then
+//! changes only the states near the vehicle, and the rest of `P` is written out when the
+//! vehicle moves on.
 //!
 //! The world frame is the robot at the first frame (vehicle-interfaces.md section 1): the filter
 //! starts at the origin with zero pose covariance, and the first landmarks anchor the map.
@@ -172,6 +174,8 @@ mod kernels;
 mod landmarks;
 #[cfg(feature = "alloc")]
 mod linalg;
+#[cfg(feature = "alloc")]
+pub mod local;
 #[cfg(feature = "alloc")]
 pub mod measurement;
 #[cfg(feature = "alloc")]

@@ -90,6 +90,50 @@ fn panel_update_nalgebra(
         .gemm(alpha, &lhs.rows(jb, n - jb), &rhs_t, 1.0);
 }
 
+/// `dst = alpha a b` (`beta` false) or `dst += alpha a b` (true), for column-major `a`
+/// (`m x k`), `b` (`k x n`) and `dst` (`m x n`): faer's kernels with `std`, nalgebra's
+/// otherwise.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn gemm(
+    dst: &mut [f64],
+    m: usize,
+    n: usize,
+    a: &[f64],
+    b: &[f64],
+    k: usize,
+    alpha: f64,
+    accumulate: bool,
+) {
+    let (Some(dst), Some(a), Some(b)) = (dst.get_mut(..m * n), a.get(..m * k), b.get(..k * n))
+    else {
+        return;
+    };
+    if m == 0 || n == 0 {
+        return;
+    }
+    #[cfg(feature = "std")]
+    {
+        use faer::{Accum, MatMut, MatRef, Par};
+        let dst = MatMut::from_column_major_slice_mut(dst, m, n);
+        let a = MatRef::from_column_major_slice(a, m, k);
+        let b = MatRef::from_column_major_slice(b, k, n);
+        let accum = if accumulate {
+            Accum::Add
+        } else {
+            Accum::Replace
+        };
+        faer::linalg::matmul::matmul(dst, accum, a, b, alpha, Par::Seq);
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        use nalgebra::{DMatrixView, DMatrixViewMut};
+        let mut dst = DMatrixViewMut::from_slice(dst, m, n);
+        let a = DMatrixView::from_slice(a, m, k);
+        let b = DMatrixView::from_slice(b, k, n);
+        dst.gemm(alpha, &a, &b, if accumulate { 1.0 } else { 0.0 });
+    }
+}
+
 /// Entry `(i, j)` of the symmetric matrix whose lower triangle the buffer holds.
 #[inline]
 pub(crate) fn sym(p: &[f64], n: usize, i: usize, j: usize) -> f64 {

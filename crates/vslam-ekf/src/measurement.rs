@@ -111,10 +111,20 @@ impl Ekf {
         &self,
         id: LandmarkId,
     ) -> Result<(Measurement, Matrix4<f64>), Error> {
+        self.predict_measurement_with(id, false)
+    }
+
+    /// [`Self::predict_measurement`], with `upper` an upper bound of `S` that costs less
+    /// while a local session is open ([`Self::innovation_covariance_with`]).
+    fn predict_measurement_with(
+        &self,
+        id: LandmarkId,
+        upper: bool,
+    ) -> Result<(Measurement, Matrix4<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
         let (z, mut m) = self.observation_model(s, &self.camera(), &self.pose())?;
         m.r = self.measurement_variances(&z);
-        Ok((z, self.innovation_covariance(&m)))
+        Ok((z, self.innovation_covariance_with(&m, upper)))
     }
 
     /// The predicted measurement of a landmark and the full `4 x n` Jacobian `H` of the
@@ -168,15 +178,27 @@ impl Ekf {
             if !(coarse(z[0], z[1]) && coarse(z[2], z[3])) {
                 continue;
             }
+            let near = |z: &Measurement, cov: &Matrix4<f64>| {
+                let near = |u: usize, v: usize| {
+                    let su = k_sigma * libm::sqrt(cov[(u, u)].max(0.0));
+                    let sv = k_sigma * libm::sqrt(cov[(v, v)].max(0.0));
+                    z[u] + su >= 0.0 && z[u] - su < w && z[v] + sv >= 0.0 && z[v] - sv < h
+                };
+                near(0, 1) && near(2, 3)
+            };
+            // While a local session is open, a passive landmark is first tested with an
+            // upper bound of its covariance, which costs less, then exactly.
+            if self.local.is_some()
+                && !self
+                    .predict_measurement_with(slot.id, true)
+                    .is_ok_and(|(z, cov)| near(&z, &cov))
+            {
+                continue;
+            }
             let Ok((z, cov)) = self.predict_measurement(slot.id) else {
                 continue;
             };
-            let near = |u: usize, v: usize| {
-                let su = k_sigma * libm::sqrt(cov[(u, u)].max(0.0));
-                let sv = k_sigma * libm::sqrt(cov[(v, v)].max(0.0));
-                z[u] + su >= 0.0 && z[u] - su < w && z[v] + sv >= 0.0 && z[v] - sv < h
-            };
-            if near(0, 1) && near(2, 3) {
+            if near(&z, &cov) {
                 out.push((slot.id, z, cov));
             }
         }

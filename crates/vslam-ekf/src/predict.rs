@@ -157,7 +157,36 @@ impl Ekf {
         self.x[0] = pose.x;
         self.x[1] = pose.y;
         self.x[2] = wrap_angle(pose.theta);
-        predict_covariance(&mut self.p, &f, &q, &g);
+        match self.local.as_deref_mut() {
+            None => predict_covariance(&mut self.p, &f, &q, &g),
+            Some(l) => {
+                // P_AA as the dense P (the camera block is active), and phi's pose rows by
+                // the same transform as P_xr's: F phi_r + sum_c g_c phi_c.
+                let g_local: Vec<(usize, Vector3<f64>)> = g
+                    .iter()
+                    .filter_map(|(c, v)| match l.place.get(*c) {
+                        Some(&crate::local::Place::Active(k)) => Some((k, *v)),
+                        _ => None,
+                    })
+                    .collect();
+                predict_covariance(&mut l.paa, &f, &q, &g_local);
+                let na0 = l.n_a0;
+                let (fa, fb) = (f[(0, 2)], f[(1, 2)]);
+                for t in 0..na0 {
+                    let at_col = |c: usize| l.phit.get(c * na0 + t).copied().unwrap_or(0.0);
+                    let (p0, p1, p2) = (at_col(0), at_col(1), at_col(2));
+                    let mut row = RowVector3::new(p0 + fa * p2, p1 + fb * p2, p2);
+                    for (c, gc) in &g_local {
+                        row += gc.transpose() * at_col(*c);
+                    }
+                    for (r, v) in row.iter().enumerate() {
+                        if let Some(dst) = l.phit.get_mut(r * na0 + t) {
+                            *dst = *v;
+                        }
+                    }
+                }
+            }
+        }
         self.motion_covariance = f * self.motion_covariance * f.transpose() + q;
         Ok(())
     }

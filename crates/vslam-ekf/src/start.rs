@@ -17,7 +17,6 @@ use crate::filter::{Ekf, Settings, check_finite};
 use crate::health::{DOF, HealthState};
 use crate::kernels::Workspace;
 use crate::landmarks::{LandmarkId, Slot};
-use crate::linalg::sym;
 use crate::motion::check_noise;
 use crate::state::{CameraCovariance, LANDMARK_DIM, POSE_DIM, StateLayout};
 
@@ -151,6 +150,7 @@ impl Ekf {
             motion_covariance: Matrix3::zeros(),
             workspace: Workspace::default(),
             held: [false; N_PARAMS],
+            local: None,
         })
     }
 
@@ -322,6 +322,7 @@ impl Ekf {
         if p.iter().any(|v| !v.is_finite()) || (0..n).any(|i| p[(i, i)] < 0.0) {
             return Err(Error::BadCameraCovariance);
         }
+        self.local = None;
         self.x = x;
         self.p = p;
         Ok(())
@@ -339,14 +340,12 @@ impl Ekf {
         map.extend(c0..c0 + m);
         map.extend(StateLayout::landmark(0)..c0);
         let n = map.len();
-        let ps = self.p.as_slice();
-        let nn = self.x.len();
         let covariance = DMatrix::from_fn(n, n, |i, j| {
             let (fi, fj) = (
                 map.get(i).copied().unwrap_or(0),
                 map.get(j).copied().unwrap_or(0),
             );
-            sym(ps, nn, fi, fj)
+            self.cov(fi, fj)
         });
         let landmarks = (0..nl)
             .map(|k| {

@@ -80,31 +80,36 @@ impl Ekf {
         &self.x
     }
 
-    /// The covariance `P`, `n x n`, exactly symmetric (a copy: O(n^2)).
+    /// The covariance `P`, `n x n`, exactly symmetric (a copy: O(n^2); with a local session
+    /// open, the session is settled on the copy: see [`Ekf::settle`]).
     pub fn covariance(&self) -> DMatrix<f64> {
-        let mut p = self.p.clone();
+        let mut p = if self.local.is_some() {
+            let mut settled = self.clone();
+            settled.settle();
+            settled.p
+        } else {
+            self.p.clone()
+        };
         let n = p.nrows();
         mirror_lower(p.as_mut_slice(), n);
         p
     }
 
-    /// The covariance buffer itself, column-major (`as_slice()` is the one buffer nalgebra and
-    /// faer views are made of): its lower triangle, diagonal included, is `P`; the strict
-    /// upper triangle is not maintained (see the crate docs).
-    pub fn covariance_lower(&self) -> &DMatrix<f64> {
-        &self.p
-    }
-
     /// Entry `(i, j)` of `P`.
     pub fn covariance_entry(&self, i: usize, j: usize) -> Option<f64> {
         let n = self.x.len();
-        (i < n && j < n).then(|| sym(self.p.as_slice(), n, i, j))
+        (i < n && j < n).then(|| self.cov(i, j))
     }
 
     /// The `3 x 3` block of `P` at `(i, i)`.
     pub(crate) fn block3(&self, i: usize) -> Matrix3<f64> {
-        let n = self.x.len();
-        Matrix3::from_fn(|r, c| sym(self.p.as_slice(), n, i + r, i + c))
+        match &self.local {
+            None => {
+                let n = self.x.len();
+                Matrix3::from_fn(|r, c| sym(self.p.as_slice(), n, i + r, i + c))
+            }
+            Some(l) => l.block3(self.p.as_slice(), i),
+        }
     }
 
     /// The robot pose.
@@ -145,8 +150,7 @@ impl Ekf {
         let c0 = self.camera_offset();
         for (a, pa) in self.estimated.iter().enumerate() {
             for (b, pb) in self.estimated.iter().enumerate() {
-                cov[(pa.index(), pb.index())] =
-                    sym(self.p.as_slice(), self.x.len(), c0 + a, c0 + b);
+                cov[(pa.index(), pb.index())] = self.cov(c0 + a, c0 + b);
             }
         }
         cov

@@ -15,6 +15,7 @@ use crate::filter::{
     AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, Gated, SEQUENTIAL_MAX_STATES,
     UpdateReport,
 };
+use crate::kernels::gather_columns;
 use crate::kernels::{
     LANES, MAX_INVOLVED, Obs, Workspace, cholesky4, compact, diagonal_change, gain_factors,
     gain_factors4, innovation_products, mahalanobis4, observation_products,
@@ -22,7 +23,8 @@ use crate::kernels::{
 };
 use crate::landmarks::LandmarkId;
 use crate::linalg::rank_update_lower;
-use crate::state::at;
+use crate::local::Place;
+use crate::state::{LANDMARK_DIM, POSE_DIM, at};
 
 /// What eq. (6)'s gain is computed from: the innovation covariance `S` (with `A = P H^T`
 /// already in the workspace) and the innovation `nu`.
@@ -189,7 +191,7 @@ impl Ekf {
         self.joseph()
     }
 
-    fn joseph(&self) -> bool {
+    pub(crate) fn joseph(&self) -> bool {
         if self.settings.camera_update == CameraUpdate::Consider || self.held.iter().any(|h| *h) {
             return true;
         }
@@ -217,6 +219,7 @@ impl Ekf {
             }
             slots.push(s);
         }
+        self.prepare_local(&slots);
         let camera = self.camera();
         let pose = self.pose();
         // Linearise every observation at the current estimate; one that cannot be projected
@@ -317,36 +320,17 @@ impl Ekf {
             }
             return self.sequential_update(&keep, ws);
         }
+        if self.local.is_some() {
+            if let Some(local_obs) = self.local_observations(obs) {
+                return self.local_gate_and_update(&local_obs, projected, nis, ws);
+            }
+            self.settle();
+        }
         innovation_products(self.p.as_slice(), n, obs, ws);
-        let mut d = 4 * obs.len();
-        if ws.s.iter().any(|v| !v.is_finite()) {
-            return Err(Error::InnovationNotPositiveDefinite {
-                observations: obs.len(),
-            });
-        }
-        // Gate: each observation's NIS with its own 4x4 block of S.
-        let mut keep: Vec<usize> = Vec::with_capacity(obs.len());
-        for (j, o) in obs.iter().enumerate() {
-            let block = Matrix4::from_fn(|r, c| ws.s[(4 * j + c) * d + 4 * j + r]);
-            let chol = block
-                .cholesky()
-                .ok_or(Error::InnovationNotPositiveDefinite { observations: 1 })?;
-            let nu = Vector4::from(o.nu);
-            let v = nu.dot(&chol.solve(&nu));
-            if let Some(slot) = projected.get(j).and_then(|&b| nis.get_mut(b)) {
-                *slot = if v.is_finite() { v } else { f64::INFINITY };
-            }
-            if v.is_finite() && v <= self.gate {
-                keep.push(j);
-            }
-        }
-        if keep.is_empty() {
+        let Some(keep) = self.gate_batch(obs, projected, nis, n, ws)? else {
             return Ok(());
-        }
-        if keep.len() < obs.len() {
-            compact(n, d, &keep, &mut ws.a, &mut ws.s);
-            d = 4 * keep.len();
-        }
+        };
+        let d = 4 * keep.len();
         let nu: Vec<f64> = keep
             .iter()
             .filter_map(|&j| obs.get(j))
@@ -380,6 +364,267 @@ impl Ekf {
         );
         correct_state(&mut self.x, &ws.dx);
         Ok(())
+    }
+
+    /// The batch's gate: each observation's NIS with its own 4x4 block of `S` (`A` and `S`
+    /// in the workspace, `n` rows), into `nis[projected[j]]`; `A` and `S` compacted to the
+    /// accepted ones, which are returned (`None`: none accepted).
+    fn gate_batch(
+        &self,
+        obs: &[Obs],
+        projected: &[usize],
+        nis: &mut [f64],
+        n: usize,
+        ws: &mut Workspace,
+    ) -> Result<Option<Vec<usize>>, Error> {
+        let d = 4 * obs.len();
+        if ws.s.iter().any(|v| !v.is_finite()) {
+            return Err(Error::InnovationNotPositiveDefinite {
+                observations: obs.len(),
+            });
+        }
+        let mut keep: Vec<usize> = Vec::with_capacity(obs.len());
+        for (j, o) in obs.iter().enumerate() {
+            let block = Matrix4::from_fn(|r, c| ws.s[(4 * j + c) * d + 4 * j + r]);
+            let chol = block
+                .cholesky()
+                .ok_or(Error::InnovationNotPositiveDefinite { observations: 1 })?;
+            let nu = Vector4::from(o.nu);
+            let v = nu.dot(&chol.solve(&nu));
+            if let Some(slot) = projected.get(j).and_then(|&b| nis.get_mut(b)) {
+                *slot = if v.is_finite() { v } else { f64::INFINITY };
+            }
+            if v.is_finite() && v <= self.gate {
+                keep.push(j);
+            }
+        }
+        if keep.is_empty() {
+            return Ok(None);
+        }
+        if keep.len() < obs.len() {
+            compact(n, d, &keep, &mut ws.a, &mut ws.s);
+        }
+        Ok(Some(keep))
+    }
+
+    /// The observations with their columns in the local session's active rows, `None` when
+    /// one involves a passive state.
+    fn local_observations(&self, obs: &[Obs]) -> Option<Vec<Obs>> {
+        let l = self.local.as_ref()?;
+        obs.iter()
+            .map(|o| {
+                let mut lo = *o;
+                for c in lo.cols.iter_mut().take(lo.q) {
+                    match l.place.get(*c) {
+                        Some(&Place::Active(k)) => *c = k,
+                        _ => return None,
+                    }
+                }
+                Some(lo)
+            })
+            .collect()
+    }
+
+    /// [`Self::gate_and_update`] in the open local session (`crate::local`), `obs` in its
+    /// active rows.
+    fn local_gate_and_update(
+        &mut self,
+        obs: &[Obs],
+        projected: &[usize],
+        nis: &mut [f64],
+        ws: &mut Workspace,
+    ) -> Result<(), Error> {
+        let Some(l) = self.local.as_deref() else {
+            return Ok(());
+        };
+        let (na, na0) = (l.n_active(), l.n_a0);
+        innovation_products(l.paa.as_slice(), na, obs, ws);
+        let Some(keep) = self.gate_batch(obs, projected, nis, na, ws)? else {
+            return Ok(());
+        };
+        // phi^T H_A^T (n_A0 x d): the passive rows' share of P H^T is P0_BA0 times it.
+        let d = 4 * keep.len();
+        let mut a_bot = alloc::vec![0.0; na0 * d];
+        let kept = keep.iter().filter_map(|&j| obs.get(j));
+        for (o, cols4) in kept.clone().zip(a_bot.chunks_exact_mut(4 * na0)) {
+            for (r, col) in cols4.chunks_exact_mut(na0).enumerate() {
+                for (t, &k) in o.cols.iter().enumerate().take(o.q) {
+                    let h = o.h[r][t];
+                    if h == 0.0 {
+                        continue;
+                    }
+                    if let Some(f) = l.phit.get(k * na0..(k + 1) * na0) {
+                        for (v, &fv) in col.iter_mut().zip(f) {
+                            *v += h * fv;
+                        }
+                    }
+                }
+            }
+        }
+        let nu: Vec<f64> = kept.flat_map(|o| o.nu).collect();
+        let error = Error::InnovationNotPositiveDefinite {
+            observations: keep.len(),
+        };
+        self.local_correct(ws, &a_bot, &nu, d, error, true)
+    }
+
+    /// The factored update `P - W W^T`, `x + W L^-1 nu` in the open local session, from `A`'s
+    /// active rows (`P_AA H^T`, in `ws.a`), `phi^T H_A^T` (`a_bot`) and `S` (`d x d`, in
+    /// `ws.s`): `P_AA` and `x_A` as the dense filter, `phi` and `psi` as the module docs say,
+    /// the passive states through `P0_BA0`. With `check`, every active variance must stay
+    /// positive (a merge's exact constraint zeroes the dropped landmark's on purpose).
+    pub(crate) fn local_correct(
+        &mut self,
+        ws: &mut Workspace,
+        a_bot: &[f64],
+        nu: &[f64],
+        d: usize,
+        not_positive: Error,
+        check: bool,
+    ) -> Result<(), Error> {
+        let Some(l) = self.local.as_deref() else {
+            return Ok(());
+        };
+        let (na, na0, n0) = (l.n_active(), l.n_a0, l.n0);
+        let ne = na + na0;
+        // A over the active rows and the rows of phi^T stacked: W and dx come out stacked.
+        let mut a_ext = alloc::vec![0.0; ne * d];
+        for (c, dst) in a_ext.chunks_exact_mut(ne).enumerate() {
+            let (top, bottom) = dst.split_at_mut(na);
+            if let (Some(t), Some(b)) = (
+                ws.a.get(c * na..(c + 1) * na),
+                a_bot.get(c * na0..(c + 1) * na0),
+            ) {
+                top.copy_from_slice(t);
+                bottom.copy_from_slice(b);
+            }
+        }
+        let chol =
+            nalgebra::Cholesky::new(DMatrix::from_column_slice(d, d, &ws.s)).ok_or(not_positive)?;
+        gain_factors(
+            ne,
+            d,
+            chol.l_dirty().as_slice(),
+            &ws.s,
+            nu,
+            false,
+            &a_ext,
+            &mut ws.w,
+            &mut ws.y,
+            &mut ws.dx,
+            &mut ws.lhs,
+            &mut ws.rhs,
+        );
+        let mut w_top = alloc::vec![0.0; na * d];
+        let mut w_bot = alloc::vec![0.0; na0 * d];
+        for ((w, t), b) in
+            ws.w.chunks_exact(ne)
+                .zip(w_top.chunks_exact_mut(na))
+                .zip(w_bot.chunks_exact_mut(na0))
+        {
+            t.copy_from_slice(&w[..na]);
+            b.copy_from_slice(&w[na..]);
+        }
+        if check {
+            diagonal_change(na, &w_top, &w_top, -1.0, &mut ws.y);
+            check_variances(l.paa.as_slice(), na, &ws.y).map_err(|e| match e {
+                Error::VarianceNotPositive {
+                    index,
+                    before,
+                    after,
+                } => Error::VarianceNotPositive {
+                    index: l.active.get(index).copied().unwrap_or(index),
+                    before,
+                    after,
+                },
+                e => e,
+            })?;
+        }
+        // The passive states' correction P0_BA0 (phi^T H^T L^-T L^-1 nu).
+        let mut dx_b = alloc::vec![0.0; n0];
+        crate::linalg::gemm(&mut dx_b, n0, 1, &l.g0, &ws.dx[na..], na0, 1.0, false);
+        let mut dx = alloc::vec![0.0; self.x.len()];
+        for (i, place) in l.place.iter().enumerate() {
+            dx[i] = match *place {
+                Place::Active(k) => ws.dx.get(k).copied().unwrap_or(f64::NAN),
+                Place::Passive(b) => dx_b.get(b).copied().unwrap_or(f64::NAN),
+            };
+        }
+        check_state(&self.x, &dx)?;
+        // Commit.
+        let mut w_top_t = alloc::vec![0.0; d * na];
+        for (c, col) in w_top.chunks_exact(na).enumerate() {
+            for (k, &v) in col.iter().enumerate() {
+                w_top_t[k * d + c] = v;
+            }
+        }
+        if let Some(l) = self.local.as_deref_mut() {
+            rank_update_lower(l.paa.as_mut_slice(), na, &w_top, &w_top, d, -1.0);
+            crate::linalg::gemm(&mut l.phit, na0, na, &w_bot, &w_top_t, d, -1.0, true);
+            rank_update_lower(&mut l.psi, na0, &w_bot, &w_bot, d, 1.0);
+        }
+        correct_state(&mut self.x, &dx);
+        Ok(())
+    }
+
+    /// [`Ekf::merge_landmarks`]'s constraint `x_a - x_b = 0` (state indices `ia`, `ib`, the
+    /// difference `d`) in the open local session; `false` (nothing done) when either is
+    /// passive.
+    pub(crate) fn local_merge(
+        &mut self,
+        ia: usize,
+        ib: usize,
+        d: &nalgebra::Vector3<f64>,
+    ) -> Result<bool, Error> {
+        let Some(l) = self.local.as_deref() else {
+            return Ok(false);
+        };
+        let (Some(&Place::Active(ka)), Some(&Place::Active(kb))) =
+            (l.place.get(ia), l.place.get(ib))
+        else {
+            return Ok(false);
+        };
+        let (na, na0) = (l.n_active(), l.n_a0);
+        let mut ws = core::mem::take(&mut self.workspace);
+        // A = P_AA H^T with H = [.. I .. -I ..], S = H A, and phi^T H^T.
+        let cols: Vec<usize> = (ka..ka + 3).chain(kb..kb + 3).collect();
+        let mut g = alloc::vec![0.0; na * 6];
+        gather_columns(l.paa.as_slice(), na, &cols, &mut g);
+        ws.a.clear();
+        ws.a.resize(na * 3, 0.0);
+        for (c, a) in ws.a.chunks_exact_mut(na).enumerate() {
+            for (i, v) in a.iter_mut().enumerate() {
+                *v = g[c * na + i] - g[(c + 3) * na + i];
+            }
+        }
+        ws.s.clear();
+        ws.s.resize(9, 0.0);
+        for c in 0..3 {
+            for r in 0..3 {
+                ws.s[c * 3 + r] = ws.a[c * na + ka + r] - ws.a[c * na + kb + r];
+            }
+        }
+        for c in 0..3 {
+            for r in 0..c {
+                let v = 0.5 * (ws.s[c * 3 + r] + ws.s[r * 3 + c]);
+                ws.s[c * 3 + r] = v;
+                ws.s[r * 3 + c] = v;
+            }
+        }
+        let mut a_bot = alloc::vec![0.0; na0 * 3];
+        for (c, col) in a_bot.chunks_exact_mut(na0).enumerate() {
+            for (t, v) in col.iter_mut().enumerate() {
+                *v = l.phit[(ka + c) * na0 + t] - l.phit[(kb + c) * na0 + t];
+            }
+        }
+        let nu = [-d[0], -d[1], -d[2]];
+        let error = Error::NonFinite {
+            what: "merge constraint covariance",
+            value: f64::NAN,
+        };
+        let result = self.local_correct(&mut ws, &a_bot, &nu, 3, error, false);
+        self.workspace = ws;
+        result.map(|()| true)
     }
 
     /// [`CameraUpdate::Consider`]: the camera rows of the gain set to zero in the update's
@@ -472,15 +717,31 @@ impl Ekf {
     /// involved block of `P` only (the batch's `S` is `kernels::innovation_products`, one
     /// landmark's on the padded copy `kernels::observation_products`).
     pub(crate) fn innovation_covariance(&self, m: &Obs) -> Matrix4<f64> {
-        let n = self.x.len();
-        let buf = self.p.as_slice();
+        self.innovation_covariance_with(m, false)
+    }
+
+    /// [`Self::innovation_covariance`], or with `upper` an upper bound of it (in the
+    /// positive semi-definite order) that costs less while a local session is open: a
+    /// passive landmark's own block read as the session found it (`P_bb` only shrinks).
+    pub(crate) fn innovation_covariance_with(&self, m: &Obs, upper: bool) -> Matrix4<f64> {
         let q = m.q.min(MAX_INVOLVED);
-        // The involved block of P (its columns increase, so `a >= b` is in the lower triangle).
+        // The landmark's own block (columns 3..6 of an observation) read at once: a passive
+        // one's entries share their products.
+        let li = m.cols.get(POSE_DIM).copied().unwrap_or(0);
+        let block = match (&self.local, upper) {
+            (Some(l), true) => l.block3_upper(self.p.as_slice(), li),
+            _ => self.block3(li),
+        };
+        let in_block = |c: usize| (li..li + LANDMARK_DIM).contains(&c);
+        // The involved block of P.
         let mut pq = [[0.0; MAX_INVOLVED]; MAX_INVOLVED];
         for (a, &ca) in m.cols.iter().enumerate().take(q) {
             for (b, &cb) in m.cols.iter().enumerate().take(a + 1) {
-                // cb <= ca: (ca, cb) is in the lower triangle.
-                let v = buf.get(cb * n + ca).copied().unwrap_or(f64::NAN);
+                let v = if in_block(ca) && in_block(cb) {
+                    block[(ca - li, cb - li)]
+                } else {
+                    self.cov_with(ca, cb, upper)
+                };
                 pq[a][b] = v;
                 pq[b][a] = v;
             }

@@ -1,0 +1,547 @@
+//! The local session: the update confined to the states near the vehicle, exactly (the
+//! compressed filter of Guivant and Nebot, "Optimization of the simultaneous localization and
+//! map-building algorithm for real-time implementation", IEEE T-RA 17(3), 2001).
+//!
+//! A frame's observations involve the pose, a few landmarks and the camera, yet the dense
+//! update changes all of `P`: `n^2` per observation, 80 % of a large hall's replay
+//! (docs/benchmarks.md, "A hall mapped once"). While the vehicle works in one place, the
+//! states split into the active ones `A` (the pose, the camera, the landmarks within reach of
+//! the view) and the passive rest `B`, and every prediction and update acts on `A` alone. With
+//! `P0` the covariance when the session opened (`A0` its active states), the session keeps
+//!
+//! - `P_AA` exactly, as the filter would;
+//! - `P_AB = phi P0_A0B`, with `phi` (`n_A x n_A0`) the product of the transforms the steps
+//!   applied to the active rows (`phi = I` at the start; a prediction multiplies its pose rows
+//!   by `F`, an update multiplies by `I - K_A H_A`, a new landmark adds the rows `G phi` of its
+//!   initialisation Jacobian);
+//! - `P_BB = P0_BB - P0_BA0 psi P0_A0B`, with `psi` (`n_A0 x n_A0`) the sum over the updates of
+//!   `V^T V`, `V = L^-1 H_A phi`;
+//! - the passive states themselves, exactly at every update: `x_B += P0_BA0 V^T L^-1 nu`.
+//!
+//! An update then costs `O((n_A + n_A0) n_A d)`, independent of the map's size. Any entry of
+//! `P` can still be read exactly ([`Local::entry`]); when an observation involves a passive
+//! landmark (the vehicle has moved on), the session is settled: `P_AB` and `P_BB` written out
+//! from the formulas above, `O(n_B^2 n_A0)`, once per a few metres driven. The result is the
+//! dense filter's to rounding (tests: `a_local_session_is_the_dense_filter`).
+//!
+//! [`Ekf`]'s code reads the covariance through [`Ekf::cov`], which knows both forms; the
+//! steps that change it (`predict`, `update`, `add_landmark`, `remove_landmark`,
+//! `merge_landmarks`) have their local branches next to the dense ones.
+
+use alloc::vec::Vec;
+
+use nalgebra::{DMatrix, Matrix3};
+
+use crate::filter::Ekf;
+use crate::kernels::gather_columns;
+use crate::linalg::{rank_update_lower, sym};
+use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout};
+
+/// Smallest state for which updates open a local session: below it the dense update is cheap
+/// (and, in [`crate::CovarianceUpdate::Auto`], in the Joseph form, which the session does not
+/// have).
+pub const LOCAL_MIN_STATES: usize = crate::filter::AUTO_JOSEPH_MAX_STATES + 1;
+
+/// Where a state's covariance lives during a session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Place {
+    /// Row `k` of `P_AA`.
+    Active(usize),
+    /// Row `b` of `P0` (the covariance buffer as the session found it).
+    Passive(usize),
+}
+
+/// An open session (see the module docs). `P0` is the filter's covariance buffer itself,
+/// untouched while the session is open.
+#[derive(Debug, Clone)]
+pub(crate) struct Local {
+    /// For each state index, where its covariance lives.
+    pub(crate) place: Vec<Place>,
+    /// The state index of each row of `P_AA`, increasing.
+    pub(crate) active: Vec<usize>,
+    /// `P_AA`, lower triangle.
+    pub(crate) paa: DMatrix<f64>,
+    /// `phi^T`, `n_A0 x n_A`, column-major: column `k` is row `k` of `phi`.
+    pub(crate) phit: Vec<f64>,
+    /// `psi`, `n_A0 x n_A0`, lower triangle.
+    pub(crate) psi: Vec<f64>,
+    /// `P0`'s columns of the states active at the start, `n_0 x n_A0` (`n_0` the state's
+    /// length then).
+    pub(crate) g0: Vec<f64>,
+    /// `n_A0`.
+    pub(crate) n_a0: usize,
+    /// `n_0`, the rows of `P0`.
+    pub(crate) n0: usize,
+}
+
+impl Local {
+    /// Rows of `P_AA`.
+    pub(crate) fn n_active(&self) -> usize {
+        self.active.len()
+    }
+
+    /// Row `b` of `P0_{B A0}` dotted with column `k` of `phi^T`: `P_{b, active k}`.
+    fn cross(&self, k: usize, b: usize) -> f64 {
+        let n0 = self.n0;
+        let col = self.phit.get(k * self.n_a0..(k + 1) * self.n_a0);
+        col.map_or(f64::NAN, |col| {
+            col.iter()
+                .enumerate()
+                .map(|(t, f)| f * self.g0.get(t * n0 + b).copied().unwrap_or(f64::NAN))
+                .sum()
+        })
+    }
+
+    /// `psi P0_{A0 b}` (length `n_A0`): a symmetric product from `psi`'s lower triangle,
+    /// read down its columns.
+    fn psi_row(&self, b: usize) -> Vec<f64> {
+        let (na0, n0) = (self.n_a0, self.n0);
+        let g: Vec<f64> = (0..na0)
+            .map(|t| self.g0.get(t * n0 + b).copied().unwrap_or(f64::NAN))
+            .collect();
+        let mut out = alloc::vec![0.0; na0];
+        for (t, col) in self.psi.chunks_exact(na0).enumerate() {
+            let (Some(below), Some(g_below), Some(&gt)) = (col.get(t..), g.get(t..), g.get(t))
+            else {
+                continue;
+            };
+            let mut acc = 0.0;
+            for (p, gu) in below.iter().zip(g_below) {
+                acc += p * gu;
+            }
+            if let Some(o) = out.get_mut(t) {
+                *o += acc;
+            }
+            if let (Some(o), Some(p)) = (out.get_mut(t + 1..), below.get(1..)) {
+                for (ov, pv) in o.iter_mut().zip(p) {
+                    *ov += pv * gt;
+                }
+            }
+        }
+        out
+    }
+
+    /// Entry `(i, j)` of the current covariance (state indices), from `P0` (`base`).
+    pub(crate) fn entry(&self, base: &[f64], i: usize, j: usize) -> f64 {
+        match (self.place.get(i), self.place.get(j)) {
+            (Some(&Place::Active(a)), Some(&Place::Active(b))) => {
+                sym(self.paa.as_slice(), self.n_active(), a, b)
+            }
+            (Some(&Place::Active(k)), Some(&Place::Passive(b)))
+            | (Some(&Place::Passive(b)), Some(&Place::Active(k))) => self.cross(k, b),
+            (Some(&Place::Passive(a)), Some(&Place::Passive(b))) => {
+                let row = self.psi_row(a);
+                let n0 = self.n0;
+                let correction: f64 = row
+                    .iter()
+                    .enumerate()
+                    .map(|(u, v)| v * self.g0.get(u * n0 + b).copied().unwrap_or(f64::NAN))
+                    .sum();
+                sym(base, n0, a, b) - correction
+            }
+            _ => f64::NAN,
+        }
+    }
+
+    /// The `3 x 3` block at `(i, i)`: as [`Local::entry`], with a passive block's `psi`
+    /// products formed once.
+    pub(crate) fn block3(&self, base: &[f64], i: usize) -> Matrix3<f64> {
+        let places: [Option<&Place>; 3] = core::array::from_fn(|r| self.place.get(i + r));
+        if let [
+            Some(Place::Passive(b0)),
+            Some(Place::Passive(_)),
+            Some(Place::Passive(_)),
+        ] = places
+        {
+            let b0 = *b0;
+            let n0 = self.n0;
+            let rows: [Vec<f64>; 3] = core::array::from_fn(|r| self.psi_row(b0 + r));
+            return Matrix3::from_fn(|r, c| {
+                let correction: f64 = rows[r]
+                    .iter()
+                    .enumerate()
+                    .map(|(u, v)| v * self.g0.get(u * n0 + b0 + c).copied().unwrap_or(f64::NAN))
+                    .sum();
+                sym(base, n0, b0 + r, b0 + c) - correction
+            });
+        }
+        Matrix3::from_fn(|r, c| self.entry(base, i + r, i + c))
+    }
+}
+
+impl Local {
+    /// `P0_{B A0} psi` for every row of `P0` (`n_0 x n_A0`), one product: what
+    /// [`Local::block3_with`] reads the passive blocks from.
+    pub(crate) fn passive_products(&self) -> Vec<f64> {
+        let (n0, na0) = (self.n0, self.n_a0);
+        let mut psi = self.psi.clone();
+        crate::linalg::mirror_lower(&mut psi, na0);
+        let mut m = alloc::vec![0.0; n0 * na0];
+        crate::linalg::gemm(&mut m, n0, na0, &self.g0, &psi, na0, 1.0, false);
+        m
+    }
+
+    /// [`Local::block3`] with `P0_{B A0} psi` given ([`Local::passive_products`]).
+    pub(crate) fn block3_with(&self, base: &[f64], i: usize, m: &[f64]) -> Matrix3<f64> {
+        let (n0, na0) = (self.n0, self.n_a0);
+        match self.place.get(i) {
+            Some(&Place::Passive(b)) => Matrix3::from_fn(|r, c| {
+                let correction: f64 = (0..na0)
+                    .map(|u| {
+                        m.get(u * n0 + b + r).copied().unwrap_or(f64::NAN)
+                            * self.g0.get(u * n0 + b + c).copied().unwrap_or(f64::NAN)
+                    })
+                    .sum();
+                sym(base, n0, b + r, b + c) - correction
+            }),
+            _ => self.block3(base, i),
+        }
+    }
+
+    /// Entry `(i, j)` of an upper bound of the current covariance in the positive
+    /// semi-definite order, `P + [0, 0; 0, P0_BB - P_BB]` (`P0_BB - P_BB = P0_BA0 psi P0_A0B`
+    /// is positive semi-definite): the passive block as the session found it, the rest
+    /// exact. Costs `O(n_A0)` at most, where [`Local::entry`] costs `O(n_A0^2)`.
+    pub(crate) fn entry_upper(&self, base: &[f64], i: usize, j: usize) -> f64 {
+        match (self.place.get(i), self.place.get(j)) {
+            (Some(&Place::Passive(a)), Some(&Place::Passive(b))) => sym(base, self.n0, a, b),
+            _ => self.entry(base, i, j),
+        }
+    }
+
+    /// The `3 x 3` block at `(i, i)` of that upper bound.
+    pub(crate) fn block3_upper(&self, base: &[f64], i: usize) -> Matrix3<f64> {
+        Matrix3::from_fn(|r, c| self.entry_upper(base, i + r, i + c))
+    }
+}
+
+impl Ekf {
+    /// Entry `(i, j)` of `P` (state indices), whether or not a local session is open.
+    #[inline]
+    pub(crate) fn cov(&self, i: usize, j: usize) -> f64 {
+        match &self.local {
+            None => sym(self.p.as_slice(), self.x.len(), i, j),
+            Some(l) => l.entry(self.p.as_slice(), i, j),
+        }
+    }
+
+    /// Entry `(i, j)` of `P`, or with `upper` of the upper bound [`Local::entry_upper`]
+    /// while a local session is open.
+    #[inline]
+    pub(crate) fn cov_with(&self, i: usize, j: usize, upper: bool) -> f64 {
+        match (&self.local, upper) {
+            (Some(l), true) => l.entry_upper(self.p.as_slice(), i, j),
+            _ => self.cov(i, j),
+        }
+    }
+
+    /// Whether a local session is open (see [`Ekf::settle`]).
+    pub fn is_local(&self) -> bool {
+        self.local.is_some()
+    }
+
+    /// The active states of the open local session, `None` when none is open.
+    pub fn local_states(&self) -> Option<usize> {
+        self.local.as_ref().map(|l| l.n_active())
+    }
+
+    /// Opens a local session whose active states are the pose, the camera and the landmarks in
+    /// `slots` (state order). Settles an open one first.
+    pub(crate) fn open_local(&mut self, slots: &[usize]) {
+        self.settle();
+        let n = self.x.len();
+        let layout = self.layout();
+        let mut active: Vec<usize> = (0..POSE_DIM).collect();
+        let mut sorted: Vec<usize> = slots
+            .iter()
+            .copied()
+            .filter(|&s| s < layout.landmarks)
+            .collect();
+        sorted.sort_unstable();
+        sorted.dedup();
+        for s in sorted {
+            active.extend(StateLayout::landmark(s)..StateLayout::landmark(s) + LANDMARK_DIM);
+        }
+        active.extend(layout.camera_start()..n);
+        let na = active.len();
+        let mut place: Vec<Place> = (0..n).map(Place::Passive).collect();
+        for (k, &i) in active.iter().enumerate() {
+            if let Some(p) = place.get_mut(i) {
+                *p = Place::Active(k);
+            }
+        }
+        let mut g0 = alloc::vec![0.0; n * na];
+        gather_columns(self.p.as_slice(), n, &active, &mut g0);
+        let paa = DMatrix::from_fn(na, na, |r, c| {
+            let (i, j) = (active[r], active[c]);
+            sym(self.p.as_slice(), n, i, j)
+        });
+        let mut phit = alloc::vec![0.0; na * na];
+        for k in 0..na {
+            phit[k * na + k] = 1.0;
+        }
+        self.local = Some(alloc::boxed::Box::new(Local {
+            place,
+            active,
+            paa,
+            phit,
+            psi: alloc::vec![0.0; na * na],
+            g0,
+            n_a0: na,
+            n0: n,
+        }));
+        self.health.local_sessions += 1;
+    }
+
+    /// Closes the local session, if one is open: `P_AB` and `P_BB` are written out (module
+    /// docs), `O(n_B^2 n_A0)`. Every reader of the filter gets the same values either way;
+    /// this only moves the cost (call it before reading the whole covariance many times).
+    pub fn settle(&mut self) {
+        let Some(l) = self.local.take() else {
+            return;
+        };
+        let n = self.x.len();
+        let (n0, na0, na) = (l.n0, l.n_a0, l.n_active());
+        // P0_BB - P0_BA0 psi P0_A0B over all of P0's rows (the active ones are overwritten).
+        let mut psi = l.psi.clone();
+        crate::linalg::mirror_lower(&mut psi, na0);
+        let mut m = alloc::vec![0.0; n0 * na0];
+        crate::linalg::gemm(&mut m, n0, na0, &l.g0, &psi, na0, 1.0, false);
+        rank_update_lower(self.p.as_mut_slice(), n0, &m, &l.g0, na0, -1.0);
+        // P_{B A} = P0_BA0 phi^T.
+        let mut c = alloc::vec![0.0; n0 * na];
+        crate::linalg::gemm(&mut c, n0, na, &l.g0, &l.phit, na0, 1.0, false);
+        let base = self.p.as_slice();
+        let paa = l.paa.as_slice();
+        let mut p = DMatrix::<f64>::zeros(n, n);
+        {
+            let dst = p.as_mut_slice();
+            for j in 0..n {
+                let Some(&pj) = l.place.get(j) else { continue };
+                for i in j..n {
+                    let Some(&pi) = l.place.get(i) else { continue };
+                    let v = match (pi, pj) {
+                        (Place::Active(a), Place::Active(b)) => sym(paa, na, a, b),
+                        (Place::Active(k), Place::Passive(b))
+                        | (Place::Passive(b), Place::Active(k)) => {
+                            c.get(k * n0 + b).copied().unwrap_or(f64::NAN)
+                        }
+                        (Place::Passive(a), Place::Passive(b)) => sym(base, n0, a, b),
+                    };
+                    if let Some(d) = dst.get_mut(j * n + i) {
+                        *d = v;
+                    }
+                }
+            }
+        }
+        self.p = p;
+        self.health.local_settles += 1;
+    }
+
+    /// Prepares the update of the landmarks in `slots`: keeps the open session when they are
+    /// all active, settles it when not, and opens one around the vehicle when the state is
+    /// large enough and the update has the session's (factored) form.
+    pub(crate) fn prepare_local(&mut self, slots: &[usize]) {
+        let usable = self.settings.local_margin_m > 0.0 && !self.joseph();
+        if !usable {
+            self.settle();
+            return;
+        }
+        if let Some(l) = &self.local {
+            let all_active = slots.iter().all(|&s| {
+                matches!(
+                    l.place.get(StateLayout::landmark(s)),
+                    Some(Place::Active(_))
+                )
+            });
+            if all_active {
+                return;
+            }
+            self.settle();
+        }
+        if self.x.len() < LOCAL_MIN_STATES {
+            return;
+        }
+        // The landmarks within the view's reach plus the margin, horizontally.
+        let (vx, vy) = (self.x[0], self.x[1]);
+        let distance = |s: usize| {
+            let i = StateLayout::landmark(s);
+            libm::hypot(self.x[i] - vx, self.x[i + 1] - vy)
+        };
+        let mut reach = slots.iter().map(|&s| distance(s)).fold(0.0, f64::max);
+        for (id, _) in self.visible_landmarks() {
+            if let Some(s) = self.slot(id) {
+                reach = reach.max(distance(s));
+            }
+        }
+        let radius = reach + self.settings.local_margin_m;
+        let mut chosen: Vec<usize> = (0..self.landmarks.len())
+            .filter(|&s| distance(s) <= radius)
+            .collect();
+        chosen.extend_from_slice(slots);
+        self.open_local(&chosen);
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::cast_precision_loss)]
+mod tests {
+    use super::*;
+    use crate::{LandmarkId, Settings};
+    use nalgebra::Vector3;
+    use rig_model::camera::{Mount, Param};
+    use rig_model::{CameraParams, N_PARAMS, Noise, Pose2, Rig};
+
+    fn rig() -> Rig {
+        let mut prior = [None; N_PARAMS];
+        prior[Param::Baseline.index()] = Some(0.005);
+        prior[Param::F.index()] = Some(5.0);
+        Rig {
+            lens: None,
+            board: rig_model::Board::DEFAULT,
+            width: 752,
+            height: 480,
+            nominal: CameraParams {
+                vehicle: Default::default(),
+                f: 700.0,
+                cx: 376.0,
+                cy: 240.0,
+                baseline: 0.12,
+                mount: Mount {
+                    z: 0.8,
+                    ..Mount::default()
+                },
+            },
+            estimate: alloc::vec![Param::Baseline, Param::F],
+            prior,
+            noise: Noise::white(0.3, 0.02, 0.01),
+        }
+    }
+
+    /// Deterministic pixel noise.
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((self.0 >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.6
+        }
+    }
+
+    /// A drive along a ceiling grid of 144 lamps (a 436-element state), the same steps given
+    /// to a dense filter and to one with local sessions: predictions, updates of the lamps
+    /// near the vehicle, a landmark added, two removed (one near, one far), one merged.
+    fn drive(margin: f64) -> Ekf {
+        let rig = rig();
+        let settings = Settings {
+            local_margin_m: margin,
+            ..Settings::default()
+        };
+        let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
+        let lamps: Vec<Vector3<f64>> = (0..144)
+            .map(|k| Vector3::new(f64::from(k % 12), f64::from(k / 12) - 5.5, 3.0))
+            .collect();
+        let mut noise = Lcg(7);
+        let mut measure = |pose: &Pose2, p: &Vector3<f64>| {
+            let mut z = rig_model::project(&rig.nominal, pose, p).unwrap();
+            for v in z.iter_mut() {
+                *v += noise.next();
+            }
+            z
+        };
+        let start = Pose2::default();
+        let mut ids: Vec<LandmarkId> = lamps
+            .iter()
+            .map(|p| ekf.add_landmark(&measure(&start, p)).unwrap())
+            .collect();
+        let mut truth = start;
+        for step in 0..120 {
+            let (vx, w) = (0.5, if step < 60 { 0.02 } else { -0.03 });
+            ekf.predict(vx, 0.0, w, 0.1).unwrap();
+            truth = Pose2::new(
+                truth.x + vx * 0.1 * truth.theta.cos(),
+                truth.y + vx * 0.1 * truth.theta.sin(),
+                truth.theta + w * 0.1,
+            );
+            let batch: Vec<(LandmarkId, rig_model::Measurement)> = lamps
+                .iter()
+                .zip(&ids)
+                .filter(|(p, id)| {
+                    ekf.contains(**id) && (libm::hypot(p.x - truth.x, p.y - truth.y) < 1.3)
+                })
+                .map(|(p, id)| (*id, measure(&truth, p)))
+                .collect();
+            ekf.update(&batch).unwrap();
+            match step {
+                30 => {
+                    // A second landmark of the lamp nearest the vehicle, merged into the first.
+                    let k = (0..lamps.len())
+                        .min_by(|&a, &b| {
+                            let d = |i: usize| {
+                                (lamps[i].xy() - Vector3::new(truth.x, truth.y, 0.0).xy()).norm()
+                            };
+                            d(a).total_cmp(&d(b))
+                        })
+                        .unwrap();
+                    let twin = ekf.add_landmark(&measure(&truth, &lamps[k])).unwrap();
+                    ekf.merge_landmarks(ids[k], twin).unwrap();
+                }
+                40 => {
+                    ekf.remove_landmark(ids[143]).unwrap();
+                    let near = ids
+                        .iter()
+                        .zip(&lamps)
+                        .find(|(id, p)| {
+                            ekf.contains(**id) && libm::hypot(p.x - truth.x, p.y - truth.y) < 2.0
+                        })
+                        .map(|(id, _)| *id)
+                        .unwrap();
+                    ekf.remove_landmark(near).unwrap();
+                }
+                50 => {
+                    let p = Vector3::new(truth.x + 0.4, truth.y - 0.2, 2.9);
+                    ids.push(ekf.add_landmark(&measure(&truth, &p)).unwrap());
+                }
+                _ => {}
+            }
+        }
+        ekf
+    }
+
+    #[test]
+    fn a_local_session_is_the_dense_filter() {
+        let dense = drive(0.0);
+        let mut local = drive(1.0);
+        assert_eq!(dense.health().local_sessions, 0);
+        let health = local.health();
+        assert!(health.local_sessions >= 2, "{health:?}");
+        assert!(health.local_settles >= 1, "{health:?}");
+        assert!(local.is_local());
+        // Read while the session is open (to rounding: the session sums in another order),
+        // then settled.
+        let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| {
+            let scale = a.abs().max();
+            let diff = (a - b).abs().max();
+            assert!(diff <= 1e-8 * scale, "differs by {diff} of {scale}");
+        };
+        let (a, b) = (
+            dense.landmarks().nth(70).unwrap(),
+            local.landmarks().nth(70).unwrap(),
+        );
+        let dyn3 = |m: &Matrix3<f64>| DMatrix::from_column_slice(3, 3, m.as_slice());
+        close(&dyn3(&a.covariance), &dyn3(&b.covariance));
+        let pose = local.pose_covariance();
+        close(&dyn3(&dense.pose_covariance()), &dyn3(&pose));
+        let p_open = local.covariance();
+        local.settle();
+        assert!(!local.is_local());
+        let p_local = local.covariance();
+        assert_eq!(p_open, p_local);
+        assert_eq!(dense.state_len(), local.state_len());
+        close(&dense.covariance(), &p_local);
+        let dx = (dense.state() - local.state()).abs().max();
+        assert!(dx < 1e-9, "state differs by {dx}");
+    }
+}
