@@ -17,6 +17,7 @@
 //! | `start` | the constructors from phase 1's hand-over ([`Ekf::from_handover`], [`Ekf::from_batch`]) or the priors ([`Ekf::from_prior`]); the smoother's re-seed [`Ekf::set_joint`] | |
 //! | `filter` | [`Ekf`] itself, [`Settings`], [`UpdateReport`] | |
 //! | [`motion`] | the motion eq. (4) applies and its noise: the exact arc, [`Increment`] | |
+//! | [`local`] | local sessions (the compressed filter): updates of a large state on the states near the vehicle, exact, settled when it moves on; [`Ekf::settle`] | eq. (5)-(7) |
 //! | `kernels`, `linalg` | the update's arithmetic on column-major slices (multiversioned SIMD loops, faer panels) | eq. (6)-(7) |
 //! | [`candidates`], [`health`], [`chi2`] | confirmation of new landmarks, the filter's health, chi-square bounds | |
 //!

@@ -3,7 +3,7 @@
 //! map-building algorithm for real-time implementation", IEEE T-RA 17(3), 2001).
 //!
 //! A frame's observations involve the pose, a few landmarks and the camera, yet the dense
-//! update changes all of `P`: `n^2` per observation, 80 % of a large hall's replay
+//! update changes all of `P`: `n^2` per observation, three quarters of a large hall's replay
 //! (docs/benchmarks.md, "A hall mapped once"). While the vehicle works in one place, the
 //! states split into the active ones `A` (the pose, the camera, the landmarks within reach of
 //! the view) and the passive rest `B`, and every prediction and update acts on `A` alone. With
