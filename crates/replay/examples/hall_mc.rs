@@ -7,9 +7,11 @@
 //! on every axis, the vehicle's parameters within 3 sigma, and the replay's speed; then the
 //! totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--keep DIR]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
-//! `--lens`: every hall through that lens)
+//! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
+//! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter). With `--keep DIR` each
+//! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::process::ExitCode;
@@ -53,10 +55,11 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--keep DIR]";
     let mut settings = NavSettings::default();
     let mut lens = None;
     let mut positional = Vec::new();
+    let mut keep: Option<std::path::PathBuf> = None;
     let mut rest = args.iter();
     while let Some(a) = rest.next() {
         match a.as_str() {
@@ -64,6 +67,14 @@ fn run() -> Result<(), String> {
                 let v = rest.next().ok_or(usage)?;
                 settings.ekf.max_off_axis_deg =
                     v.parse().map_err(|_| format!("--field {v:?}: {usage}"))?;
+            }
+            "--margin" => {
+                let v = rest.next().ok_or(usage)?;
+                settings.ekf.local_margin_m =
+                    v.parse().map_err(|_| format!("--margin {v:?}: {usage}"))?;
+            }
+            "--keep" => {
+                keep = Some(std::path::PathBuf::from(rest.next().ok_or(usage)?));
             }
             "--lens" => {
                 lens = Some(match rest.next().map(String::as_str) {
@@ -107,7 +118,19 @@ fn run() -> Result<(), String> {
             .run(&mut sink, &mut |_, _| {})
             .map_err(|e| e.to_string())?;
         let took = t0.elapsed().as_secs_f64();
-        std::fs::remove_file(&log).ok();
+        match &keep {
+            Some(dir) => {
+                std::fs::rename(&log, dir.join(format!("hall-{seed}.mcap")))
+                    .or_else(|_| {
+                        std::fs::copy(&log, dir.join(format!("hall-{seed}.mcap"))).map(|_| ())
+                    })
+                    .map_err(|e| format!("--keep {}: {e}", dir.display()))?;
+                std::fs::remove_file(&log).ok();
+            }
+            None => {
+                std::fs::remove_file(&log).ok();
+            }
+        }
         let truth = end.truth.as_ref().ok_or("the log has no truth")?;
         // Each landmark against its nearest lamp within the match radius: inside 3 sigma on
         // every axis.

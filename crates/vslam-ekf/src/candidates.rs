@@ -329,7 +329,7 @@ impl Candidates {
             }
         }
         let budget = match self.settings.max_observations {
-            0 => observation_budget(ekf.state_len(), ekf.uses_joseph()),
+            0 => ekf.observation_budget(),
             k => k,
         };
         // Seen is tracked: a landmark the budget leaves out of this update is still in view

@@ -90,7 +90,7 @@ impl Default for Settings {
             covariance_update: CovarianceUpdate::Auto,
             camera_update: CameraUpdate::Refine,
             max_off_axis_deg: 50.0,
-            local_margin_m: 3.0,
+            local_margin_m: 1.0,
         }
     }
 }

@@ -37,10 +37,11 @@ use crate::kernels::gather_columns;
 use crate::linalg::{rank_update_lower, sym};
 use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout};
 
-/// Smallest state for which updates open a local session: below it the dense update is cheap
-/// (and, in [`crate::CovarianceUpdate::Auto`], in the Joseph form, which the session does not
-/// have).
-pub const LOCAL_MIN_STATES: usize = crate::filter::AUTO_JOSEPH_MAX_STATES + 1;
+/// Smallest state for which updates open a local session: below it the dense update costs
+/// less than the session's (whose active block alone is about 150 states in a hall). Above it
+/// [`crate::CovarianceUpdate::Auto`] takes the factored form, the session's, where the dense
+/// filter would take the Joseph form up to [`crate::AUTO_JOSEPH_MAX_STATES`].
+pub const LOCAL_MIN_STATES: usize = 250;
 
 /// Where a state's covariance lives during a session.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -191,7 +191,10 @@ impl Ekf {
         self.joseph()
     }
 
-    pub(crate) fn joseph(&self) -> bool {
+    /// The form a dense update of this state takes: the Joseph form with the camera
+    /// considered or held, or a state of at most [`AUTO_JOSEPH_MAX_STATES`] in
+    /// [`CovarianceUpdate::Auto`].
+    fn dense_joseph(&self) -> bool {
         if self.settings.camera_update == CameraUpdate::Consider || self.held.iter().any(|h| *h) {
             return true;
         }
@@ -200,6 +203,27 @@ impl Ekf {
             CovarianceUpdate::Factored => false,
             CovarianceUpdate::Auto => self.x.len() <= AUTO_JOSEPH_MAX_STATES,
         }
+    }
+
+    /// [`Self::dense_joseph`], except that in [`CovarianceUpdate::Auto`] a state large enough
+    /// for local sessions (`crate::local`) is updated in the factored form, the sessions'.
+    pub(crate) fn joseph(&self) -> bool {
+        let local = self.settings.covariance_update == CovarianceUpdate::Auto
+            && self.settings.local_margin_m > 0.0
+            && self.x.len() >= crate::local::LOCAL_MIN_STATES;
+        self.dense_joseph() && (self.frozen_any() || !local)
+    }
+
+    /// Some camera row's gain is zero (considered or held).
+    fn frozen_any(&self) -> bool {
+        self.settings.camera_update == CameraUpdate::Consider || self.held.iter().any(|h| *h)
+    }
+
+    /// Observations the next update may use ([`crate::candidates::observation_budget`]): the
+    /// dense filter's budget for this state, also while local sessions make the update
+    /// cheaper, so that they change its cost and not what it uses.
+    pub fn observation_budget(&self) -> usize {
+        crate::candidates::observation_budget(self.x.len(), self.dense_joseph())
     }
 
     /// Eq. (6)-(7): updates with a batch of landmark measurements `(uL, vL, uR, vR)`.
