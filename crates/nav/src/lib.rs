@@ -243,6 +243,10 @@ pub struct NavStats {
     pub phase2_solves: u64,
     /// Joint estimates of the smoother the filter could not take (it went on without).
     pub phase2_reseeds_refused: u64,
+    /// Of those, joint estimates outside the filter's uncertainty (pose and camera beyond
+    /// the chi-square gate of [`RESEED_PROBABILITY`] under the filter's covariance): the
+    /// smoother started again from the filter.
+    pub phase2_reseeds_inconsistent: u64,
     /// The frame count when the smoother stopped because the map outgrew
     /// [`SmootherSettings::max_landmarks`] (0: it did not).
     pub phase2_smoother_stopped_at: u64,
@@ -633,6 +637,19 @@ impl Navigator {
         let (Some(ekf), Some(joint)) = (self.ekf.as_mut(), self.smoother.joint()) else {
             return;
         };
+        // A solve far outside the filter's own uncertainty is a linearisation gone wrong, not
+        // information: after a loop closed through a long dark stretch the window's
+        // marginalised prior (linearised where dead reckoning had put it) pulled a solve to an
+        // odometry scale of 0.70 and a clock offset of 118 ms (docs/halls.md, "Loops"). The
+        // filter keeps its own estimate and the smoother starts again from it.
+        let consistent = reseed_distance(ekf, &joint)
+            .is_some_and(|d2| d2 <= chi2_quantile(RESEED_PROBABILITY, reseed_dof(&joint)));
+        if !consistent {
+            self.stats.phase2_reseeds_refused += 1;
+            self.stats.phase2_reseeds_inconsistent += 1;
+            self.smoother.stop_mapping();
+            return;
+        }
         let index = &self.smoothed;
         if ekf.set_joint(&joint, |id| index.get(&id).copied()).is_err() {
             self.stats.phase2_reseeds_refused += 1;
@@ -1261,6 +1278,54 @@ const NEAR_VIEW_SIGMAS: f64 = 3.0;
 const MERGE_PASS_FRAMES: u64 = 100;
 
 /// A pair of landmark ids, the smaller first.
+/// A smoother's joint estimate is taken by the filter only while its pose and camera lie
+/// inside this probability's chi-square gate of the filter's own estimate and covariance.
+pub const RESEED_PROBABILITY: f64 = 0.9999;
+
+/// Degrees of freedom of [`reseed_distance`]: the pose and the estimated parameters.
+fn reseed_dof(joint: &rig_model::handover::JointEstimate) -> f64 {
+    #[allow(clippy::cast_precision_loss)] // a handful of parameters
+    let n = (3 + joint.estimated.len()) as f64;
+    n
+}
+
+/// The squared Mahalanobis distance of the joint estimate's pose and estimated parameters
+/// from the filter's, under the filter's covariance of them; `None` when it cannot be
+/// computed (a parameter the filter does not estimate, a singular block, NaN).
+fn reseed_distance(ekf: &Ekf, joint: &rig_model::handover::JointEstimate) -> Option<f64> {
+    let mut rows: Vec<usize> = alloc::vec![0, 1, 2];
+    for &p in &joint.estimated {
+        rows.push(ekf.camera_state_index(p)?);
+    }
+    let n = rows.len();
+    let pose = ekf.pose();
+    let camera = ekf.camera();
+    let d = nalgebra::DVector::<f64>::from_iterator(
+        n,
+        [
+            joint.pose.x - pose.x,
+            joint.pose.y - pose.y,
+            rig_model::camera::wrap_angle(joint.pose.theta - pose.theta),
+        ]
+        .into_iter()
+        .chain(
+            joint
+                .estimated
+                .iter()
+                .map(|&p| joint.camera.get(p) - camera.get(p)),
+        ),
+    );
+    let mut entries: Vec<f64> = Vec::with_capacity(n * n);
+    for &rj in &rows {
+        for &ri in &rows {
+            entries.push(ekf.covariance_entry(ri, rj)?);
+        }
+    }
+    let cov = nalgebra::DMatrix::<f64>::from_vec(n, n, entries);
+    let d2 = d.dot(&cov.cholesky()?.solve(&d));
+    d2.is_finite().then_some(d2)
+}
+
 fn ordered(a: LandmarkId, b: LandmarkId) -> (LandmarkId, LandmarkId) {
     if a <= b { (a, b) } else { (b, a) }
 }

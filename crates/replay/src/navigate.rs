@@ -735,9 +735,13 @@ struct TruthAccumulator {
     est_x: f64,
     est_y: f64,
     gauge_frames: usize,
+    gauge_weight: f64,
     /// Frames each true lamp was inside both images at.
     seen: Vec<usize>,
 }
+
+/// The floor of a frame's position sigma in the gauge's weights, metres.
+const GAUGE_FLOOR_M: f64 = 0.01;
 
 impl TruthAccumulator {
     /// A final frame estimate against the true pose at its timestamp, if any.
@@ -753,13 +757,20 @@ impl TruthAccumulator {
         self.sq_heading += dh * dh;
         self.n += 1;
         if f.phase == Phase::Navigating {
+            // Each frame weighed by its pose's precision (a centimetre's floor): frames dead
+            // reckoned through a dark stretch, metres off with metres of sigma, say nothing
+            // about where the map sits.
+            let c = &f.pose_covariance;
+            let w = 1.0 / (c[0][0] + c[1][1] + GAUGE_FLOOR_M * GAUGE_FLOOR_M);
+            let w = if w.is_finite() { w } else { 0.0 };
             let d = p.theta - theta;
-            self.gauge_sin += d.sin();
-            self.gauge_cos += d.cos();
-            self.true_x += p.x;
-            self.true_y += p.y;
-            self.est_x += x;
-            self.est_y += y;
+            self.gauge_sin += w * d.sin();
+            self.gauge_cos += w * d.cos();
+            self.true_x += w * p.x;
+            self.true_y += w * p.y;
+            self.est_x += w * x;
+            self.est_y += w * y;
+            self.gauge_weight += w;
             self.gauge_frames += 1;
         }
         // Lamps in view of both cameras (both phases are mapped).
@@ -792,14 +803,18 @@ impl TruthAccumulator {
     }
 
     /// The map's gauge: rotation from the mean heading error (well defined even when the
-    /// robot turns on the spot), then the mean position offset.
+    /// robot turns on the spot), then the mean position offset, each frame weighed by its
+    /// pose's precision.
     fn gauge(&self) -> Planar {
         if self.gauge_frames == 0 {
             return Planar::IDENTITY;
         }
         let angle = f64::atan2(self.gauge_sin, self.gauge_cos);
         let (sn, cs) = angle.sin_cos();
-        let m = self.gauge_frames as f64;
+        let m = self.gauge_weight;
+        if m <= 0.0 {
+            return Planar::IDENTITY;
+        }
         Planar {
             angle,
             tx: (self.true_x - (cs * self.est_x - sn * self.est_y)) / m,

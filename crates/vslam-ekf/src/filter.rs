@@ -35,6 +35,20 @@ pub const SEQUENTIAL_MAX_STATES: usize = crate::kernels::MAX_SMALL_STATE;
 /// factored form keeps the 500-landmark update within its time budget (docs/benchmarks.md).
 pub const AUTO_JOSEPH_MAX_STATES: usize = 400;
 
+/// A pose position sigma above this makes [`Ekf::update`] iterate (the iterated EKF): its
+/// projections are not linear over the prior's spread, metres.
+pub const ITERATE_POSITION_SIGMA_M: f64 = 0.1;
+
+/// A heading sigma above this makes [`Ekf::update`] iterate, radians (2 degrees).
+pub const ITERATE_HEADING_SIGMA_RAD: f64 = 0.035;
+
+/// The iterated update stops when every accepted residual is within this many pixel-noise
+/// sigmas of its linear model's.
+pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
+
+/// Passes of the iterated update at most (the first, linear one included).
+pub const ITERATE_MAX_PASSES: usize = 8;
+
 /// What the update does with the camera parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum CameraUpdate {

@@ -42,6 +42,9 @@ pub struct Health {
     pub local_sessions: u64,
     /// Local sessions settled (their covariance written out), in all.
     pub local_settles: u64,
+    /// Passes of the iterated update (`Ekf::update` on a pose too uncertain for one
+    /// linearisation) beyond the first, in all.
+    pub iterated_updates: u64,
     /// Gate outcomes in the window (at most its length).
     pub window_observations: usize,
     /// Rejections among them.
@@ -71,6 +74,7 @@ pub(crate) struct HealthState {
     pub(crate) landmarks_removed: u64,
     pub(crate) local_sessions: u64,
     pub(crate) local_settles: u64,
+    pub(crate) iterated_updates: u64,
     /// The last bound computed, by accepted count (the quantile costs a few microseconds).
     bound_cache: Cell<Option<(usize, f64)>>,
 }
@@ -88,6 +92,7 @@ impl HealthState {
             landmarks_removed: 0,
             local_sessions: 0,
             local_settles: 0,
+            iterated_updates: 0,
             bound_cache: Cell::new(None),
         }
     }
@@ -137,6 +142,7 @@ impl HealthState {
             landmarks_removed: self.landmarks_removed,
             local_sessions: self.local_sessions,
             local_settles: self.local_settles,
+            iterated_updates: self.iterated_updates,
             window_observations: self.window.len(),
             window_rejected: self.window.len() - count,
             window_mean_nis_per_dof: mean,

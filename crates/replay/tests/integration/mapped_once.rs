@@ -84,30 +84,29 @@ fn the_radtan_hall_maps_each_lamp_once() {
 }
 
 /// Item 2 of the issue, a loop closed when drift has grown past the gate: `hall-loop.toml`
-/// (poor odometry, 100 m without lamps, then the first lamps again). Lamps there are at least
-/// 2.4 m apart (a 3 m grid, 0.3 m of jitter); two landmarks closer than 1.5 m are one lamp
-/// mapped twice. Today 15 such pairs: on the way back the pose jumps onto the neighbouring
-/// lamps, one grid spacing off (docs/halls.md, "Not done yet").
+/// (poor odometry, 100 m without lamps, then the first lamps again, 2.8 m of pose sigma).
+/// It once made 53 landmarks for 40 lamps: the single linear update of the first lamp seen
+/// again left the pose 0.5 m and 3 degrees off with a 0.08 m sigma, and the smoother's next
+/// solve (its window linearised where dead reckoning had put it) took the odometry scale to
+/// 0.70; the update now iterates on a pose that uncertain and the filter refuses a solve
+/// outside its own uncertainty (docs/halls.md, "Loops").
 #[test]
-#[ignore = "unfinished: loop closure (issue 35 item 2) is not built"]
 fn a_loop_through_a_dark_stretch_is_closed() {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/hall-loop.toml");
-    let run = sim::simulate(&sim::Scenario::load(&path).unwrap(), sim::Mode::Fast).unwrap();
-    let log = std::env::temp_dir().join(format!("stereonav-loop-{}.mcap", std::process::id()));
-    run.write_log(&log).unwrap();
-    let replayer = Replayer::open(&log, None, &NavSettings::default()).unwrap();
-    let mut sink = replay::ReplayCollector::default();
-    let end = replayer.run(&mut sink, &mut |_, _| {}).unwrap();
-    std::fs::remove_file(&log).ok();
-    let mut twins = Vec::new();
-    for (i, a) in end.landmarks.iter().enumerate() {
-        for b in &end.landmarks[i + 1..] {
-            let d = (a.position[0] - b.position[0]).hypot(a.position[1] - b.position[1]);
-            if d < 1.5 {
-                twins.push((a.id, b.id, d));
-            }
-        }
+    let (t, _) = replayed("hall-loop.toml", None);
+    assert_once(&t, "hall-loop", 0, 0.010);
+}
+
+/// The same loop over other seeds: closed on 3 of 9 variants today (noise and lamp jitter
+/// reseeded by hand, docs/halls.md). On the others the first lamp
+/// seen again is taken for a neighbour not yet mapped (the only landmark in its gate) and the
+/// update moves the pose one grid spacing; matching the lamps of a frame as a constellation
+/// while the pose is lost is the fix, and it waits on the filter's spurious heading
+/// information from lamps mapped while lost (docs/halls.md, "Loops").
+#[test]
+#[ignore = "unfinished: loops closed by constellation (issue 35 item 2) are not built"]
+fn loops_through_dark_stretches_are_closed_on_every_seed() {
+    for seed in 53..61 {
+        let (t, _) = replayed("hall-loop.toml", Some(seed));
+        assert_once(&t, &format!("hall-loop seed {seed}"), 0, 0.050);
     }
-    assert!(twins.is_empty(), "{} twin pairs: {twins:?}", twins.len());
 }

@@ -5,7 +5,7 @@
 use crate::common;
 
 use common::*;
-use nalgebra::{DMatrix, Matrix3, Vector4};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector4};
 use proptest::prelude::*;
 use rig_model::camera::Pose2;
 use rig_model::{Measurement, project};
@@ -389,5 +389,172 @@ fn predicted_measurement_and_visibility() {
     assert!(!visible.is_empty());
     for (id, z) in visible {
         assert_eq!(z, s.ekf.predict_measurement(id).unwrap().0);
+    }
+}
+
+/// The filter, the batch, and the prior's state and covariance.
+type LoopClosure = (
+    Setup,
+    Vec<(LandmarkId, Measurement)>,
+    DVector<f64>,
+    DMatrix<f64>,
+);
+
+/// A loop closed after a long dark stretch: the map precise, the pose a metre and several
+/// degrees uncertain (and that far off), three landmarks measured from the true pose.
+fn loop_closure_setup(seed: u64) -> LoopClosure {
+    let mut s = setup(seed, 0, 4, Settings::default());
+    let mut rng = rng(seed + 77);
+    let n = s.ekf.state_len();
+    // The prior: landmarks at their truth within 5 mm, uncorrelated; the pose off by about
+    // one sigma of a 1.2 m, 5 degree spread.
+    let sigma = [1.2, 1.2, 5f64.to_radians()];
+    let mut x0 = DVector::zeros(n);
+    let mut p0 = DMatrix::zeros(n, n);
+    let off = [normal(&mut rng), normal(&mut rng), normal(&mut rng)];
+    x0[0] = s.pose.x + sigma[0] * off[0];
+    x0[1] = s.pose.y + sigma[1] * off[1];
+    x0[2] = s.pose.theta + sigma[2] * off[2];
+    for k in 0..3 {
+        p0[(k, k)] = sigma[k] * sigma[k];
+    }
+    let mut landmarks = Vec::new();
+    for (j, (id, point)) in s.points.iter().enumerate() {
+        let i = s.ekf.landmark_state_index(*id).unwrap();
+        assert_eq!(i, 3 + 3 * j);
+        for a in 0..3 {
+            x0[i + a] = point[a] + 0.005 * normal(&mut rng);
+            p0[(i + a, i + a)] = 0.005f64.powi(2);
+        }
+        landmarks.push(nalgebra::Vector3::new(x0[i], x0[i + 1], x0[i + 2]));
+    }
+    let joint = rig_model::handover::JointEstimate {
+        t_us: 0,
+        pose: Pose2::new(x0[0], x0[1], x0[2]),
+        camera: s.ekf.camera(),
+        estimated: Vec::new(),
+        landmarks,
+        covariance: p0.clone(),
+    };
+    let ids: Vec<LandmarkId> = s.points.iter().map(|(id, _)| *id).collect();
+    s.ekf
+        .set_joint(&joint, |id| ids.iter().position(|&i| i == id))
+        .unwrap();
+    let batch: Vec<(LandmarkId, Measurement)> = s
+        .points
+        .iter()
+        .take(3)
+        .map(|(id, p)| {
+            (
+                *id,
+                noisy(&mut rng, &project(&s.truth, &s.pose, p).unwrap(), 0.3),
+            )
+        })
+        .collect();
+    (s, batch, x0, p0)
+}
+
+/// The MAP cost of the update, `|x - x0|^2_P0 + |z - h(x)|^2_R`, and the Gauss-Newton step
+/// still to go from the filter's state, in sigmas of its covariance (`sqrt(g^T P g)`).
+fn map_cost(
+    ekf: &Ekf,
+    batch: &[(LandmarkId, Measurement)],
+    x0: &DVector<f64>,
+    p0_inv: &DMatrix<f64>,
+) -> (f64, f64) {
+    let x = ekf.state();
+    let mut dx = x - x0;
+    dx[2] = wrap(dx[2]);
+    let mut cost = dx.dot(&(p0_inv * &dx));
+    let mut gradient = p0_inv * &dx;
+    for (id, z) in batch {
+        let (zhat, h) = ekf.measurement_jacobian(*id).unwrap();
+        let r = ekf.measurement_variances(&zhat);
+        let nu = z - zhat;
+        let w = Vector4::from_fn(|k, _| nu[k] / r[k]);
+        cost += nu.dot(&w);
+        gradient -= h.transpose() * w;
+    }
+    (cost, gradient.dot(&(ekf.covariance() * &gradient)).sqrt())
+}
+
+#[test]
+fn an_update_on_a_lost_pose_iterates_to_the_maximum_a_posteriori_estimate() {
+    let mut iterated = 0;
+    for seed in 0..8 {
+        let (mut s, batch, x0, p0) = loop_closure_setup(3100 + seed);
+        let p0_inv = p0.clone().try_inverse().unwrap();
+        // The single linearisation's answer, for comparison.
+        let (x_linear, _) = dense_update(&s.ekf, &batch);
+        let before = s.ekf.health().iterated_updates;
+        let report = s.ekf.update(&batch).unwrap();
+        assert_eq!(report.accepted.len(), 3, "seed {seed}: {report:?}");
+        iterated += s.ekf.health().iterated_updates - before;
+        let (cost, gradient) = map_cost(&s.ekf, &batch, &x0, &p0_inv);
+        let mut linear = s.ekf.clone();
+        let ids: Vec<LandmarkId> = s.points.iter().map(|(id, _)| *id).collect();
+        let landmarks = ids
+            .iter()
+            .map(|id| {
+                let i = s.ekf.landmark_state_index(*id).unwrap();
+                nalgebra::Vector3::new(x_linear[i], x_linear[i + 1], x_linear[i + 2])
+            })
+            .collect();
+        linear
+            .set_joint(
+                &rig_model::handover::JointEstimate {
+                    t_us: 0,
+                    pose: Pose2::new(x_linear[0], x_linear[1], x_linear[2]),
+                    camera: s.ekf.camera(),
+                    estimated: Vec::new(),
+                    landmarks,
+                    covariance: s.ekf.covariance(),
+                },
+                |id| ids.iter().position(|&i| i == id),
+            )
+            .unwrap();
+        let (linear_cost, _) = map_cost(&linear, &batch, &x0, &p0_inv);
+        assert!(
+            cost <= linear_cost + 1e-9,
+            "seed {seed}: iterated {cost} against linear {linear_cost}"
+        );
+        // At the optimum the gradient vanishes: the step still to go is a small fraction of a
+        // sigma.
+        assert!(
+            gradient < 0.1,
+            "seed {seed}: step to the optimum {gradient} sigma"
+        );
+        // And the pose is inside its posterior's 99.9 % ellipse.
+        let pose = s.ekf.pose();
+        let e = nalgebra::Vector3::new(
+            pose.x - s.pose.x,
+            pose.y - s.pose.y,
+            wrap(pose.theta - s.pose.theta),
+        );
+        let nees = e.dot(&(s.ekf.pose_covariance().try_inverse().unwrap() * e));
+        assert!(nees < 16.3, "seed {seed}: pose NEES {nees}, error {e:?}");
+    }
+    assert!(iterated > 0, "the updates never iterated");
+}
+
+#[test]
+fn an_update_on_a_known_pose_is_the_plain_ekf() {
+    for seed in 0..4 {
+        let mut s = setup(3200 + seed, 2, 5, Settings::default());
+        let mut rng = rng(3300 + seed);
+        let batch: Vec<(LandmarkId, Measurement)> = s
+            .points
+            .iter()
+            .map(|(id, p)| {
+                (
+                    *id,
+                    noisy(&mut rng, &project(&s.truth, &s.pose, p).unwrap(), 0.3),
+                )
+            })
+            .collect();
+        let (x_want, _) = dense_update(&s.ekf, &batch);
+        s.ekf.update(&batch).unwrap();
+        assert_eq!(s.ekf.health().iterated_updates, 0, "seed {seed}");
+        assert!((s.ekf.state() - x_want).amax() < 1e-9, "seed {seed}");
     }
 }

@@ -1,0 +1,228 @@
+//! Which lamp each observation really was (issue 35, loops): the navigator run over a
+//! simulator log frame by frame; every feature the update used is named by the true lamp
+//! nearest to it (the log's truth pose, camera and lamps, through the lens), each landmark by
+//! the lamp of its first observation, and every frame where an observation's lamp is not its
+//! landmark's (a wrong association), where map matching bound a track, or where the pose moved
+//! by more than `JUMP_M`, is printed with the pose error and sigma.
+//!
+//! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S]`; with
+//! `LOOP_PROBE_V=1` it also prints the vehicle's parameters, their sigmas and their
+//! correlations with the pose at every printed frame, with `NO_SMOOTH=1` it runs phase 2
+//! without the fixed-lag smoother. Every 100th frame is printed too (the drift in between).
+#![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
+
+use std::collections::BTreeMap;
+use std::process::ExitCode;
+
+use nalgebra::{Vector2, Vector3};
+use nav::{NavSettings, Navigator};
+use rig_model::Pose2;
+use vehicle_log::Record;
+
+/// A pose change this large in one frame is printed, metres.
+const JUMP_M: f64 = 0.2;
+/// A feature farther than this from every lamp's raw pixel is clutter, pixels.
+const LAMP_PX: f64 = 3.0;
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("loop_probe: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let log = args
+        .first()
+        .ok_or("usage: loop_probe LOG.mcap [FROM_S TO_S]")?;
+    let from: f64 = args
+        .get(1)
+        .map_or(Ok(0.0), |s| s.parse())
+        .map_err(|_| "FROM_S")?;
+    let to: f64 = args
+        .get(2)
+        .map_or(Ok(f64::MAX), |s| s.parse())
+        .map_err(|_| "TO_S")?;
+    let records = vehicle_log::read_log(log)
+        .map_err(|e| e.to_string())?
+        .records;
+    let mut poses = BTreeMap::new();
+    let mut lamps = Vec::new();
+    let mut truth_camera = None;
+    for r in records {
+        match r {
+            Record::TruthPose(p) => {
+                poses.insert(p.t_us, Pose2::new(p.x, p.y, p.theta));
+            }
+            Record::TruthLandmarks(l) if lamps.is_empty() => lamps = l,
+            Record::TruthCamera(c) if truth_camera.is_none() => {
+                truth_camera = Some(replay::truth_camera(&c));
+            }
+            _ => {}
+        }
+    }
+    let input =
+        replay::read_vehicle_log(std::path::Path::new(log), None).map_err(|e| e.to_string())?;
+    let rig = input.rig.clone();
+    let camera = truth_camera.unwrap_or(rig.nominal);
+    let first_t = input.frames.first().ok_or("no frames")?.t_us;
+    let t0 = *poses.range(first_t..).next().ok_or("no truth")?.1;
+    // The true pose in the first frame's world.
+    let truth_at = |t: u64| -> Option<Pose2> {
+        let p = poses.range(t..).next()?.1;
+        let (c, s) = (t0.theta.cos(), t0.theta.sin());
+        let (dx, dy) = (p.x - t0.x, p.y - t0.y);
+        Some(Pose2::new(
+            c * dx + s * dy,
+            -s * dx + c * dy,
+            p.theta - t0.theta,
+        ))
+    };
+    // The lamp whose raw left pixel is nearest to `px`, seen from the true pose at `t`.
+    let lamp_of = |t: u64, px: Vector2<f64>| -> Option<u32> {
+        let pose = poses.range(t..).next()?.1;
+        lamps
+            .iter()
+            .filter_map(|l| {
+                let z = rig_model::project(&camera, pose, &Vector3::new(l.x, l.y, l.z));
+                let z = z.ok()?;
+                let rect = Vector2::new(z[0], z[1]);
+                let raw = match &rig.lens {
+                    None => rect,
+                    Some(lens) => lens.left.unrectify(rect, camera.f, camera.cx, camera.cy)?,
+                };
+                Some((l.id, (raw - px).norm()))
+            })
+            .filter(|(_, d)| *d < LAMP_PX)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(id, _)| id)
+    };
+    let settings = NavSettings {
+        smooth_phase2: std::env::var_os("NO_SMOOTH").is_none(),
+        ..NavSettings::default()
+    };
+    let mut nav = Navigator::new(rig.clone(), settings).map_err(|e| e.to_string())?;
+    let mut odometry = input.odometry.iter().peekable();
+    let mut landmark_lamp: BTreeMap<u64, Option<u32>> = BTreeMap::new();
+    let mut previous: Option<Pose2> = None;
+    for f in &input.frames {
+        while let Some(s) = odometry.next_if(|s| s.t_us <= f.t_us + nav::ODOMETRY_LOOKAHEAD_US) {
+            nav.push_odometry(*s).map_err(|e| e.to_string())?;
+        }
+        let outcome = nav
+            .push_frame(f.t_us, &f.left, &f.right)
+            .map_err(|e| e.to_string())?;
+        let Some(ekf) = nav.ekf() else {
+            continue;
+        };
+        let t_s = (f.t_us - first_t) as f64 * 1e-6;
+        let pose = ekf.pose();
+        let jump = previous.map_or(0.0, |p| {
+            ((p.x - pose.x).powi(2) + (p.y - pose.y).powi(2)).sqrt()
+        });
+        previous = Some(pose);
+        let mut wrong = Vec::new();
+        for a in &outcome.associations {
+            let Some(px) = f.left.get(a.left) else {
+                continue;
+            };
+            let lamp = lamp_of(f.t_us, Vector2::new(px.u, px.v));
+            let known = *landmark_lamp.entry(a.landmark.0).or_insert(lamp);
+            if known != lamp {
+                wrong.push(format!(
+                    "L{}(lamp {:?}) saw {:?}{}",
+                    a.landmark.0,
+                    known,
+                    lamp,
+                    if a.accepted { "" } else { " rejected" }
+                ));
+            }
+        }
+        if t_s < from || t_s > to {
+            continue;
+        }
+        if wrong.is_empty()
+            && outcome.rematched.is_empty()
+            && outcome.merged.is_empty()
+            && jump < JUMP_M
+            && !nav.stats().frames.is_multiple_of(100)
+            && !(95.0..100.5).contains(&t_s)
+        {
+            continue;
+        }
+        let Some(truth) = truth_at(f.t_us) else {
+            continue;
+        };
+        let cov = ekf.pose_covariance();
+        let rematched: Vec<String> = outcome
+            .rematched
+            .iter()
+            .map(|(_, id)| {
+                format!(
+                    "L{}(lamp {:?})",
+                    id.0,
+                    landmark_lamp.get(&id.0).copied().flatten()
+                )
+            })
+            .collect();
+        let merged: Vec<String> = outcome
+            .merged
+            .iter()
+            .map(|(k, d)| {
+                format!(
+                    "L{}(lamp {:?})<-L{}(lamp {:?})",
+                    k.0,
+                    landmark_lamp.get(&k.0).copied().flatten(),
+                    d.0,
+                    landmark_lamp.get(&d.0).copied().flatten()
+                )
+            })
+            .collect();
+        if !merged.is_empty() {
+            println!("        merged {merged:?}");
+        }
+        println!(
+            "{t_s:7.2} err x {:+.2} y {:+.2} th {:+.2} deg | sigma {:.2} {:.2} {:.2} deg | acc {} rej {} add {} | jump {jump:.2} | rematched {rematched:?} wrong {wrong:?}",
+            pose.x - truth.x,
+            pose.y - truth.y,
+            (pose.theta - truth.theta).to_degrees(),
+            cov[(0, 0)].sqrt(),
+            cov[(1, 1)].sqrt(),
+            cov[(2, 2)].sqrt().to_degrees(),
+            outcome.accepted.len(),
+            outcome.rejected.len(),
+            outcome.added.len(),
+        );
+        let c = ekf.camera();
+        if std::env::var_os("LOOP_PROBE_V").is_some() {
+            let sd: Vec<String> = ekf
+                .estimated_parameters()
+                .iter()
+                .filter_map(|&p| {
+                    let i = ekf.camera_state_index(p)?;
+                    let v = ekf.covariance_entry(i, i)?;
+                    let ci: Vec<f64> = (0..3)
+                        .map(|k| {
+                            ekf.covariance_entry(k, i).unwrap_or(f64::NAN)
+                                / (v.sqrt() * ekf.covariance_entry(k, k).unwrap_or(f64::NAN).sqrt())
+                        })
+                        .collect();
+                    Some(format!(
+                        "{p:?} {:.3e} corr {:.2} {:.2} {:.2}",
+                        v.sqrt(),
+                        ci[0],
+                        ci[1],
+                        ci[2]
+                    ))
+                })
+                .collect();
+            println!("        sd {sd:?} n {}", ekf.state_len());
+            println!("        V {:?} v {:?}", c.vehicle, outcome.accepted);
+        }
+    }
+    Ok(())
+}
