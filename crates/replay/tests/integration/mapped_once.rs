@@ -96,8 +96,8 @@ fn a_loop_through_a_dark_stretch_is_closed() {
     assert_once(&t, "hall-loop", 0, 0.010);
 }
 
-/// The same loop over other seeds: closed on 3 of 9 variants today (noise and lamp jitter
-/// reseeded by hand, docs/halls.md). On the others the first lamp
+/// The same loop over other noise seeds. Measured by hand with the lamp jitter reseeded too:
+/// closed on 3 of 9 variants (docs/halls.md, "Loops"). On the others the first lamp
 /// seen again is taken for a neighbour not yet mapped (the only landmark in its gate) and the
 /// update moves the pose one grid spacing; matching the lamps of a frame as a constellation
 /// while the pose is lost is the fix, and it waits on the filter's spurious heading
