@@ -8,7 +8,8 @@
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S]`; with
 //! `LOOP_PROBE_V=1` it also prints the vehicle's parameters, their sigmas and their
 //! correlations with the pose at every printed frame, with `NO_SMOOTH=1` it runs phase 2
-//! without the fixed-lag smoother. Every 100th frame is printed too (the drift in between).
+//! without the fixed-lag smoother, with `LOOP_PROBE_RIG=RIG.toml` on that rig instead of the
+//! log's. Every 100th frame is printed too (the drift in between).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::collections::BTreeMap;
@@ -65,8 +66,16 @@ fn run() -> Result<(), String> {
             _ => {}
         }
     }
+    // LOOP_PROBE_RIG=RIG.toml replaces the log's rig.
+    let rig_file = match std::env::var("LOOP_PROBE_RIG") {
+        Ok(path) => {
+            let text = std::fs::read_to_string(&path).map_err(|e| format!("{path}: {e}"))?;
+            Some(rig_model::config::Rig::from_toml_str(&text, &path).map_err(|e| e.to_string())?)
+        }
+        Err(_) => None,
+    };
     let input =
-        replay::read_vehicle_log(std::path::Path::new(log), None).map_err(|e| e.to_string())?;
+        replay::read_vehicle_log(std::path::Path::new(log), rig_file).map_err(|e| e.to_string())?;
     let rig = input.rig.clone();
     let camera = truth_camera.unwrap_or(rig.nominal);
     let first_t = input.frames.first().ok_or("no frames")?.t_us;
