@@ -46,6 +46,11 @@ pub const ITERATE_HEADING_SIGMA_RAD: f64 = 0.035;
 /// sigmas of its linear model's.
 pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 
+/// While the pose's position sigma is above this, metres, the update's Jacobians are taken at
+/// each landmark's first estimate (first-estimates Jacobians: the pose is lost, and lamps seen
+/// for the first time must not tell the filter where it is).
+pub const FEJ_POSITION_SIGMA_M: f64 = 0.5;
+
 /// Passes of the iterated update at most (the first, linear one included).
 pub const ITERATE_MAX_PASSES: usize = 8;
 

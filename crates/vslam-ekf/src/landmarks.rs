@@ -40,6 +40,10 @@ pub struct LandmarkEstimate {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Slot {
     pub(crate) id: LandmarkId,
+    /// Its position when it was added (the first-estimates Jacobians' linearisation point
+    /// while the pose is lost, `Ekf::observation_model`); `None` for the landmarks handed
+    /// over by phase 1.
+    pub(crate) first: Option<Vector3<f64>>,
     pub(crate) observations: u64,
     pub(crate) rejections_in_a_row: u32,
 }
@@ -324,6 +328,7 @@ impl Ekf {
         self.next_id += 1;
         self.landmarks.push(Slot {
             id,
+            first: Some(position),
             observations: 1,
             rejections_in_a_row: 0,
         });

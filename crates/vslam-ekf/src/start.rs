@@ -249,6 +249,7 @@ impl Ekf {
             ekf.next_id += 1;
             ekf.landmarks.push(Slot {
                 id,
+                first: None,
                 observations: l.observations,
                 rejections_in_a_row: 0,
             });
