@@ -110,21 +110,151 @@ fn run() -> Result<(), String> {
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(id, _)| id)
     };
+    let defaults = NavSettings::default();
     let settings = NavSettings {
         smooth_phase2: std::env::var_os("NO_SMOOTH").is_none(),
-        ..NavSettings::default()
+        // LOOP_PROBE_FIELD=DEG: the navigator's field of use.
+        ekf: vslam_ekf::Settings {
+            max_off_axis_deg: std::env::var("LOOP_PROBE_FIELD")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(defaults.ekf.max_off_axis_deg),
+            ..defaults.ekf
+        },
+        // LOOP_PROBE_MAX_IN_VIEW=N: the candidates' cap on landmarks in view.
+        candidates: vslam_ekf::CandidateSettings {
+            max_in_view: std::env::var("LOOP_PROBE_MAX_IN_VIEW")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(defaults.candidates.max_in_view),
+            ..defaults.candidates
+        },
+        ..defaults
     };
     let mut nav = Navigator::new(rig.clone(), settings).map_err(|e| e.to_string())?;
     let mut odometry = input.odometry.iter().peekable();
     let mut landmark_lamp: BTreeMap<u64, Option<u32>> = BTreeMap::new();
     let mut previous: Option<Pose2> = None;
+    // LOOP_PROBE_MISSED=1: per lamp, frames in view of both raw images, frames with a left
+    // feature on it, frames an observation of it reached the update; reported at the end for
+    // the lamps in view 20 frames or more that no landmark of the final map is.
+    let missed_report = std::env::var_os("LOOP_PROBE_MISSED").is_some();
+    let mut per_lamp: BTreeMap<u32, (u32, u32, u32, f64, f64)> = BTreeMap::new();
+    let (w, h) = (f64::from(rig.width), f64::from(rig.height));
     for f in &input.frames {
+        if missed_report && let Some(pose) = poses.range(f.t_us..).next().map(|(_, p)| *p) {
+            let raw_of = |lens: Option<&rig_model::lens::Lens>, u: f64, v: f64| match lens {
+                None => Some(Vector2::new(u, v)),
+                Some(lens) => lens.unrectify(Vector2::new(u, v), camera.f, camera.cx, camera.cy),
+            };
+            let inside = |p: &Vector2<f64>| p.x >= 0.0 && p.x < w && p.y >= 0.0 && p.y < h;
+            for l in &lamps {
+                let Ok(z) = rig_model::project(&camera, &pose, &Vector3::new(l.x, l.y, l.z)) else {
+                    continue;
+                };
+                let left = raw_of(rig.lens.as_ref().map(|s| &s.left), z[0], z[1]);
+                let right = raw_of(rig.lens.as_ref().map(|s| &s.right), z[2], z[3]);
+                let (Some(left), Some(right)) = (left, right) else {
+                    continue;
+                };
+                if !(inside(&left) && inside(&right)) {
+                    continue;
+                }
+                let off_axis = ((z[0] - camera.cx).hypot(z[1] - camera.cy) / camera.f)
+                    .atan()
+                    .to_degrees();
+                let e = per_lamp.entry(l.id).or_insert((0, 0, 0, f64::MAX, 0.0));
+                e.0 += 1;
+                e.3 = e.3.min(off_axis);
+                e.4 = e.4.max(off_axis);
+                if f.left
+                    .iter()
+                    .any(|px| (Vector2::new(px.u, px.v) - left).norm() < LAMP_PX)
+                {
+                    e.1 += 1;
+                }
+            }
+        }
         while let Some(s) = odometry.next_if(|s| s.t_us <= f.t_us + nav::ODOMETRY_LOOKAHEAD_US) {
             nav.push_odometry(*s).map_err(|e| e.to_string())?;
         }
         let outcome = nav
             .push_frame(f.t_us, &f.left, &f.right)
             .map_err(|e| e.to_string())?;
+        // LOOP_PROBE_LAMP=ID: that lamp's stereo match and track, frame by frame, while in view.
+        if let Some(watch) = std::env::var("LOOP_PROBE_LAMP")
+            .ok()
+            .and_then(|v| v.parse::<u32>().ok())
+            && let (Some(pose), Some(l)) = (
+                poses.range(f.t_us..).next().map(|(_, p)| *p),
+                lamps.iter().find(|l| l.id == watch),
+            )
+            && let Ok(z) = rig_model::project(&camera, &pose, &Vector3::new(l.x, l.y, l.z))
+        {
+            let raw = match &rig.lens {
+                None => Some(Vector2::new(z[0], z[1])),
+                Some(lens) => {
+                    lens.left
+                        .unrectify(Vector2::new(z[0], z[1]), camera.f, camera.cx, camera.cy)
+                }
+            };
+            if let Some(raw) = raw
+                && raw.x >= 0.0
+                && raw.x < f64::from(rig.width)
+                && raw.y >= 0.0
+                && raw.y < f64::from(rig.height)
+            {
+                let feature = f
+                    .left
+                    .iter()
+                    .position(|px| (Vector2::new(px.u, px.v) - raw).norm() < LAMP_PX);
+                // The stereo match of that feature: its rectified left pixel (the front end
+                // numbers the rectified features, not the raw ones).
+                let matched = feature.and_then(|i| {
+                    let px = f.left.get(i)?;
+                    let q = match &rig.lens {
+                        None => Vector2::new(px.u, px.v),
+                        Some(lens) => lens.left.rectify_point(
+                            Vector2::new(px.u, px.v),
+                            rig.nominal.f,
+                            rig.nominal.cx,
+                            rig.nominal.cy,
+                        )?,
+                    };
+                    nav.front_end()
+                        .stereo_matches()
+                        .iter()
+                        .find(|m| {
+                            (Vector2::new(m.measurement[0], m.measurement[1]) - q).norm() < 0.5
+                        })
+                        .map(|m| m.measurement)
+                });
+                let track = nav.front_end().tracker().tracks().find(|t| {
+                    t.last_t_us == f.t_us
+                        && (Vector2::new(t.last[0], t.last[1]) - Vector2::new(z[0], z[1])).norm()
+                            < 4.0
+                });
+                let bound = track.and_then(|t| nav.candidates().landmark_of(t.id.0));
+                let used = bound.map(|id| {
+                    (
+                        outcome.accepted.iter().any(|(a, _)| *a == id),
+                        outcome.rejected.contains(&id),
+                        outcome.removed.contains(&id),
+                        nav.ekf().and_then(|e| e.observations_of(id)),
+                    )
+                });
+                println!("    update (accepted, rejected, removed, observations): {used:?}");
+                println!(
+                    "lamp {watch} t {:.2}: feature {feature:?} stereo {:?} (true {:?}) track {:?} bound {:?} retired {:?}",
+                    (f.t_us - first_t) as f64 * 1e-6,
+                    matched.map(|m| (m[0], m[1], m[2])),
+                    (z[0], z[1], z[2]),
+                    track.map(|t| (t.id.0, t.confirmed, t.hits)),
+                    track.and_then(|t| nav.candidates().landmark_of(t.id.0)),
+                    track.map(|t| nav.candidates().is_retired(t.id.0)),
+                );
+            }
+        }
         let Some(ekf) = nav.ekf() else {
             continue;
         };
@@ -140,6 +270,11 @@ fn run() -> Result<(), String> {
                 continue;
             };
             let lamp = lamp_of(f.t_us, Vector2::new(px.u, px.v));
+            if let Some(l) = lamp
+                && let Some(e) = per_lamp.get_mut(&l)
+            {
+                e.2 += 1;
+            }
             let known = *landmark_lamp.entry(a.landmark.0).or_insert(lamp);
             if known != lamp {
                 wrong.push(format!(
@@ -231,6 +366,25 @@ fn run() -> Result<(), String> {
                 .collect();
             println!("        sd {sd:?} n {}", ekf.state_len());
             println!("        V {:?} v {:?}", c.vehicle, outcome.accepted);
+        }
+    }
+    if missed_report {
+        let mapped: Vec<u32> = nav
+            .ekf()
+            .map(|ekf| {
+                ekf.landmark_positions()
+                    .filter_map(|(id, _)| landmark_lamp.get(&id.0).copied().flatten())
+                    .collect()
+            })
+            .unwrap_or_default();
+        for (lamp, (in_view, featured, observed, min_deg, max_deg)) in &per_lamp {
+            if *in_view >= 20 && !mapped.contains(lamp) {
+                let l = lamps.iter().find(|l| l.id == *lamp);
+                println!(
+                    "missed lamp {lamp} at {:?}: in view {in_view} frames, a feature on it in {featured}, observed by the update in {observed}, {min_deg:.0} to {max_deg:.0} degrees off the axis",
+                    l.map(|l| (l.x, l.y, l.z))
+                );
+            }
         }
     }
     Ok(())

@@ -98,6 +98,7 @@ fn select_observations(
     batch: Vec<(LandmarkId, Measurement)>,
     budget: usize,
     brief: u64,
+    frame: u64,
 ) -> Vec<(LandmarkId, Measurement)> {
     if batch.len() <= budget {
         return batch;
@@ -127,6 +128,13 @@ fn select_observations(
         });
         cell.reverse(); // taken from the back
     }
+    // The round starts at a cell that moves on each frame: with fewer observations to take
+    // than cells holding some, a fixed start left the last cells (the image's bottom row)
+    // without a turn, and a lamp passed once there was bound for 15 frames and never
+    // updated (issue 35, the radtan hall's last row).
+    #[allow(clippy::cast_possible_truncation)] // a cell index
+    let start = (frame % cells.len() as u64) as usize;
+    cells.rotate_left(start);
     let mut keep = alloc::vec![false; batch.len()];
     let mut kept = 0;
     while kept < budget {
@@ -337,7 +345,13 @@ impl Candidates {
         for (id, _) in &batch {
             self.last_seen.insert(*id, self.frame + 1);
         }
-        let batch = select_observations(ekf, batch, budget, self.settings.brief_observations);
+        let batch = select_observations(
+            ekf,
+            batch,
+            budget,
+            self.settings.brief_observations,
+            self.frame,
+        );
         report.skipped = frame.len() - report.ignored - unbound.len() - batch.len();
         report.update = ekf.update(&batch)?;
         // Bindings to landmarks the caller removed from the filter directly.

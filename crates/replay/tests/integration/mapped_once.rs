@@ -74,13 +74,13 @@ fn the_sparse_fisheye_hall_maps_each_lamp_once_and_to_scale() {
 }
 
 /// The radtan hall (187 lamps and 160 sprinkler heads, five aisles, the first again): 486
-/// landmarks with 158 twins before the fixes. Four lamps seen only from the side on the
-/// return along the wall are still missed (the issue's target is none). A 5-minute drive
-/// replayed in about 10 s.
+/// landmarks with 158 twins before the fixes. Two lamps seen only from the side on the
+/// return along the wall are mapped more than the match radius off, so counted missed (the
+/// issue's target is none). A 5-minute drive replayed in about 10 s.
 #[test]
 fn the_radtan_hall_maps_each_lamp_once() {
     let (t, _) = replayed("hall-radtan.toml", None);
-    assert_once(&t, "hall-radtan", 4, 0.070);
+    assert_once(&t, "hall-radtan", 2, 0.070);
 }
 
 /// Item 2 of the issue, a loop closed when drift has grown past the gate: `hall-loop.toml`
