@@ -780,16 +780,12 @@ impl TruthAccumulator {
         let true_camera = truth.camera.as_ref().map_or(rig.nominal, truth_camera);
         let (w, h) = (f64::from(rig.width), f64::from(rig.height));
         let inside = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
-        // Through real lenses the cameras see their whole raw images (vehicle-interfaces.md
-        // 1.1): a lamp is in view where its raw pixel is, as the simulator decides.
-        let through = |lens: &rig_model::lens::Lens, u: f64, v: f64| {
-            let c = &rig.nominal;
-            lens.unrectify(nalgebra::Vector2::new(u, v), c.f, c.cx, c.cy)
-                .is_some_and(|raw| inside(raw.x, raw.y))
-        };
+        // Through real lenses a lamp is in view where its raw pixels are, as the simulator
+        // decides.
+        let c = &rig.nominal;
         let in_view = |z: &rig_model::Measurement| match &rig.lens {
             None => inside(z[0], z[1]) && inside(z[2], z[3]),
-            Some(lens) => through(&lens.left, z[0], z[1]) && through(&lens.right, z[2], z[3]),
+            Some(lens) => lens.sees(z, c.f, c.cx, c.cy, w, h),
         };
         let pose = Pose2::new(p.x, p.y, p.theta);
         for (lamp, count) in truth.landmarks.iter().zip(self.seen.iter_mut()) {

@@ -86,6 +86,34 @@ pub struct StereoLens {
     pub right: Lens,
 }
 
+impl StereoLens {
+    /// Whether both cameras see the rectified measurement `z` (`uL, vL, uR, vR` in the
+    /// rectified model of focal length `f` and principal point `(cx, cy)`): each raw pixel
+    /// ([`Lens::unrectify`]) inside its camera's `width x height` raw image. Through a real
+    /// lens the cameras see their whole raw images (vehicle-interfaces.md 1.1), whose
+    /// rectified view is not the rectified rectangle: a barrel lens sees past its corners, a
+    /// fisheye far past its edges.
+    pub fn sees(
+        &self,
+        z: &Vector4<f64>,
+        f: f64,
+        cx: f64,
+        cy: f64,
+        width: f64,
+        height: f64,
+    ) -> bool {
+        let inside =
+            |raw: Vector2<f64>| raw.x >= 0.0 && raw.x < width && raw.y >= 0.0 && raw.y < height;
+        self.left
+            .unrectify(Vector2::new(z[0], z[1]), f, cx, cy)
+            .is_some_and(inside)
+            && self
+                .right
+                .unrectify(Vector2::new(z[2], z[3]), f, cx, cy)
+                .is_some_and(inside)
+    }
+}
+
 impl LensModel {
     /// The model's name in rig files and calibration files (`plumb_bob`, `equidistant`).
     pub const fn name(&self) -> &'static str {

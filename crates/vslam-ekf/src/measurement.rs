@@ -235,10 +235,6 @@ impl Ekf {
         let pose = self.pose();
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         let inside_image = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
-        let through = |lens: &rig_model::lens::Lens, u: f64, v: f64| {
-            lens.unrectify(nalgebra::Vector2::new(u, v), camera.f, camera.cx, camera.cy)
-                .is_some_and(|raw| inside_image(raw.x, raw.y))
-        };
         let field = rig_model::lens::FieldOfUse::new(
             self.settings.max_off_axis_deg.to_radians(),
             camera.f,
@@ -250,8 +246,7 @@ impl Ekf {
             Some(lens) => {
                 field.contains(z[0], z[1])
                     && field.contains(z[2], z[3])
-                    && through(&lens.left, z[0], z[1])
-                    && through(&lens.right, z[2], z[3])
+                    && lens.sees(z, camera.f, camera.cx, camera.cy, w, h)
             }
         };
         self.landmarks
