@@ -96,6 +96,27 @@ fn a_loop_through_a_dark_stretch_is_closed() {
     assert_once(&t, "hall-loop", 0, 0.010);
 }
 
+/// A floor under loop closure (slow tier): over the scenario's seed and eight more noise
+/// seeds (the lamp grid unchanged), the loop closes, every lamp one landmark within the match
+/// radius and no twin, on at least five. Measured 2026-12-05: 52, 53, 57, 59, 60 close; 54,
+/// 55, 56 and 58 do not (the first lamp seen again is bound to a neighbour's landmark,
+/// docs/halls.md "Loops"). Every seed closing is the target (the ignored test below).
+#[test]
+fn slow_loops_through_a_dark_stretch_close_on_most_seeds() {
+    let mut closed = Vec::new();
+    for seed in 52..61 {
+        let (t, _) = replayed("hall-loop.toml", Some(seed));
+        if t.landmarks_duplicate == 0
+            && t.lamps_missed == 0
+            && t.landmarks_unmatched == 0
+            && t.landmark_rms <= 0.050
+        {
+            closed.push(seed);
+        }
+    }
+    assert!(closed.len() >= 5, "closed on {closed:?} only");
+}
+
 /// The same loop over other noise seeds. Measured by hand with the lamp jitter reseeded too:
 /// closed on 3 of 9 variants (docs/halls.md, "Loops"). On the others the first lamp
 /// seen again is taken for a neighbour not yet mapped (the only landmark in its gate) and the
