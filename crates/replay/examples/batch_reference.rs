@@ -108,6 +108,10 @@ fn run() -> Result<(), String> {
             max_frames: usize::MAX,
             solve_every,
             consecutive: usize::MAX,
+            // Every lamp: the default budget (48) would compare the navigator's whole map
+            // with the reference's first 48 lamps.
+            max_landmarks: usize::MAX,
+            max_in_view: usize::MAX,
             ..SmootherSettings::default()
         };
         let mut batch = Smoother::new(sc.rig.clone(), settings);

@@ -178,6 +178,8 @@ mod linalg;
 #[cfg(feature = "alloc")]
 pub mod local;
 #[cfg(feature = "alloc")]
+mod marginal;
+#[cfg(feature = "alloc")]
 pub mod measurement;
 #[cfg(feature = "alloc")]
 pub mod motion;

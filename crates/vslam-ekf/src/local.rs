@@ -386,7 +386,7 @@ impl Ekf {
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::cast_precision_loss)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::{LandmarkId, Settings};
     use nalgebra::Vector3;
@@ -433,8 +433,9 @@ mod tests {
 
     /// A drive along a ceiling grid of 144 lamps (a 436-element state), the same steps given
     /// to a dense filter and to one with local sessions: predictions, updates of the lamps
-    /// near the vehicle, a landmark added, two removed (one near, one far), one merged.
-    fn drive(margin: f64) -> Ekf {
+    /// near the vehicle, a landmark added, two removed (one near, one far), one merged. Also
+    /// the setting of `crate::marginal`'s tests.
+    pub(crate) fn drive(margin: f64) -> Ekf {
         let rig = rig();
         let settings = Settings {
             local_margin_m: margin,

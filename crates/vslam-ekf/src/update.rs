@@ -136,7 +136,7 @@ fn state_step(a: &DVector<f64>, b: &DVector<f64>, o: &Obs) -> [f64; 4] {
 
 /// Eq. (7), the state: `x+ = x + K nu` (`dx = K nu` from the gain), the heading wrapped into
 /// `(-pi, pi]`.
-fn correct_state(x: &mut DVector<f64>, dx: &[f64]) {
+pub(crate) fn correct_state(x: &mut DVector<f64>, dx: &[f64]) {
     for (xi, dxi) in x.iter_mut().zip(dx) {
         *xi += dxi;
     }
@@ -145,7 +145,7 @@ fn correct_state(x: &mut DVector<f64>, dx: &[f64]) {
 
 /// Every variance stays positive after adding `change` to the diagonal of `p` (or stays zero:
 /// the start pose before the first prediction).
-fn check_variances(p: &[f64], n: usize, change: &[f64]) -> Result<(), Error> {
+pub(crate) fn check_variances(p: &[f64], n: usize, change: &[f64]) -> Result<(), Error> {
     for (i, c) in change.iter().enumerate() {
         let before = p.get(at(n, i, i)).copied().unwrap_or(f64::NAN);
         let after = before + c;
@@ -161,7 +161,7 @@ fn check_variances(p: &[f64], n: usize, change: &[f64]) -> Result<(), Error> {
 }
 
 /// The corrected state is finite.
-fn check_state(x: &DVector<f64>, dx: &[f64]) -> Result<(), Error> {
+pub(crate) fn check_state(x: &DVector<f64>, dx: &[f64]) -> Result<(), Error> {
     for (i, (&xi, &dxi)) in x.iter().zip(dx).enumerate() {
         if !(xi + dxi).is_finite() {
             return Err(Error::StateNotFinite { index: i });
