@@ -122,6 +122,14 @@ pub struct NavSettings {
     /// associations, and the filter is re-seeded with its joint estimate at every solve
     /// (docs/phase2.md, "Phase 2 re-linearised"). Off with the camera considered.
     pub smooth_phase2: bool,
+    /// Phase 2's smoother over the landmarks near the vehicle when the map outgrows its
+    /// budget ([`SmootherSettings::max_landmarks`]): started again from the filter's marginal
+    /// over them whenever the vehicle moves on, and put back with the rest of the map carried
+    /// by its cross-covariances (`vslam_ekf::Ekf::replace_marginal`). Off (the default), the
+    /// smoother stops at the budget and the filter maps on alone: measured on the halls and
+    /// the warehouse, the smoother near the vehicle was slower and not more accurate, and
+    /// moved the hall maps' scale (docs/halls.md, "The smoother over part of the map").
+    pub smooth_near_vehicle: bool,
     /// Hold (consider, not refine) in phase 2 every estimated camera parameter the motion so
     /// far cannot inform: all of them until the vehicle has translated
     /// [`NavSettings::min_translation_m`], and those with a structural trap
@@ -149,6 +157,7 @@ impl Default for NavSettings {
             map_match_probability: 0.999,
             skip_phase1: false,
             smooth_phase2: true,
+            smooth_near_vehicle: false,
             hold_unexcited: true,
             min_translation_m: 0.05,
             frame_pairs: FramePairSettings::default(),
@@ -248,8 +257,13 @@ pub struct NavStats {
     /// smoother started again from the filter.
     pub phase2_reseeds_inconsistent: u64,
     /// The frame count when the smoother stopped because the map outgrew
-    /// [`SmootherSettings::max_landmarks`] (0: it did not).
+    /// [`SmootherSettings::max_landmarks`] (0: it did not; never with
+    /// [`NavSettings::smooth_near_vehicle`]).
     pub phase2_smoother_stopped_at: u64,
+    /// With [`NavSettings::smooth_near_vehicle`]: times phase 2's smoother started again from
+    /// the filter over the landmarks near the vehicle (a landmark observed that it did not
+    /// carry, its budget full, a merge).
+    pub phase2_smoother_restarts: u64,
     /// Board features the lens model could not map into the rectified image (dropped).
     pub features_unmapped: u64,
     /// Board features mapped, but outside the field of use and left out
@@ -651,7 +665,15 @@ impl Navigator {
             return;
         }
         let index = &self.smoothed;
-        if ekf.set_joint(&joint, |id| index.get(&id).copied()).is_err() {
+        // The smoother carrying every landmark, its joint is the filter's new state;
+        // otherwise the rest of the map follows its marginal.
+        let result = if index.len() >= ekf.landmark_count() {
+            ekf.set_joint(&joint, |id| index.get(&id).copied())
+        } else {
+            ekf.replace_marginal(&joint, |id| index.get(&id).copied())
+                .map(|_| ())
+        };
+        if result.is_err() {
             self.stats.phase2_reseeds_refused += 1;
         } else {
             self.pose = joint.pose;
@@ -944,25 +966,38 @@ impl Navigator {
             return;
         };
         let held = !ekf.held().is_empty();
-        let over_budget = ekf.landmark_count() > self.settings.phase1.max_landmarks;
         if self.smoother.is_mapping() && held {
             // A parameter held: the smoother would refine it; the filter goes on alone until
             // nothing is held, then the smoother starts again from the filter.
             self.smoother.stop_mapping();
             return;
         }
+        let near = self.settings.smooth_near_vehicle;
+        let budget = self.settings.phase1.max_landmarks;
         if !self.smoother.is_mapping() {
-            if held || over_budget || self.stats.phase2_smoother_stopped_at > 0 {
-                return;
-            }
-            let (joint, ids) = ekf.joint(tracked.t_us);
-            if self.smoother.restart_mapping(&joint) {
-                self.smoothed = ids.iter().enumerate().map(|(j, id)| (*id, j)).collect();
+            let over_budget = ekf.landmark_count() > budget;
+            let stopped = self.stats.phase2_smoother_stopped_at > 0;
+            if !held && (near || !(over_budget || stopped)) {
+                self.restart_smoother(tracked.t_us, motion.as_ref(), outcome);
             }
             return;
         }
         for id in &outcome.removed {
             self.smoothed.remove(id);
+        }
+        // The smoother carries the landmarks near the vehicle; a landmark observed outside
+        // them, one more than its budget, or a merge (a constraint it does not hold) starts
+        // it again from the filter, over the landmarks near the vehicle then
+        // (docs/halls.md, "The smoother over part of the map").
+        let outside = outcome
+            .accepted
+            .iter()
+            .any(|(id, _)| !self.smoothed.contains_key(id));
+        let full = self.smoother.landmarks().len() + outcome.added.len() > budget;
+        if near && (outside || full || !outcome.merged.is_empty()) {
+            self.stats.phase2_smoother_restarts += 1;
+            self.restart_smoother(tracked.t_us, motion.as_ref(), outcome);
+            return;
         }
         let measurement_of = |id: LandmarkId| {
             let track = self.candidates.track_of(id)?;
@@ -994,9 +1029,10 @@ impl Navigator {
             observations.push((j, z));
         }
         // Landmarks the filter holds that the smoother does not (created while it was not
-        // told): it cannot re-seed them, so it stops.
-        if ekf.landmark_count() > self.smoothed.len()
-            || self.smoother.landmarks().len() > self.settings.phase1.max_landmarks
+        // told), or more than its budget: it stops, and the filter maps on alone.
+        if !near
+            && (ekf.landmark_count() > self.smoothed.len()
+                || self.smoother.landmarks().len() > budget)
         {
             self.smoother.stop_mapping();
             self.stats.phase2_smoother_stopped_at = self.stats.frames;
@@ -1007,6 +1043,63 @@ impl Navigator {
             .add_mapped_frame(tracked.t_us, motion, pose, &observations)
         {
             self.reseed();
+        }
+    }
+
+    /// Starts phase 2's smoother again from the filter's marginal over the pose, the camera
+    /// and the landmarks near the vehicle: the ones observed in this frame, then the nearest
+    /// to a point [`SMOOTHER_LOOK_AHEAD_M`] ahead along the direction of travel (the lamps
+    /// about to come into view), up to two thirds of the budget (the rest is for lamps mapped
+    /// from here on).
+    fn restart_smoother(
+        &mut self,
+        t_us: u64,
+        motion: Option<&OdometryFactor>,
+        outcome: &FrameOutcome,
+    ) {
+        let Some(ekf) = self.ekf.as_ref() else {
+            return;
+        };
+        if !self.settings.smooth_near_vehicle {
+            let (joint, ids) = ekf.joint(t_us);
+            if self.smoother.restart_mapping(&joint) {
+                self.smoothed = ids.iter().enumerate().map(|(j, id)| (*id, j)).collect();
+            }
+            return;
+        }
+        let budget = self.settings.phase1.max_landmarks;
+        let mut chosen: Vec<LandmarkId> = Vec::with_capacity(budget);
+        for id in outcome
+            .observed()
+            .into_iter()
+            .chain(outcome.added.iter().copied())
+        {
+            if ekf.landmark(id).is_some() && !chosen.contains(&id) && chosen.len() < budget {
+                chosen.push(id);
+            }
+        }
+        let pose = ekf.pose();
+        let ahead = match motion {
+            Some(m) if m.motion.dx < 0.0 => -SMOOTHER_LOOK_AHEAD_M,
+            _ => SMOOTHER_LOOK_AHEAD_M,
+        };
+        let (cx, cy) = (
+            pose.x + ahead * libm::cos(pose.theta),
+            pose.y + ahead * libm::sin(pose.theta),
+        );
+        let mut rest: Vec<(f64, LandmarkId)> = ekf
+            .landmarks()
+            .filter(|l| !chosen.contains(&l.id))
+            .map(|l| (libm::hypot(l.position.x - cx, l.position.y - cy), l.id))
+            .collect();
+        rest.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let fill = (2 * budget / 3).max(chosen.len());
+        chosen.extend(rest.iter().take(fill - chosen.len()).map(|(_, id)| *id));
+        let Ok(joint) = ekf.joint_of(t_us, &chosen) else {
+            return;
+        };
+        if self.smoother.restart_mapping(&joint) {
+            self.smoothed = chosen.iter().enumerate().map(|(j, id)| (*id, j)).collect();
         }
     }
 
@@ -1281,6 +1374,11 @@ const MERGE_PASS_FRAMES: u64 = 100;
 /// A smoother's joint estimate is taken by the filter only while its pose and camera lie
 /// inside this probability's chi-square gate of the filter's own estimate and covariance.
 pub const RESEED_PROBABILITY: f64 = 0.9999;
+
+/// When phase 2's smoother starts again over the landmarks near the vehicle, they are the
+/// nearest to a point this far ahead along the direction of travel, metres: about the
+/// distance from the vehicle to the front of a ceiling camera's view at 4 to 6 m.
+pub const SMOOTHER_LOOK_AHEAD_M: f64 = 3.0;
 
 /// Degrees of freedom of [`reseed_distance`]: the pose and the estimated parameters.
 fn reseed_dof(joint: &rig_model::handover::JointEstimate) -> f64 {

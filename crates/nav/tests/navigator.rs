@@ -192,3 +192,54 @@ fn associations_name_the_raw_features_of_one_lamp() {
     assert_eq!(lamp_of.len(), 5, "{lamp_of:?}");
     assert!(accepted_total > 1000, "{accepted_total}");
 }
+
+/// Phase 2's smoother over the landmarks near the vehicle (`smooth_near_vehicle`) with a
+/// budget of a third of the aisle's lamps is the smoother over the whole map: it starts again
+/// from the filter's marginal as the vehicle moves on (the rest of the map carried by the
+/// cross-covariances when it is put back), solves all along the drive, and the map it leaves
+/// is the one the smoother over every landmark leaves, lamp for lamp.
+#[test]
+fn the_smoother_near_the_vehicle_is_the_smoother_over_the_whole_map() {
+    let run = run("aisle");
+    let whole = feed(&run, NavSettings::default());
+    let mut settings = NavSettings {
+        smooth_near_vehicle: true,
+        ..NavSettings::default()
+    };
+    settings.phase1.max_landmarks = 12;
+    let near = feed(&run, settings);
+    let (sw, sn) = (whole.stats(), near.stats());
+    assert_eq!(sw.phase2_smoother_restarts, 0, "{sw:?}");
+    assert!(sn.phase2_smoother_restarts >= 10, "{sn:?}");
+    assert!(
+        sn.phase2_solves * 10 >= sw.phase2_solves * 7,
+        "{sn:?} {sw:?}"
+    );
+    assert_eq!(sn.phase2_reseeds_refused, 0, "{sn:?}");
+    let (ew, en) = (whole.ekf().unwrap(), near.ekf().unwrap());
+    assert_eq!(ew.landmark_count(), en.landmark_count());
+    let mut largest: f64 = 0.0;
+    for l in en.landmarks() {
+        let twin = ew
+            .landmarks()
+            .map(|w| (w.position - l.position).norm())
+            .fold(f64::INFINITY, f64::min);
+        largest = largest.max(twin);
+    }
+    let db = (en.camera().baseline - ew.camera().baseline).abs();
+    eprintln!(
+        "largest landmark difference {:.2} mm, baseline {:.4} mm",
+        1e3 * largest,
+        1e3 * db
+    );
+    assert!(
+        largest < 0.0015,
+        "a landmark {:.2} mm from the whole smoother's",
+        1e3 * largest
+    );
+    assert!(
+        db < 1e-5,
+        "baseline {:.4} mm from the whole smoother's",
+        1e3 * db
+    );
+}

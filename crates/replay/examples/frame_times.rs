@@ -99,6 +99,14 @@ fn run() -> Result<(), String> {
             ekf.state_len()
         );
     }
+    let stats = nav.stats();
+    println!(
+        "smoother: {} solves, {} restarts, {} reseeds refused ({} inconsistent)",
+        stats.phase2_solves,
+        stats.phase2_smoother_restarts,
+        stats.phase2_reseeds_refused,
+        stats.phase2_reseeds_inconsistent
+    );
     // Where along the log the time goes: mean per block of 500 frames.
     for block in times.chunks(500) {
         let (first, last) = (block[0], block[block.len() - 1]);

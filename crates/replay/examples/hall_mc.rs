@@ -7,10 +7,11 @@
 //! on every axis, the vehicle's parameters within 3 sigma, and the replay's speed; then the
 //! totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--keep DIR]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--keep DIR]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
-//! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter). With `--keep DIR` each
+//! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
+//! smoother over the landmarks near the vehicle, `nav::NavSettings::smooth_near_vehicle`). With `--keep DIR` each
 //! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
@@ -55,7 +56,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--keep DIR]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--keep DIR]";
     let mut settings = NavSettings::default();
     let mut lens = None;
     let mut positional = Vec::new();
@@ -73,6 +74,7 @@ fn run() -> Result<(), String> {
                 settings.ekf.local_margin_m =
                     v.parse().map_err(|_| format!("--margin {v:?}: {usage}"))?;
             }
+            "--smooth-near" => settings.smooth_near_vehicle = true,
             "--keep" => {
                 keep = Some(std::path::PathBuf::from(rest.next().ok_or(usage)?));
             }

@@ -1,7 +1,7 @@
 //! The whole stack over many seeds of a scenario: each seed simulated to a vehicle log (the
 //! board's byte stream, link faults and all), replayed, and scored against the truth.
 //!
-//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N]`
+//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near]`
 //!
 //! Prints, over the seeds: when phase 1 handed over (time since the first frame, and since the
 //! vehicle first moved), the whole method's errors (landmark RMS, trajectory RMS in the first
@@ -36,7 +36,7 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N]";
+    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -51,6 +51,7 @@ fn run() -> Result<(), String> {
         match a.as_str() {
             "--skip-phase1" => settings.skip_phase1 = true,
             "--no-smoother" => settings.smooth_phase2 = false,
+            "--smooth-near" => settings.smooth_near_vehicle = true,
             "--iterations" => {
                 let v = rest.next().ok_or("--iterations needs a value")?;
                 settings.phase1.max_iterations =
