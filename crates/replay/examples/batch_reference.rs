@@ -16,8 +16,9 @@ use std::process::ExitCode;
 
 use replay::{NavSettings, replay_log};
 use rig_model::Param;
-use selfcal::smoother::{Smoother, SmootherSettings};
-use vslam_ekf::Increment;
+
+#[path = "common/reference.rs"]
+mod reference;
 
 fn main() -> ExitCode {
     match run() {
@@ -104,64 +105,9 @@ fn run() -> Result<(), String> {
             }
         }
         // The reference: the frames the replay decoded, associated by the truth.
-        let settings = SmootherSettings {
-            max_frames: usize::MAX,
-            solve_every,
-            consecutive: usize::MAX,
-            // Every lamp: the default budget (48) would compare the navigator's whole map
-            // with the reference's first 48 lamps.
-            max_landmarks: usize::MAX,
-            max_in_view: usize::MAX,
-            ..SmootherSettings::default()
-        };
-        let mut batch = Smoother::new(sc.rig.clone(), settings);
         let decoded: std::collections::BTreeSet<u64> = r.frames.iter().map(|f| f.t_us).collect();
-        let odometry_samples = sim_run.odometry.clone();
-        let mut previous: Option<u64> = None;
-        for f in sim_run.frames.iter().filter(|f| decoded.contains(&f.t_us)) {
-            let vehicle = sc.rig.nominal.vehicle;
-            let odometry = previous.and_then(|t0| {
-                Increment::from_odometry_vehicle(
-                    &odometry_samples,
-                    t0,
-                    f.t_us,
-                    &sc.rig.noise,
-                    &vehicle,
-                    true,
-                )
-                .ok()
-                .map(|(inc, reported, jv)| rig_model::odometry::OdometryFactor {
-                    motion: inc.motion,
-                    covariance: reported,
-                    vehicle,
-                    vehicle_jacobian: jv,
-                    frames_us: (t0, f.t_us),
-                    samples: {
-                        let from = t0.saturating_sub(200_000);
-                        let a = odometry_samples
-                            .partition_point(|s| s.t_us <= from)
-                            .saturating_sub(1);
-                        let b = odometry_samples.partition_point(|s| s.t_us <= f.t_us + 200_000);
-                        odometry_samples[a..b].to_vec()
-                    },
-                })
-            });
-            previous = Some(f.t_us);
-            let mut observations = Vec::new();
-            for v in &f.views {
-                let left = f.left.features.iter().find(|x| x.lamp == Some(v.id));
-                let right = f.right.features.iter().find(|x| x.lamp == Some(v.id));
-                if let (Some(a), Some(b)) = (left, right) {
-                    let (a, b) = (a.feature(), b.feature());
-                    observations.push((
-                        u64::from(v.id),
-                        rig_model::Measurement::new(a.u(), a.v(), b.u(), b.v()),
-                    ));
-                }
-            }
-            batch.add_frame(f.t_us, odometry, &observations, &[]);
-        }
-        let handover = batch.finish().ok_or("the reference batch had no frame")?;
+        let handover = reference::solve(&sc.rig, &sim_run, &decoded, solve_every)
+            .ok_or("the reference batch had no frame")?;
         for p in Param::VEHICLE {
             if handover.estimated.contains(&p) {
                 let (scale, unit) = p.display_unit();
@@ -176,24 +122,23 @@ fn run() -> Result<(), String> {
                 );
             }
         }
-        let (mut s_ref, mut n_ref) = (0.0, 0usize);
-        for l in &handover.landmarks {
-            let lamp = usize::try_from(l.track)
-                .ok()
-                .and_then(|i| sim_run.landmarks.get(i));
-            if let Some(lamp) = lamp {
-                if std::env::var_os("BATCH_REF_DEBUG").is_some() {
+        if std::env::var_os("BATCH_REF_DEBUG").is_some() {
+            for l in &handover.landmarks {
+                let lamp = usize::try_from(l.track)
+                    .ok()
+                    .and_then(|i| sim_run.landmarks.get(i));
+                if let Some(lamp) = lamp {
                     let e = 1e3 * (l.position - lamp.position);
                     println!(
                         "  ref lamp {}: {:+.2} {:+.2} {:+.2} mm ({} obs)",
                         lamp.id, e.x, e.y, e.z, l.observations
                     );
                 }
-                let d = (lamp.position - l.position).norm();
-                s_ref += d * d;
-                n_ref += 1;
             }
         }
+        let (rms_ref, n_ref) = reference::landmark_rms(&handover, &sim_run);
+        #[allow(clippy::cast_precision_loss)]
+        let s_ref = rms_ref * rms_ref * n_ref as f64;
         let truth_b = sim_run.camera.baseline;
         nav_b.push(
             r.final_camera

@@ -7,11 +7,13 @@
 //! on every axis, the vehicle's parameters within 3 sigma, and the replay's speed; then the
 //! totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--keep DIR]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--reference] [--keep DIR]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
-//! smoother over the landmarks near the vehicle, `nav::NavSettings::smooth_near_vehicle`). With `--keep DIR` each
+//! smoother over the landmarks near the vehicle, `nav::NavSettings::smooth_near_vehicle`;
+//! `--reference`: each hall's frames also solved as one batch with the truth's association,
+//! its landmark RMS and the navigator's ratio to it printed: a minute or more a hall). With `--keep DIR` each
 //! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
@@ -19,6 +21,9 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use replay::{NavSettings, Replayer};
+
+#[path = "common/reference.rs"]
+mod reference;
 use rig_model::Param;
 
 fn main() -> ExitCode {
@@ -52,15 +57,18 @@ struct Totals {
     vehicle_total: usize,
     data_s: f64,
     replay_s: f64,
+    /// The navigator's landmark RMS over the batch reference's, per hall.
+    ratios: Vec<f64>,
 }
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--keep DIR]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--reference] [--keep DIR]";
     let mut settings = NavSettings::default();
     let mut lens = None;
     let mut positional = Vec::new();
     let mut keep: Option<std::path::PathBuf> = None;
+    let mut with_reference = false;
     let mut rest = args.iter();
     while let Some(a) = rest.next() {
         match a.as_str() {
@@ -75,6 +83,7 @@ fn run() -> Result<(), String> {
                     v.parse().map_err(|_| format!("--margin {v:?}: {usage}"))?;
             }
             "--smooth-near" => settings.smooth_near_vehicle = true,
+            "--reference" => with_reference = true,
             "--keep" => {
                 keep = Some(std::path::PathBuf::from(rest.next().ok_or(usage)?));
             }
@@ -195,6 +204,20 @@ fn run() -> Result<(), String> {
             estimated.len(),
             data_s / took
         );
+        if with_reference {
+            let decoded: std::collections::BTreeSet<u64> =
+                sink.frames.iter().map(|f| f.t_us).collect();
+            let batch = reference::solve(&scenario.rig, &run, &decoded, 500)
+                .ok_or("the reference batch had no frame")?;
+            let (rms, n) = reference::landmark_rms(&batch, &run);
+            let ratio = truth.landmark_rms / rms;
+            println!(
+                "{seed} | batch reference: {:.1} mm over {n} lamps, baseline {:+.3} mm off; the navigator {ratio:.2}x",
+                rms * 1e3,
+                (batch.camera.baseline - run.camera.baseline) * 1e3
+            );
+            totals.ratios.push(ratio);
+        }
         totals.halls += 1;
         totals.landmarks += end.landmarks.len();
         totals.duplicates += truth.landmarks_duplicate;
@@ -223,5 +246,13 @@ fn run() -> Result<(), String> {
         totals.data_s / totals.replay_s.max(1e-9),
         peak_mib().map_or_else(|| "unknown".to_string(), |m| format!("{m:.0} MiB"))
     );
+    if !totals.ratios.is_empty() {
+        totals.ratios.sort_by(f64::total_cmp);
+        println!(
+            "against the batch reference: median {:.2}x, worst {:.2}x",
+            totals.ratios[totals.ratios.len() / 2],
+            totals.ratios[totals.ratios.len() - 1]
+        );
+    }
     Ok(())
 }
