@@ -5,11 +5,15 @@
 //! landmark's (a wrong association), where map matching bound a track, or where the pose moved
 //! by more than `JUMP_M`, is printed with the pose error and sigma.
 //!
-//! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S]`; with
-//! `LOOP_PROBE_V=1` it also prints the vehicle's parameters, their sigmas and their
-//! correlations with the pose at every printed frame, with `NO_SMOOTH=1` it runs phase 2
-//! without the fixed-lag smoother, with `LOOP_PROBE_RIG=RIG.toml` on that rig instead of the
-//! log's. Every 100th frame is printed too (the drift in between).
+//! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
+//! [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]`:
+//! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
+//! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
+//! smoother; `--rig` runs on that rig instead of the log's; `--field` and `--max-in-view` set
+//! the navigator's field of use and its cap on landmarks in view; `--missed` reports, per lamp
+//! in view 20 frames or more that no landmark is, where its observations were lost; `--lamp`
+//! follows one lamp's stereo match and track while it is in view. Every 100th frame is printed
+//! too (the drift in between).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::collections::BTreeMap;
@@ -35,16 +39,57 @@ fn main() -> ExitCode {
     }
 }
 
+/// The probe's options (see the module docs).
+#[derive(Debug, Default)]
+struct Options {
+    vehicle: bool,
+    no_smoother: bool,
+    missed: bool,
+    rig: Option<String>,
+    field: Option<f64>,
+    max_in_view: Option<usize>,
+    lamp: Option<u32>,
+}
+
 fn run() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let log = args
-        .first()
-        .ok_or("usage: loop_probe LOG.mcap [FROM_S TO_S]")?;
-    let from: f64 = args
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]";
+    let mut opts = Options::default();
+    let mut positional: Vec<String> = Vec::new();
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value; {usage}"));
+        match a.as_str() {
+            "--vehicle" => opts.vehicle = true,
+            "--no-smoother" => opts.no_smoother = true,
+            "--missed" => opts.missed = true,
+            "--rig" => opts.rig = Some(value("--rig")?),
+            "--field" => {
+                let v = value("--field")?;
+                opts.field = Some(v.parse().map_err(|_| format!("--field {v:?}: {usage}"))?);
+            }
+            "--max-in-view" => {
+                let v = value("--max-in-view")?;
+                opts.max_in_view = Some(
+                    v.parse()
+                        .map_err(|_| format!("--max-in-view {v:?}: {usage}"))?,
+                );
+            }
+            "--lamp" => {
+                let v = value("--lamp")?;
+                opts.lamp = Some(v.parse().map_err(|_| format!("--lamp {v:?}: {usage}"))?);
+            }
+            other if other.starts_with("--") => {
+                return Err(format!("unknown option {other:?}; {usage}"));
+            }
+            _ => positional.push(a),
+        }
+    }
+    let log = positional.first().ok_or(usage)?;
+    let from: f64 = positional
         .get(1)
         .map_or(Ok(0.0), |s| s.parse())
         .map_err(|_| "FROM_S")?;
-    let to: f64 = args
+    let to: f64 = positional
         .get(2)
         .map_or(Ok(f64::MAX), |s| s.parse())
         .map_err(|_| "TO_S")?;
@@ -66,13 +111,13 @@ fn run() -> Result<(), String> {
             _ => {}
         }
     }
-    // LOOP_PROBE_RIG=RIG.toml replaces the log's rig.
-    let rig_file = match std::env::var("LOOP_PROBE_RIG") {
-        Ok(path) => {
-            let text = std::fs::read_to_string(&path).map_err(|e| format!("{path}: {e}"))?;
-            Some(rig_model::config::Rig::from_toml_str(&text, &path).map_err(|e| e.to_string())?)
+    // --rig RIG.toml replaces the log's rig.
+    let rig_file = match &opts.rig {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
+            Some(rig_model::config::Rig::from_toml_str(&text, path).map_err(|e| e.to_string())?)
         }
-        Err(_) => None,
+        None => None,
     };
     let input =
         replay::read_vehicle_log(std::path::Path::new(log), rig_file).map_err(|e| e.to_string())?;
@@ -112,21 +157,13 @@ fn run() -> Result<(), String> {
     };
     let defaults = NavSettings::default();
     let settings = NavSettings {
-        smooth_phase2: std::env::var_os("NO_SMOOTH").is_none(),
-        // LOOP_PROBE_FIELD=DEG: the navigator's field of use.
+        smooth_phase2: !opts.no_smoother,
         ekf: vslam_ekf::Settings {
-            max_off_axis_deg: std::env::var("LOOP_PROBE_FIELD")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(defaults.ekf.max_off_axis_deg),
+            max_off_axis_deg: opts.field.unwrap_or(defaults.ekf.max_off_axis_deg),
             ..defaults.ekf
         },
-        // LOOP_PROBE_MAX_IN_VIEW=N: the candidates' cap on landmarks in view.
         candidates: vslam_ekf::CandidateSettings {
-            max_in_view: std::env::var("LOOP_PROBE_MAX_IN_VIEW")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(defaults.candidates.max_in_view),
+            max_in_view: opts.max_in_view.unwrap_or(defaults.candidates.max_in_view),
             ..defaults.candidates
         },
         ..defaults
@@ -135,10 +172,10 @@ fn run() -> Result<(), String> {
     let mut odometry = input.odometry.iter().peekable();
     let mut landmark_lamp: BTreeMap<u64, Option<u32>> = BTreeMap::new();
     let mut previous: Option<Pose2> = None;
-    // LOOP_PROBE_MISSED=1: per lamp, frames in view of both raw images, frames with a left
+    // --missed: per lamp, frames in view of both raw images, frames with a left
     // feature on it, frames an observation of it reached the update; reported at the end for
     // the lamps in view 20 frames or more that no landmark of the final map is.
-    let missed_report = std::env::var_os("LOOP_PROBE_MISSED").is_some();
+    let missed_report = opts.missed;
     let mut per_lamp: BTreeMap<u32, (u32, u32, u32, f64, f64)> = BTreeMap::new();
     let (w, h) = (f64::from(rig.width), f64::from(rig.height));
     for f in &input.frames {
@@ -181,10 +218,8 @@ fn run() -> Result<(), String> {
         let outcome = nav
             .push_frame(f.t_us, &f.left, &f.right)
             .map_err(|e| e.to_string())?;
-        // LOOP_PROBE_LAMP=ID: that lamp's stereo match and track, frame by frame, while in view.
-        if let Some(watch) = std::env::var("LOOP_PROBE_LAMP")
-            .ok()
-            .and_then(|v| v.parse::<u32>().ok())
+        // --lamp ID: that lamp's stereo match and track, frame by frame, while in view.
+        if let Some(watch) = opts.lamp
             && let (Some(pose), Some(l)) = (
                 poses.range(f.t_us..).next().map(|(_, p)| *p),
                 lamps.iter().find(|l| l.id == watch),
@@ -342,7 +377,7 @@ fn run() -> Result<(), String> {
             outcome.added.len(),
         );
         let c = ekf.camera();
-        if std::env::var_os("LOOP_PROBE_V").is_some() {
+        if opts.vehicle {
             let sd: Vec<String> = ekf
                 .estimated_parameters()
                 .iter()
