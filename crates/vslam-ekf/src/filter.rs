@@ -279,15 +279,24 @@ impl Ekf {
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::expect_used)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use nalgebra::Vector3;
     use rig_model::camera::{Mount, wrap_angle};
     use rig_model::{Measurement, Pose2, Rig};
 
+    /// The unit tests' rig: a 752 x 480 camera (f 700 px, baseline 0.12 m) 0.8 m up looking
+    /// straight up, no lens, estimating the baseline (prior sigma 5 mm).
     fn rig() -> Rig {
+        rig_estimating(&[(Param::Baseline, 0.005)])
+    }
+
+    /// [`rig`], estimating these parameters with these prior sigmas.
+    pub(crate) fn rig_estimating(estimate: &[(Param, f64)]) -> Rig {
         let mut prior = [None; N_PARAMS];
-        prior[Param::Baseline.index()] = Some(0.005);
+        for &(p, sigma) in estimate {
+            prior[p.index()] = Some(sigma);
+        }
         Rig {
             lens: None,
             board: rig_model::Board::DEFAULT,
@@ -304,7 +313,7 @@ mod tests {
                     ..Mount::default()
                 },
             },
-            estimate: alloc::vec![Param::Baseline],
+            estimate: estimate.iter().map(|&(p, _)| p).collect(),
             prior,
             noise: Noise::white(0.3, 0.02, 0.01),
         }

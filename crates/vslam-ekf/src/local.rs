@@ -390,33 +390,11 @@ pub(crate) mod tests {
     use super::*;
     use crate::{LandmarkId, Settings};
     use nalgebra::Vector3;
-    use rig_model::camera::{Mount, Param};
-    use rig_model::{CameraParams, N_PARAMS, Noise, Pose2, Rig};
+    use rig_model::camera::Param;
+    use rig_model::{Pose2, Rig};
 
     fn rig() -> Rig {
-        let mut prior = [None; N_PARAMS];
-        prior[Param::Baseline.index()] = Some(0.005);
-        prior[Param::F.index()] = Some(5.0);
-        Rig {
-            lens: None,
-            board: rig_model::Board::DEFAULT,
-            width: 752,
-            height: 480,
-            nominal: CameraParams {
-                vehicle: Default::default(),
-                f: 700.0,
-                cx: 376.0,
-                cy: 240.0,
-                baseline: 0.12,
-                mount: Mount {
-                    z: 0.8,
-                    ..Mount::default()
-                },
-            },
-            estimate: alloc::vec![Param::Baseline, Param::F],
-            prior,
-            noise: Noise::white(0.3, 0.02, 0.01),
-        }
+        crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005), (Param::F, 5.0)])
     }
 
     /// Deterministic pixel noise.
