@@ -4,8 +4,8 @@
 //! the whole raw views, and replays it with no flags. Per hall: lamps and landmarks,
 //! duplicates, lamps missed (in view of both raw images for 20 frames or more, unmapped),
 //! unmatched landmarks, landmark and trajectory RMS, the landmarks within 3 sigma of their lamp
-//! on every axis, the vehicle's parameters within 3 sigma, and the replay's speed; then the
-//! totals and the process's peak memory.
+//! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
+//! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
 //! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--reference] [--keep DIR]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
@@ -108,7 +108,7 @@ fn run() -> Result<(), String> {
     };
     let mut totals = Totals::default();
     println!(
-        "seed | hall | lamps seen | landmarks | duplicates | missed | unmatched | landmark RMS | inside 3 sigma | trajectory RMS | vehicle inside 3 sigma | speed"
+        "seed | hall | lamps seen | landmarks | duplicates | missed | unmatched | landmark RMS | inside 3 sigma | trajectory RMS | vehicle inside 3 sigma | baseline error (sigma) | speed"
     );
     for seed in first..first + halls {
         let mut spec = sim::hall::HallSpec::draw(seed);
@@ -192,8 +192,10 @@ fn run() -> Result<(), String> {
             _ => 0.0,
         };
         let seen = truth.landmarks_matched + truth.lamps_missed;
+        // The map's scale: the baseline's error against the truth, with its sigma.
+        let baseline = end.final_camera.iter().find(|e| e.param == Param::Baseline);
         println!(
-            "{seed} | {} | {seen} | {} | {} | {} | {} | {:.1} mm | {inside} of {matched} | {:.1} mm | {vehicle_inside} of {} | {:.0}x",
+            "{seed} | {} | {seen} | {} | {} | {} | {} | {:.1} mm | {inside} of {matched} | {:.1} mm | {vehicle_inside} of {} | {:+.3} mm ({:.3}) | {:.0}x",
             spec.describe(),
             end.landmarks.len(),
             truth.landmarks_duplicate,
@@ -202,6 +204,8 @@ fn run() -> Result<(), String> {
             truth.landmark_rms * 1e3,
             truth.ate_rms * 1e3,
             estimated.len(),
+            baseline.map_or(f64::NAN, |b| (b.value - run.camera.baseline) * 1e3),
+            baseline.map_or(f64::NAN, |b| b.sigma * 1e3),
             data_s / took
         );
         if with_reference {
