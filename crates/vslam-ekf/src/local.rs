@@ -81,6 +81,38 @@ impl Local {
         self.active.len()
     }
 
+    /// A correction of the whole state in state order, from its active rows' part `dx_a`
+    /// (length `n_A`) and the passive rows' `dx_b` (rows of `P0`).
+    pub(crate) fn scatter(&self, dx_a: &[f64], dx_b: &[f64]) -> Vec<f64> {
+        self.place
+            .iter()
+            .map(|place| match *place {
+                Place::Active(k) => dx_a.get(k).copied().unwrap_or(f64::NAN),
+                Place::Passive(b) => dx_b.get(b).copied().unwrap_or(f64::NAN),
+            })
+            .collect()
+    }
+
+    /// Commits a rank-`d` change of the covariance `P -= C G^T` whose active rows are
+    /// `C_A = x` with `G_A = y`, and whose `phi`-rows are `u` (`P_BA`'s share) with `v`
+    /// (`n_A0 x d` each, column-major): `P_AA -= x y^T`, `phi^T -= u y^T`, `psi += u v^T`
+    /// (module docs). A Kalman update's `W W^T` is `x = y = W_A`, `u = v = phi^T H^T L^-T`.
+    pub(crate) fn commit(&mut self, x: &[f64], y: &[f64], u: &[f64], v: &[f64], d: usize) {
+        let (na, na0) = (self.n_active(), self.n_a0);
+        // y^T, d x n_A column-major.
+        let mut y_t = alloc::vec![0.0; d * na];
+        for (c, col) in y.chunks_exact(na).enumerate() {
+            for (k, &val) in col.iter().enumerate() {
+                if let Some(t) = y_t.get_mut(k * d + c) {
+                    *t = val;
+                }
+            }
+        }
+        rank_update_lower(self.paa.as_mut_slice(), na, x, y, d, -1.0);
+        crate::linalg::gemm(&mut self.phit, na0, na, u, &y_t, d, -1.0, true);
+        rank_update_lower(&mut self.psi, na0, u, v, d, 1.0);
+    }
+
     /// Row `b` of `P0_{B A0}` dotted with column `k` of `phi^T`: `P_{b, active k}`.
     fn cross(&self, k: usize, b: usize) -> f64 {
         let n0 = self.n0;

@@ -41,27 +41,37 @@ impl Ekf {
     /// the fixed-lag smoother is restarted from when it carries part of the map. An id the
     /// filter does not hold is an [`Error::UnknownLandmark`].
     pub fn joint_of(&self, t_us: u64, ids: &[LandmarkId]) -> Result<JointEstimate, Error> {
+        let slots = ids
+            .iter()
+            .map(|&id| self.slot(id).ok_or(Error::UnknownLandmark { id }))
+            .collect::<Result<Vec<usize>, Error>>()?;
+        Ok(self.joint_over(t_us, &slots))
+    }
+
+    /// The marginal over the pose, the estimated camera parameters and the landmarks in
+    /// `slots` (in that order), in the batch's layout: [`Self::joint_of`] and, over every
+    /// slot, `Ekf::joint`.
+    pub(crate) fn joint_over(&self, t_us: u64, slots: &[usize]) -> JointEstimate {
         let m = self.estimated.len();
         let c0 = self.camera_offset();
         let mut rows: Vec<usize> = (0..POSE_DIM).collect();
         rows.extend(c0..c0 + m);
-        let mut landmarks = Vec::with_capacity(ids.len());
-        for &id in ids {
-            let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
+        let mut landmarks = Vec::with_capacity(slots.len());
+        for &s in slots {
             let i = StateLayout::landmark(s);
             rows.extend(i..i + LANDMARK_DIM);
             landmarks.push(Vector3::new(self.x[i], self.x[i + 1], self.x[i + 2]));
         }
         let n = rows.len();
         let covariance = DMatrix::from_fn(n, n, |r, c| self.cov(rows[r], rows[c]));
-        Ok(JointEstimate {
+        JointEstimate {
             t_us,
             pose: self.pose(),
             camera: self.camera(),
             estimated: self.estimated.clone(),
             landmarks,
             covariance,
-        })
+        }
     }
 
     /// Replaces the filter's marginal over the joint estimate's states (the pose, the
@@ -229,25 +239,10 @@ impl Ekf {
             .map(|r| -(0..s).map(|k| am[k * na + r] * a[k * na + r]).sum::<f64>())
             .collect();
         check_variances(paa, na, &change)?;
-        let mut dx = alloc::vec![0.0; self.x.len()];
-        for (i, place) in l.place.iter().enumerate() {
-            dx[i] = match *place {
-                Place::Active(k) => dx_a.get(k).copied().unwrap_or(f64::NAN),
-                Place::Passive(p) => dx_b.get(p).copied().unwrap_or(f64::NAN),
-            };
-        }
+        let dx = l.scatter(&dx_a, &dx_b);
         check_state(&self.x, &dx)?;
-        // A^T, s x n_A column-major, for phi^T -= (B M) A^T.
-        let mut a_t = alloc::vec![0.0; s * na];
-        for (k, col) in a.chunks_exact(na).enumerate() {
-            for (r, &v) in col.iter().enumerate() {
-                a_t[r * s + k] = v;
-            }
-        }
         if let Some(l) = self.local.as_deref_mut() {
-            rank_update_lower(l.paa.as_mut_slice(), na, &am, &a, s, -1.0);
-            gemm(&mut l.phit, na0, na, &bm, &a_t, s, -1.0, true);
-            rank_update_lower(&mut l.psi, na0, &bm, &b, s, 1.0);
+            l.commit(&am, &a, &bm, &b, s);
         }
         correct_state(&mut self.x, &dx);
         Ok(())

@@ -6,7 +6,7 @@
 
 use alloc::vec::Vec;
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3};
 use rig_model::camera::{Param, wrap_angle};
 use rig_model::handover::{BatchHandover, Handover, JointEstimate};
 use rig_model::{CameraParams, N_PARAMS, Pose2, Rig};
@@ -333,36 +333,9 @@ impl Ekf {
     /// landmarks in map order), with the landmark ids in that order: what the fixed-lag
     /// smoother is (re)started from (`selfcal::smoother::Smoother::restart_mapping`).
     pub fn joint(&self, t_us: u64) -> (JointEstimate, Vec<LandmarkId>) {
-        let nl = self.landmarks.len();
-        let m = self.estimated.len();
-        let c0 = self.camera_offset();
-        // Batch index -> filter index.
-        let mut map: Vec<usize> = (0..POSE_DIM).collect();
-        map.extend(c0..c0 + m);
-        map.extend(StateLayout::landmark(0)..c0);
-        let n = map.len();
-        let covariance = DMatrix::from_fn(n, n, |i, j| {
-            let (fi, fj) = (
-                map.get(i).copied().unwrap_or(0),
-                map.get(j).copied().unwrap_or(0),
-            );
-            self.cov(fi, fj)
-        });
-        let landmarks = (0..nl)
-            .map(|k| {
-                let i = StateLayout::landmark(k);
-                Vector3::new(self.x[i], self.x[i + 1], self.x[i + 2])
-            })
-            .collect();
+        let slots: Vec<usize> = (0..self.landmarks.len()).collect();
         (
-            JointEstimate {
-                t_us,
-                pose: self.pose(),
-                camera: self.camera(),
-                estimated: self.estimated.clone(),
-                landmarks,
-                covariance,
-            },
+            self.joint_over(t_us, &slots),
             self.landmarks.iter().map(|l| l.id).collect(),
         )
     }

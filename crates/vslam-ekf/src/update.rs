@@ -696,25 +696,11 @@ impl Ekf {
         // The passive states' correction P0_BA0 (phi^T H^T L^-T L^-1 nu).
         let mut dx_b = alloc::vec![0.0; n0];
         crate::linalg::gemm(&mut dx_b, n0, 1, &l.g0, &ws.dx[na..], na0, 1.0, false);
-        let mut dx = alloc::vec![0.0; self.x.len()];
-        for (i, place) in l.place.iter().enumerate() {
-            dx[i] = match *place {
-                Place::Active(k) => ws.dx.get(k).copied().unwrap_or(f64::NAN),
-                Place::Passive(b) => dx_b.get(b).copied().unwrap_or(f64::NAN),
-            };
-        }
+        let dx = l.scatter(ws.dx.get(..na).unwrap_or(&[]), &dx_b);
         check_state(&self.x, &dx)?;
         // Commit.
-        let mut w_top_t = alloc::vec![0.0; d * na];
-        for (c, col) in w_top.chunks_exact(na).enumerate() {
-            for (k, &v) in col.iter().enumerate() {
-                w_top_t[k * d + c] = v;
-            }
-        }
         if let Some(l) = self.local.as_deref_mut() {
-            rank_update_lower(l.paa.as_mut_slice(), na, &w_top, &w_top, d, -1.0);
-            crate::linalg::gemm(&mut l.phit, na0, na, &w_bot, &w_top_t, d, -1.0, true);
-            rank_update_lower(&mut l.psi, na0, &w_bot, &w_bot, d, 1.0);
+            l.commit(&w_top, &w_top, &w_bot, &w_bot, d);
         }
         correct_state(&mut self.x, &dx);
         Ok(())
