@@ -1074,7 +1074,7 @@ impl Navigator {
             .into_iter()
             .chain(outcome.added.iter().copied())
         {
-            if ekf.landmark(id).is_some() && !chosen.contains(&id) && chosen.len() < budget {
+            if ekf.contains(id) && !chosen.contains(&id) && chosen.len() < budget {
                 chosen.push(id);
             }
         }
@@ -1087,10 +1087,11 @@ impl Navigator {
             pose.x + ahead * libm::cos(pose.theta),
             pose.y + ahead * libm::sin(pose.theta),
         );
+        // Positions only: `Ekf::landmarks` would form every covariance block.
         let mut rest: Vec<(f64, LandmarkId)> = ekf
-            .landmarks()
-            .filter(|l| !chosen.contains(&l.id))
-            .map(|l| (libm::hypot(l.position.x - cx, l.position.y - cy), l.id))
+            .landmark_positions()
+            .filter(|(id, _)| !chosen.contains(id))
+            .map(|(id, p)| (libm::hypot(p.x - cx, p.y - cy), id))
             .collect();
         rest.sort_by(|a, b| a.0.total_cmp(&b.0));
         let fill = (2 * budget / 3).max(chosen.len());
