@@ -28,7 +28,7 @@ use rig_model::handover::JointEstimate;
 
 use crate::error::Error;
 use crate::filter::Ekf;
-use crate::kernels::gather_columns;
+use crate::kernels::{diagonal_change, gather_columns};
 use crate::landmarks::LandmarkId;
 use crate::linalg::{gemm, rank_update_lower, sym};
 use crate::local::Place;
@@ -187,9 +187,8 @@ impl Ekf {
         gemm(&mut dx, n, 1, &c, g.as_slice(), s, 1.0, false);
         let mut cm = alloc::vec![0.0; n * s];
         gemm(&mut cm, n, s, &c, m.as_slice(), s, 1.0, false);
-        let change: Vec<f64> = (0..n)
-            .map(|i| -(0..s).map(|k| cm[k * n + i] * c[k * n + i]).sum::<f64>())
-            .collect();
+        let mut change = Vec::new();
+        diagonal_change(n, &cm, &c, -1.0, &mut change);
         check_variances(self.p.as_slice(), n, &change)?;
         check_state(&self.x, &dx)?;
         rank_update_lower(self.p.as_mut_slice(), n, &cm, &c, s, -1.0);
@@ -235,9 +234,8 @@ impl Ekf {
         gemm(&mut am, na, s, &a, m.as_slice(), s, 1.0, false);
         let mut bm = alloc::vec![0.0; na0 * s];
         gemm(&mut bm, na0, s, &b, m.as_slice(), s, 1.0, false);
-        let change: Vec<f64> = (0..na)
-            .map(|r| -(0..s).map(|k| am[k * na + r] * a[k * na + r]).sum::<f64>())
-            .collect();
+        let mut change = Vec::new();
+        diagonal_change(na, &am, &a, -1.0, &mut change);
         check_variances(paa, na, &change)?;
         let dx = l.scatter(&dx_a, &dx_b);
         check_state(&self.x, &dx)?;
