@@ -124,10 +124,7 @@ fn run() -> Result<(), String> {
         }
         if std::env::var_os("BATCH_REF_DEBUG").is_some() {
             for l in &handover.landmarks {
-                let lamp = usize::try_from(l.track)
-                    .ok()
-                    .and_then(|i| sim_run.landmarks.get(i));
-                if let Some(lamp) = lamp {
+                if let Some(lamp) = reference::lamp_of(l, &sim_run) {
                     let e = 1e3 * (l.position - lamp.position);
                     println!(
                         "  ref lamp {}: {:+.2} {:+.2} {:+.2} mm ({} obs)",

@@ -93,16 +93,22 @@ pub(crate) fn solve(
     batch.finish().cloned()
 }
 
+/// The lamp a reference landmark is (its track is the lamp's id: the truth's association).
+pub(crate) fn lamp_of<'a>(
+    landmark: &rig_model::handover::BatchLandmark,
+    run: &'a sim::SimRun,
+) -> Option<&'a sim::Lamp> {
+    run.landmarks
+        .iter()
+        .find(|lamp| u64::from(lamp.id) == landmark.track)
+}
+
 /// The reference's landmark RMS against the truth, metres, and the landmarks it held (each
 /// is its lamp: the association is the truth's).
 pub(crate) fn landmark_rms(handover: &BatchHandover, run: &sim::SimRun) -> (f64, usize) {
     let (mut sq, mut n) = (0.0, 0usize);
     for l in &handover.landmarks {
-        let lamp = run
-            .landmarks
-            .iter()
-            .find(|lamp| u64::from(lamp.id) == l.track);
-        if let Some(lamp) = lamp {
+        if let Some(lamp) = lamp_of(l, run) {
             sq += (lamp.position - l.position).norm_squared();
             n += 1;
         }
