@@ -50,6 +50,7 @@ extern crate std;
 
 mod error;
 mod frame_pairs;
+pub mod loops;
 
 use alloc::collections::{BTreeMap, BTreeSet};
 use alloc::vec::Vec;
@@ -264,6 +265,17 @@ pub struct NavStats {
     /// the filter over the landmarks near the vehicle (a landmark observed that it did not
     /// carry, its budget full, a merge).
     pub phase2_smoother_restarts: u64,
+    /// Loops closed: lamps held while the pose was lost ([`MATCH_MAX_POSE_SIGMA_M`])
+    /// recognised as a constellation of landmarks, and the filter updated with them.
+    pub loops_closed: u64,
+    /// Frames whose held lamps fitted several places (nothing closed).
+    pub loops_ambiguous: u64,
+    /// Observations held out of the map while the pose was lost (a lamp mapped from a lost
+    /// pose would tell the filter where it is; counted per frame).
+    pub held_while_lost: u64,
+    /// Lamps held while lost and mapped from their held positions once the loop was closed
+    /// (or, no place recognised, once the navigator gave up holding).
+    pub held_mapped: u64,
     /// Board features the lens model could not map into the rectified image (dropped).
     pub features_unmapped: u64,
     /// Board features mapped, but outside the field of use and left out
@@ -308,6 +320,11 @@ pub struct Navigator {
     stats: NavStats,
     /// Map landmark -> its index in the smoother, while the smoother runs in phase 2.
     smoothed: BTreeMap<LandmarkId, usize>,
+    /// Lamps held out of the map while the pose is lost ([`MATCH_MAX_POSE_SIGMA_M`]).
+    held: loops::Held,
+    /// Lost, the held lamps recognised no place: lamps are mapped again until the pose is
+    /// found.
+    gave_up_holding: bool,
     /// Landmarks within [`MERGE_SEARCH_M`] of each other that were observed in the same frame:
     /// two lamps, never merged. `(smaller id, larger id)`.
     co_observed: BTreeSet<(LandmarkId, LandmarkId)>,
@@ -373,6 +390,8 @@ impl Navigator {
             match_gate: chi2_quantile(p, 4.0),
             stats: NavStats::default(),
             smoothed: BTreeMap::new(),
+            held: loops::Held::new(),
+            gave_up_holding: false,
             co_observed: BTreeSet::new(),
             merge_gate: chi2_quantile(p, 3.0),
             frame_pairs,
@@ -428,6 +447,11 @@ impl Navigator {
     /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
     pub fn frame_pairs(&self) -> Option<&FramePairCalibration> {
         self.frame_pairs.as_ref()
+    }
+
+    /// The lamps held out of the map while the pose is lost ([`loops::Held::positions`]).
+    pub fn held_lamps(&self) -> Vec<(u64, nalgebra::Vector3<f64>, u32)> {
+        self.held.positions()
     }
 
     /// The hand-over to phase 2 (camera parameters and covariance), once it happened: the
@@ -821,6 +845,7 @@ impl Navigator {
         }
         if let Some(o) = &phase1_motion {
             self.excite(&o.motion, &o.covariance);
+            self.held.add_motion(&o.covariance);
         }
         self.last_frame_t = Some(t_us);
         // Keep the last sample at or before this frame's odometry-clock time (less a margin
@@ -965,6 +990,15 @@ impl Navigator {
         let Some(ekf) = self.ekf.as_ref() else {
             return;
         };
+        // While the pose is lost the filter dead-reckons the lamps it holds (`loops::Held`):
+        // a smoother's solve would move the pose under them. It starts again from the filter
+        // once the loop is closed.
+        if pose_lost(ekf) {
+            if self.smoother.is_mapping() {
+                self.smoother.stop_mapping();
+            }
+            return;
+        }
         let held = !ekf.held().is_empty();
         if self.smoother.is_mapping() && held {
             // A parameter held: the smoother would refine it; the filter goes on alone until
@@ -1127,7 +1161,53 @@ impl Navigator {
             })
             .map(|(i, _)| i)
             .collect();
-        if !unbound.is_empty() {
+        // While the pose is lost its unbound tracks are held out of the map (a lamp mapped
+        // anew from a lost pose would tell the filter where it is) until their constellation
+        // is recognised among the landmarks (`loops`), or there are so many that the vehicle
+        // must be on new ground.
+        let lost = pose_lost(ekf);
+        if !lost {
+            self.held.clear();
+            self.gave_up_holding = false;
+        }
+        let mut held: Vec<u64> = Vec::new();
+        if !unbound.is_empty() && lost && !self.gave_up_holding {
+            let closed = match recognise(ekf, tracked, &unbound, &mut self.held, self.stats.frames)
+            {
+                Recognised::Place { pairs, guess } => close_loop(
+                    ekf,
+                    &mut self.held,
+                    &mut self.candidates,
+                    &pairs,
+                    guess,
+                    &mut self.stats,
+                    outcome,
+                )?,
+                Recognised::Ambiguous => {
+                    self.stats.loops_ambiguous += 1;
+                    false
+                }
+                Recognised::Nothing => false,
+            };
+            if !closed
+                && (self.held.mature() >= LOOP_GIVE_UP_LAMPS || self.held.len() >= LOOP_MAX_HELD)
+            {
+                // That many lamps seen well and no place recognised: new ground, mapped from
+                // where they were held, and mapping goes on as before until the pose is found.
+                map_held(ekf, &self.held, &mut self.candidates, &[], &mut self.stats)?;
+                self.held.clear();
+                self.gave_up_holding = true;
+            }
+            if !closed && !self.gave_up_holding {
+                held = unbound
+                    .iter()
+                    .filter_map(|&i| tracked.observations.get(i))
+                    .map(|o| o.track.0)
+                    .filter(|&t| self.candidates.landmark_of(t).is_none())
+                    .collect();
+                self.stats.held_while_lost += held.len() as u64;
+            }
+        } else if !unbound.is_empty() {
             // The landmarks in view, and those near it: a match is unique only if no other
             // landmark the feature might be, in view or just outside it, is in its gate.
             let in_view = ekf.visible_landmarks();
@@ -1176,6 +1256,7 @@ impl Navigator {
             .observations
             .iter()
             .filter(|o| o.confirmed || self.candidates.landmark_of(o.track.0).is_some())
+            .filter(|o| !held.contains(&o.track.0))
             .map(|o| (o.track.0, o.measurement))
             .collect();
         // Each bound landmark's stereo match, taken before the update (which may remove a
@@ -1376,6 +1457,27 @@ const MERGE_PASS_FRAMES: u64 = 100;
 /// inside this probability's chi-square gate of the filter's own estimate and covariance.
 pub const RESEED_PROBABILITY: f64 = 0.9999;
 
+/// Map matching binds a single track to a landmark only while the pose's position sigma is
+/// at most this, metres; beyond it returning lamps are bound as a constellation only.
+pub const MATCH_MAX_POSE_SIGMA_M: f64 = 0.5;
+
+/// Lamps held while lost (seen in [`loops::MIN_FRAMES`] frames) after which, with no place
+/// recognised, the navigator maps again (new ground).
+const LOOP_GIVE_UP_LAMPS: usize = 30;
+
+/// A lamp held while lost is mapped when the loop closes only if its position relative to
+/// the vehicle is known this well (one sigma, metres): dead reckoning since it was seen
+/// makes the older ones too uncertain to be worth a landmark (they are mapped when seen
+/// again).
+const HELD_MAP_MAX_SIGMA_M: f64 = 0.05;
+
+/// Lamps held at most (a bound on memory): beyond, the navigator maps them and goes on
+/// mapping as on new ground.
+const LOOP_MAX_HELD: usize = 400;
+
+/// Rotation a constellation may make beyond three sigma of the heading, radians.
+const LOOP_ROTATION_FLOOR_RAD: f64 = 0.02;
+
 /// When phase 2's smoother starts again over the landmarks near the vehicle, they are the
 /// nearest to a point this far ahead along the direction of travel, metres: about the
 /// distance from the vehicle to the front of a ceiling camera's view at 4 to 6 m.
@@ -1427,4 +1529,177 @@ fn reseed_distance(ekf: &Ekf, joint: &rig_model::handover::JointEstimate) -> Opt
 
 fn ordered(a: LandmarkId, b: LandmarkId) -> (LandmarkId, LandmarkId) {
     if a <= b { (a, b) } else { (b, a) }
+}
+
+/// The pose is lost: its position more than [`MATCH_MAX_POSE_SIGMA_M`] uncertain along x or y.
+fn pose_lost(ekf: &Ekf) -> bool {
+    let c = ekf.pose_covariance();
+    c.m11.max(c.m22) > MATCH_MAX_POSE_SIGMA_M * MATCH_MAX_POSE_SIGMA_M
+}
+
+/// What the lamps held while lost recognised ([`recognise`]).
+enum Recognised {
+    /// A place: its `(track, landmark)` pairs and where it puts the vehicle.
+    Place {
+        pairs: Vec<(u64, LandmarkId)>,
+        guess: Pose2,
+    },
+    /// Several places fit.
+    Ambiguous,
+    /// Nothing yet.
+    Nothing,
+}
+
+/// Map matching while the pose is lost (more than [`MATCH_MAX_POSE_SIGMA_M`] uncertain): the
+/// frame's unbound observations are triangulated into the held lamps ([`loops::Held`]), whose
+/// constellation is matched onto the landmarks within reach of the lost pose's uncertainty
+/// ([`loops::constellation`]).
+fn recognise(
+    ekf: &Ekf,
+    tracked: &TrackedFrame,
+    unbound: &[usize],
+    held: &mut loops::Held,
+    frame: u64,
+) -> Recognised {
+    let camera = ekf.camera();
+    let pose = ekf.pose();
+    let sigma = ekf.noise().pixel;
+    for &i in unbound {
+        let Some(o) = tracked.observations.get(i) else {
+            continue;
+        };
+        let Ok(tri) = rig_model::triangulate(&camera, &o.measurement) else {
+            continue;
+        };
+        let position = tri.p_in_world(&camera, &pose);
+        let covariance = if ekf.pixel_noise().is_uniform() {
+            tri.covariance_in_world(&camera, &pose, sigma, None, None)
+        } else {
+            let r = Vector4::from(ekf.measurement_variances(&o.measurement));
+            tri.covariance_in_world_of(&camera, &pose, &r, None, None)
+        };
+        let systematic =
+            tri.covariance_in_world(&camera, &pose, 0.0, None, Some(&ekf.camera_covariance()));
+        held.add(o.track.0, position, &covariance, &systematic, frame);
+    }
+    let cov = ekf.pose_covariance();
+    let sigma_theta = libm::sqrt(cov.m33);
+    let max_rotation = 3.0 * sigma_theta + LOOP_ROTATION_FLOOR_RAD;
+    // A held lamp's landmark is within three sigma of the pose's uncertainty carried to it
+    // (position, and heading times its distance from the vehicle).
+    let sigma_position = libm::sqrt(
+        cov.fixed_view::<2, 2>(0, 0)
+            .symmetric_eigenvalues()
+            .max()
+            .max(0.0),
+    );
+    let map: Vec<(LandmarkId, nalgebra::Vector3<f64>)> = ekf.landmark_positions().collect();
+    let reach = |p: &nalgebra::Vector3<f64>| {
+        let d = libm::hypot(p.x - pose.x, p.y - pose.y);
+        3.0 * (sigma_position + d * sigma_theta) + loops::PAIR_TOLERANCE_M
+    };
+    let candidates = held.candidates(&map, reach);
+    let (pairs, motion) = match loops::constellation(&candidates, max_rotation) {
+        loops::Found::Unique { pairs, motion } => (pairs, motion),
+        loops::Found::Ambiguous => return Recognised::Ambiguous,
+        loops::Found::None => return Recognised::Nothing,
+    };
+    // The motion lays the dead-reckoned world onto the map: the vehicle with it.
+    let (angle, tx, ty) = motion;
+    let (s, c) = (libm::sin(angle), libm::cos(angle));
+    let guess = Pose2::new(
+        c * pose.x - s * pose.y + tx,
+        s * pose.x + c * pose.y + ty,
+        rig_model::camera::wrap_angle(pose.theta + angle),
+    );
+    Recognised::Place { pairs, guess }
+}
+
+/// Closes a loop the held lamps recognised: the filter updated with the `pairs`' held lamps
+/// as points relative to the vehicle (linearised first at `guess`, then iterated:
+/// [`Ekf::update_relative`]), their tracks bound to the landmarks, and the other held lamps
+/// mapped ([`map_held`]). Returns whether the filter took the update; either way nothing is
+/// held afterwards.
+fn close_loop(
+    ekf: &mut Ekf,
+    held: &mut loops::Held,
+    candidates: &mut Candidates,
+    pairs: &[(u64, LandmarkId)],
+    guess: Pose2,
+    stats: &mut NavStats,
+    outcome: &mut FrameOutcome,
+) -> Result<bool, Error> {
+    let dead_reckoned = ekf.pose();
+    let observations = held.relative_observations(pairs, &dead_reckoned);
+    let batch: Vec<vslam_ekf::RelativeObservation> = observations.iter().map(|(_, o)| *o).collect();
+    // The other lamps, relative to the vehicle before the update moves it.
+    let others: Vec<(u64, loops::Relative)> = held
+        .mature_keys()
+        .into_iter()
+        .filter(|k| !pairs.iter().any(|(t, _)| t == k))
+        .filter_map(|k| Some((k, held.relative(k, &dead_reckoned)?)))
+        .collect();
+    held.clear();
+    let Ok(report) = ekf.update_relative(&batch, guess) else {
+        stats.refused_updates += 1;
+        return Ok(false);
+    };
+    stats.loops_closed += 1;
+    for (track, o) in &observations {
+        if report.accepted.iter().any(|g| g.id == o.id) {
+            candidates.bind(ekf, *track, o.id)?;
+            outcome.rematched.push((*track, o.id));
+            stats.rematched += 1;
+        }
+    }
+    map_held(ekf, held, candidates, &others, stats)?;
+    Ok(true)
+}
+
+/// Maps held lamps from where they were held relative to the vehicle
+/// ([`Ekf::add_landmark_relative`]): `given` (taken before a loop's update moved the vehicle),
+/// or, when empty, every lamp `held` has seen in [`loops::MIN_FRAMES`] frames relative to the
+/// vehicle now. A lamp is left out when its relative position is more than
+/// [`HELD_MAP_MAX_SIGMA_M`] uncertain, or when it would land within
+/// [`loops::CONFLICT_RADIUS_M`] of a landmark (it may be that landmark a little off: map
+/// matching decides when it is seen again).
+fn map_held(
+    ekf: &mut Ekf,
+    held: &loops::Held,
+    candidates: &mut Candidates,
+    given: &[(u64, loops::Relative)],
+    stats: &mut NavStats,
+) -> Result<(), Error> {
+    let now = ekf.pose();
+    let lamps: Vec<(u64, loops::Relative)> = if given.is_empty() {
+        held.mature_keys()
+            .into_iter()
+            .filter_map(|k| Some((k, held.relative(k, &now)?)))
+            .collect()
+    } else {
+        given.to_vec()
+    };
+    let (s, c) = (libm::sin(now.theta), libm::cos(now.theta));
+    for (track, r) in lamps {
+        let cov = r.covariance;
+        if candidates.landmark_of(track).is_some()
+            || cov.m11.max(cov.m22) > HELD_MAP_MAX_SIGMA_M * HELD_MAP_MAX_SIGMA_M
+        {
+            continue;
+        }
+        let p = r.position;
+        let (wx, wy) = (now.x + c * p.x - s * p.y, now.y + s * p.x + c * p.y);
+        let near = ekf.landmark_positions().any(|(_, q)| {
+            libm::hypot(q.x - wx, q.y - wy) < loops::CONFLICT_RADIUS_M
+                && (q.z - p.z).abs() < loops::HEIGHT_TOLERANCE_M
+        });
+        if near {
+            continue;
+        }
+        if let Ok(id) = ekf.add_landmark_relative(&p, &cov) {
+            candidates.bind(ekf, track, id)?;
+            stats.held_mapped += 1;
+        }
+    }
+    Ok(())
 }

@@ -49,10 +49,11 @@ struct Options {
     field: Option<f64>,
     max_in_view: Option<usize>,
     lamp: Option<u32>,
+    held_at: Option<f64>,
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut args = std::env::args().skip(1);
@@ -73,6 +74,10 @@ fn run() -> Result<(), String> {
                     v.parse()
                         .map_err(|_| format!("--max-in-view {v:?}: {usage}"))?,
                 );
+            }
+            "--held-at" => {
+                let v = value("--held-at")?;
+                opts.held_at = Some(v.parse().map_err(|_| format!("--held-at {v:?}: {usage}"))?);
             }
             "--lamp" => {
                 let v = value("--lamp")?;
@@ -125,6 +130,7 @@ fn run() -> Result<(), String> {
     let camera = truth_camera.unwrap_or(rig.nominal);
     let first_t = input.frames.first().ok_or("no frames")?.t_us;
     let t0 = *poses.range(first_t..).next().ok_or("no truth")?.1;
+    let mut track_lamp: BTreeMap<u64, u32> = BTreeMap::new();
     // The true pose in the first frame's world.
     let truth_at = |t: u64| -> Option<Pose2> {
         let p = poses.range(t..).next()?.1;
@@ -218,6 +224,45 @@ fn run() -> Result<(), String> {
         let outcome = nav
             .push_frame(f.t_us, &f.left, &f.right)
             .map_err(|e| e.to_string())?;
+        // --held-at T: every track's lamp (the lamp whose rectified projection is nearest
+        // its last measurement), and at T the lamps held while lost against the truth.
+        if let (Some(at), Some(pose)) =
+            (opts.held_at, poses.range(f.t_us..).next().map(|(_, p)| *p))
+        {
+            for t in nav.front_end().tracker().tracks() {
+                if t.last_t_us != f.t_us {
+                    continue;
+                }
+                let best = lamps
+                    .iter()
+                    .filter_map(|l| {
+                        let z = rig_model::project(&camera, &pose, &Vector3::new(l.x, l.y, l.z))
+                            .ok()?;
+                        Some((
+                            l.id,
+                            (Vector2::new(z[0], z[1]) - Vector2::new(t.last[0], t.last[1])).norm(),
+                        ))
+                    })
+                    .min_by(|a, b| a.1.total_cmp(&b.1));
+                if let Some((id, d)) = best
+                    && d < 4.0
+                {
+                    track_lamp.insert(t.id.0, id);
+                }
+            }
+            let t_s = (f.t_us - first_t) as f64 * 1e-6;
+            if (t_s - at).abs() < 0.025 {
+                let mapped: Vec<u32> = landmark_lamp
+                    .iter()
+                    .filter(|(id, _)| {
+                        nav.ekf()
+                            .is_some_and(|e| e.contains(vslam_ekf::LandmarkId(**id)))
+                    })
+                    .filter_map(|(_, l)| *l)
+                    .collect();
+                held_report(&nav.held_lamps(), &track_lamp, &lamps, &t0, &mapped);
+            }
+        }
         // --lamp ID: that lamp's stereo match and track, frame by frame, while in view.
         if let Some(watch) = opts.lamp
             && let (Some(pose), Some(l)) = (
@@ -364,6 +409,24 @@ fn run() -> Result<(), String> {
         if !merged.is_empty() {
             println!("        merged {merged:?}");
         }
+        // Each landmark bound again: where the map has it and where its lamp is (the first
+        // frame's world).
+        for (_, id) in &outcome.rematched {
+            let lamp = landmark_lamp.get(&id.0).copied().flatten();
+            let truth = lamp
+                .and_then(|n| lamps.iter().find(|l| l.id == n))
+                .map(|l| {
+                    let (c, s) = (t0.theta.cos(), t0.theta.sin());
+                    let (dx, dy) = (l.x - t0.x, l.y - t0.y);
+                    (c * dx + s * dy, -s * dx + c * dy)
+                });
+            if let (Some(p), Some((tx, ty))) = (ekf.landmark_position(*id), truth) {
+                println!(
+                    "        L{} at ({:+.2}, {:+.2}), its lamp at ({tx:+.2}, {ty:+.2})",
+                    id.0, p.x, p.y
+                );
+            }
+        }
         println!(
             "{t_s:7.2} err x {:+.2} y {:+.2} th {:+.2} deg | sigma {:.2} {:.2} {:.2} deg | acc {} rej {} add {} | jump {jump:.2} | rematched {rematched:?} wrong {wrong:?}",
             pose.x - truth.x,
@@ -403,6 +466,24 @@ fn run() -> Result<(), String> {
             println!("        V {:?} v {:?}", c.vehicle, outcome.accepted);
         }
     }
+    if missed_report && let Some(ekf) = nav.ekf() {
+        // Each landmark against its lamp (the first frame's world), the worst first.
+        let (c0, s0) = (t0.theta.cos(), t0.theta.sin());
+        let mut errors: Vec<(f64, u64, u32)> = ekf
+            .landmark_positions()
+            .filter_map(|(id, p)| {
+                let lamp = landmark_lamp.get(&id.0).copied().flatten()?;
+                let l = lamps.iter().find(|l| l.id == lamp)?;
+                let (dx, dy) = (l.x - t0.x, l.y - t0.y);
+                let t = Vector3::new(c0 * dx + s0 * dy, -s0 * dx + c0 * dy, l.z);
+                Some(((p - t).norm(), id.0, lamp))
+            })
+            .collect();
+        errors.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for (e, id, lamp) in errors.iter().take(12) {
+            println!("landmark L{id} (lamp {lamp}): {:.1} mm off", e * 1000.0);
+        }
+    }
     if missed_report {
         let mapped: Vec<u32> = nav
             .ekf()
@@ -423,4 +504,65 @@ fn run() -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// The held lamps against their true lamps (`--held-at`): the planar rigid fit of one onto
+/// the other and each lamp's residual, metres.
+fn held_report(
+    held: &[(u64, Vector3<f64>, u32)],
+    track_lamp: &BTreeMap<u64, u32>,
+    lamps: &[vehicle_log::TruthLandmark],
+    t0: &Pose2,
+    mapped: &[u32],
+) {
+    let (c0, s0) = (t0.theta.cos(), t0.theta.sin());
+    // (track, lamp, frames, held position, true position)
+    type Pair = (u64, u32, u32, Vector3<f64>, Vector3<f64>);
+    let pairs: Vec<Pair> = held
+        .iter()
+        .filter_map(|&(k, p, frames)| {
+            let id = *track_lamp.get(&k)?;
+            let l = lamps.iter().find(|l| l.id == id)?;
+            let (dx, dy) = (l.x - t0.x, l.y - t0.y);
+            Some((
+                k,
+                id,
+                frames,
+                p,
+                Vector3::new(c0 * dx + s0 * dy, -s0 * dx + c0 * dy, l.z),
+            ))
+        })
+        .collect();
+    let n = pairs.len() as f64;
+    if pairs.len() < 2 {
+        println!("held: {} lamps, {} named", held.len(), pairs.len());
+        return;
+    }
+    let ma = pairs.iter().fold(Vector2::zeros(), |m, p| m + p.3.xy()) / n;
+    let mb = pairs.iter().fold(Vector2::zeros(), |m, p| m + p.4.xy()) / n;
+    let (mut c, mut s) = (0.0, 0.0);
+    for p in &pairs {
+        let (a, b) = (p.3.xy() - ma, p.4.xy() - mb);
+        c += a.x * b.x + a.y * b.y;
+        s += a.x * b.y - a.y * b.x;
+    }
+    let angle = s.atan2(c);
+    let (sa, ca) = angle.sin_cos();
+    println!(
+        "held: {} lamps, {} named; fit rotation {:.2} deg",
+        held.len(),
+        pairs.len(),
+        angle.to_degrees()
+    );
+    for (k, id, frames, p, t) in &pairs {
+        let a = p.xy() - ma;
+        let q = Vector2::new(ca * a.x - sa * a.y, sa * a.x + ca * a.y) + mb;
+        println!(
+            "  track {k} lamp {id}{} frames {frames}: residual ({:+.3}, {:+.3}) height {:+.3}",
+            if mapped.contains(id) { " (mapped)" } else { "" },
+            q.x - t.x,
+            q.y - t.y,
+            p.z - t.z
+        );
+    }
 }

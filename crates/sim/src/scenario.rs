@@ -777,6 +777,14 @@ impl Scenario {
         self
     }
 
+    /// The same scenario with its lamps laid out from another seed (`[world] seed`): the
+    /// jittered grids jittered afresh.
+    #[must_use]
+    pub fn with_world_seed(mut self, seed: u64) -> Self {
+        self.spec.world.seed = Some(seed);
+        self
+    }
+
     /// The nominal rig must describe the same sensor as the truth.
     fn check_rig(&self) -> Result<()> {
         let cam = &self.spec.camera;

@@ -237,7 +237,6 @@ impl Ekf {
                 value,
             });
         }
-        let n = self.x.len();
         let c0 = self.camera_offset();
         let m = self.estimated.len();
         // G = [Gp | Gc] over the involved states (pose, estimated camera).
@@ -270,6 +269,67 @@ impl Ekf {
             let r = nalgebra::Vector4::from(self.measurement_variances(z));
             gz * nalgebra::Matrix4::from_diagonal(&r) * gz.transpose()
         };
+        self.insert_landmark(position, &idx, &g, q, &noise)
+    }
+
+    /// Adds a landmark seen as a point relative to the vehicle (`position`: x ahead, y left,
+    /// the height in the world; `covariance` its covariance), placed from the current pose
+    /// with its joint linearised covariance and cross-covariances, as
+    /// [`Ekf::add_landmark`] does from pixels: a lamp held out of the map while the pose was
+    /// lost, mapped once the loop is closed.
+    pub fn add_landmark_relative(
+        &mut self,
+        position: &Vector3<f64>,
+        covariance: &Matrix3<f64>,
+    ) -> Result<LandmarkId, Error> {
+        if let Some(&value) = position
+            .iter()
+            .chain(covariance.iter())
+            .find(|v| !v.is_finite())
+        {
+            return Err(Error::NonFinite {
+                what: "relative position of a new landmark",
+                value,
+            });
+        }
+        let pose = self.pose();
+        let (s, c) = (libm::sin(pose.theta), libm::cos(pose.theta));
+        let (vx, vy) = (position.x, position.y);
+        let world = Vector3::new(
+            pose.x + c * vx - s * vy,
+            pose.y + s * vx + c * vy,
+            position.z,
+        );
+        let rot = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let noise = rot * covariance * rot.transpose();
+        let mut idx: [usize; POSE_DIM + N_PARAMS] = [0; POSE_DIM + N_PARAMS];
+        let mut g = [[0.0; POSE_DIM + N_PARAMS]; 3];
+        for (k, i) in idx.iter_mut().enumerate().take(POSE_DIM) {
+            *i = k;
+        }
+        // d world / d (x, y, theta); the camera's columns are zero (the relative position
+        // carries its own uncertainty).
+        g[0][0] = 1.0;
+        g[1][1] = 1.0;
+        g[0][2] = -s * vx - c * vy;
+        g[1][2] = c * vx - s * vy;
+        self.insert_landmark(world, &idx, &g, POSE_DIM, &noise)
+    }
+
+    /// Appends a landmark at `position` whose covariance is `G P Gᵀ + noise` over the states
+    /// `idx[..q]` (`g` their Jacobian rows) and whose cross-covariances are `G P`.
+    fn insert_landmark(
+        &mut self,
+        position: Vector3<f64>,
+        idx: &[usize; POSE_DIM + N_PARAMS],
+        g: &[[f64; POSE_DIM + N_PARAMS]; 3],
+        q: usize,
+        noise: &Matrix3<f64>,
+    ) -> Result<LandmarkId, Error> {
+        let n = self.x.len();
+        let c0 = self.camera_offset();
+        let m = self.estimated.len();
+        let (idx, g, noise) = (*idx, *g, *noise);
         match self.local.as_deref_mut() {
             None => self.p = grow(&self.p, c0, &idx[..q], &g, &noise)?,
             Some(l) => {

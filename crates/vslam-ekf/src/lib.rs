@@ -214,3 +214,4 @@ pub use motion::Increment;
 pub use start::CameraStart;
 #[cfg(feature = "alloc")]
 pub use state::{CameraCovariance, LANDMARK_DIM, POSE_DIM, StateLayout};
+pub use update::RelativeObservation;

@@ -6,8 +6,8 @@
 
 use alloc::vec::Vec;
 
-use nalgebra::{DMatrix, DVector, Matrix4, Vector4};
-use rig_model::camera::{Param, wrap_angle};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, Vector3, Vector4};
+use rig_model::camera::{Param, Pose2, wrap_angle};
 use rig_model::{Measurement, N_PARAMS};
 
 use crate::error::Error;
@@ -25,7 +25,7 @@ use crate::kernels::{
 use crate::landmarks::LandmarkId;
 use crate::linalg::rank_update_lower;
 use crate::local::Place;
-use crate::state::{LANDMARK_DIM, POSE_DIM, at};
+use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout, at};
 
 /// What eq. (6)'s gain is computed from: the innovation covariance `S` (with `A = P H^T`
 /// already in the workspace) and the innovation `nu`.
@@ -129,6 +129,86 @@ fn state_step(a: &DVector<f64>, b: &DVector<f64>, o: &Obs) -> [f64; 4] {
             if let (Some(slot), Some(h)) = (out.get_mut(r), row.get(t)) {
                 *slot += h * d;
             }
+        }
+    }
+    out
+}
+
+/// A landmark seen as a point relative to the vehicle ([`Ekf::update_relative`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelativeObservation {
+    /// The landmark.
+    pub id: LandmarkId,
+    /// Where it is from the vehicle: `R(theta)^T (L - p)` horizontally (x ahead, y left), its
+    /// world height, metres.
+    pub position: Vector3<f64>,
+    /// The covariance of `position`, m^2.
+    pub covariance: Matrix3<f64>,
+}
+
+/// A relative update's passes stop once no state moved by more than this (metres, radians).
+const RELATIVE_STEP_TOLERANCE: f64 = 1e-6;
+
+/// One relative observation linearised at `at` (whitened by `w`, so its rows have unit
+/// variance), its innovation taken back to the prior's state `x0`:
+/// `nu = W (z - h(at)) - W H (x0 - at)`. The fourth row is empty.
+fn relative_obs(
+    at: &DVector<f64>,
+    x0: &DVector<f64>,
+    li: usize,
+    o: &RelativeObservation,
+    w: &Matrix3<f64>,
+) -> Obs {
+    let g = |i: usize| at.get(i).copied().unwrap_or(0.0);
+    let (px, py, theta) = (g(0), g(1), g(2));
+    let (lx, ly, lz) = (g(li), g(li + 1), g(li + 2));
+    let (s, c) = (libm::sin(theta), libm::cos(theta));
+    let (dx, dy) = (lx - px, ly - py);
+    let h = Vector3::new(c * dx + s * dy, -s * dx + c * dy, lz);
+    // Columns: x, y, theta, Lx, Ly, Lz.
+    let jac = nalgebra::SMatrix::<f64, 3, 6>::from_row_slice(&[
+        -c,
+        -s,
+        -s * dx + c * dy,
+        c,
+        s,
+        0.0, //
+        s,
+        -c,
+        -c * dx - s * dy,
+        -s,
+        c,
+        0.0, //
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        1.0,
+    ]);
+    let wh = w * jac;
+    let wnu = w * (o.position - h);
+    let mut out = Obs {
+        cols: [0; MAX_INVOLVED],
+        h: [[0.0; MAX_INVOLVED]; 4],
+        q: 6,
+        nu: [0.0; 4],
+        r: [1.0; 4],
+    };
+    for (t, col) in [0, 1, 2, li, li + 1, li + 2].into_iter().enumerate() {
+        if let Some(c) = out.cols.get_mut(t) {
+            *c = col;
+        }
+        for r in 0..3 {
+            if let Some(v) = out.h.get_mut(r).and_then(|row| row.get_mut(t)) {
+                *v = wh[(r, t)];
+            }
+        }
+    }
+    let back = state_step(x0, at, &out);
+    for r in 0..3 {
+        if let Some(v) = out.nu.get_mut(r) {
+            *v = wnu[r] - back[r];
         }
     }
     out
@@ -339,6 +419,155 @@ impl Ekf {
                 if self.remove_landmark(id).is_ok() {
                     report.removed.push(id);
                 }
+            }
+        }
+        Ok(report)
+    }
+
+    /// Updates with landmarks seen as points relative to the vehicle (not as pixels): each
+    /// `position` is the landmark in the vehicle's frame now (x ahead, y left, z the height in
+    /// the world), with its covariance. This is how lamps held out of the map while the pose
+    /// was lost (triangulated over several frames in the dead-reckoned world, then carried to
+    /// the vehicle's frame now) close a loop once their constellation names the landmarks they
+    /// are: `h(x) = R(theta)^T (L - p)` for the horizontal part, `L_z` for the height.
+    ///
+    /// The update is iterated (Gauss-Newton on the prior and the observations, as on a lost
+    /// pose), its first linearisation at `guess` (where the constellation puts the vehicle;
+    /// the prior's mean and covariance are unchanged, so the result is the maximum a
+    /// posteriori estimate of the prior and these observations). Observations outside the
+    /// gate of the first pass are left out of every pass. On an error nothing changes.
+    pub fn update_relative(
+        &mut self,
+        batch: &[RelativeObservation],
+        guess: Pose2,
+    ) -> Result<UpdateReport, Error> {
+        if let Some(&value) = [guess.x, guess.y, guess.theta]
+            .iter()
+            .find(|v| !v.is_finite())
+        {
+            return Err(Error::NonFinite {
+                what: "pose to linearise a relative update at",
+                value,
+            });
+        }
+        let mut slots: Vec<usize> = Vec::with_capacity(batch.len());
+        let mut whiten: Vec<Matrix3<f64>> = Vec::with_capacity(batch.len());
+        for o in batch {
+            if let Some(&value) = o
+                .position
+                .iter()
+                .chain(o.covariance.iter())
+                .find(|v| !v.is_finite())
+            {
+                return Err(Error::NonFinite {
+                    what: "relative observation of a landmark",
+                    value,
+                });
+            }
+            let s = self.slot(o.id).ok_or(Error::UnknownLandmark { id: o.id })?;
+            if slots.contains(&s) {
+                return Err(Error::DuplicateObservation { id: o.id });
+            }
+            slots.push(s);
+            // `W = L^-1` with `covariance = L L^T`: the whitened rows have unit variance.
+            let l = o
+                .covariance
+                .cholesky()
+                .ok_or(Error::InnovationNotPositiveDefinite {
+                    observations: batch.len(),
+                })?
+                .l();
+            let w = l
+                .try_inverse()
+                .ok_or(Error::InnovationNotPositiveDefinite {
+                    observations: batch.len(),
+                })?;
+            whiten.push(w);
+        }
+        self.prepare_local(&slots);
+        let mut ws = core::mem::take(&mut self.workspace);
+        let prior = self.clone();
+        let health = self.health.clone();
+        let mut at = self.x.clone();
+        at[0] = guess.x;
+        at[1] = guess.y;
+        at[2] = guess.theta;
+        let order: Vec<usize> = (0..batch.len()).collect();
+        let mut nis: Vec<f64> = alloc::vec![f64::INFINITY; batch.len()];
+        let mut kept: Vec<usize> = order.clone();
+        let mut result = Ok(());
+        for pass in 0..ITERATE_MAX_PASSES {
+            let obs: Vec<Obs> = kept
+                .iter()
+                .filter_map(|&b| {
+                    let (o, &s, w) = (batch.get(b)?, slots.get(b)?, whiten.get(b)?);
+                    Some(relative_obs(&at, &prior.x, StateLayout::landmark(s), o, w))
+                })
+                .collect();
+            let mut candidate = prior.clone();
+            let mut pass_nis = alloc::vec![f64::INFINITY; obs.len()];
+            let pass_order: Vec<usize> = (0..obs.len()).collect();
+            if let Err(e) = candidate.gate_and_update(&obs, &pass_order, &mut pass_nis, &mut ws) {
+                if pass == 0 {
+                    result = Err(e);
+                }
+                break;
+            }
+            if pass == 0 {
+                // The first pass's gate decides which observations take part.
+                for (&b, &v) in kept.iter().zip(&pass_nis) {
+                    if let Some(slot) = nis.get_mut(b) {
+                        *slot = v;
+                    }
+                }
+                let accepted: Vec<usize> = kept
+                    .iter()
+                    .copied()
+                    .filter(|&b| nis.get(b).is_some_and(|&v| v <= self.gate))
+                    .collect();
+                if accepted.len() != kept.len() {
+                    // Applied again without the rejected ones (their gate was the prior's).
+                    kept = accepted;
+                    if kept.is_empty() {
+                        break;
+                    }
+                    continue;
+                }
+            }
+            let step = candidate
+                .x
+                .iter()
+                .zip(at.iter())
+                .enumerate()
+                .map(|(i, (a, b))| if i == 2 { wrap_angle(a - b) } else { a - b })
+                .fold(0.0f64, |m, d| m.max(d.abs()));
+            at = candidate.x.clone();
+            *self = candidate;
+            if step < RELATIVE_STEP_TOLERANCE {
+                break;
+            }
+        }
+        self.workspace = ws;
+        self.health = health;
+        if let Err(e) = result {
+            let ws = core::mem::take(&mut self.workspace);
+            *self = prior;
+            self.workspace = ws;
+            self.health.refused_updates += 1;
+            return Err(e);
+        }
+        let mut report = UpdateReport::default();
+        if !kept.is_empty() {
+            self.health.updates += 1;
+            self.health.iterated_updates += 1;
+        }
+        for (b, o) in batch.iter().enumerate() {
+            let v = nis.get(b).copied().unwrap_or(f64::INFINITY);
+            let gated = Gated { id: o.id, nis: v };
+            if kept.contains(&b) {
+                report.accepted.push(gated);
+            } else {
+                report.rejected.push(gated);
             }
         }
         Ok(report)
@@ -713,7 +942,7 @@ impl Ekf {
         &mut self,
         ia: usize,
         ib: usize,
-        d: &nalgebra::Vector3<f64>,
+        d: &Vector3<f64>,
     ) -> Result<bool, Error> {
         let Some(l) = self.local.as_deref() else {
             return Ok(false);

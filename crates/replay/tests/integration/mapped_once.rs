@@ -10,12 +10,20 @@ use replay::{NavSettings, Replayer, TruthErrors};
 
 /// `name` simulated with `seed` (the scenario's own without), replayed with no flags.
 fn replayed(name: &str, seed: Option<u64>) -> (TruthErrors, u64) {
+    replayed_with(name, seed, None)
+}
+
+/// [`replayed`], the lamps laid out from `world` (`[world] seed`) when given.
+fn replayed_with(name: &str, seed: Option<u64>, world: Option<u64>) -> (TruthErrors, u64) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../fixtures/scenarios")
         .join(name);
     let mut scenario = sim::Scenario::load(&path).unwrap();
     if let Some(seed) = seed {
         scenario = scenario.with_seed(seed);
+    }
+    if let Some(world) = world {
+        scenario = scenario.with_world_seed(world);
     }
     let run = sim::simulate(&scenario, sim::Mode::Fast).unwrap();
     static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
@@ -84,50 +92,59 @@ fn the_radtan_hall_maps_each_lamp_once() {
 }
 
 /// Item 2 of the issue, a loop closed when drift has grown past the gate: `hall-loop.toml`
-/// (poor odometry, 100 m without lamps, then the first lamps again, 2.8 m of pose sigma).
-/// It once made 53 landmarks for 40 lamps: the single linear update of the first lamp seen
-/// again left the pose 0.5 m and 3 degrees off with a 0.08 m sigma, and the smoother's next
-/// solve (its window linearised where dead reckoning had put it) took the odometry scale to
-/// 0.70; the update now iterates on a pose that uncertain and the filter refuses a solve
-/// outside its own uncertainty (docs/halls.md, "Loops").
+/// (poor odometry, 100 m without lamps, then the lamps again, 2.8 m of pose sigma). Single
+/// lamps matched from the lost pose closed this seed (3.0 mm) but made wrong maps on ten of
+/// the seventeen variants below; the lamps are now held while lost and the loop closed when
+/// their constellation is recognised (docs/halls.md, "Loops"). Two lamps of the return lane,
+/// seen only while held and seconds before the place was recognised, are mapped from where
+/// they were held: one 66 mm off, one beyond the match radius (counted missed).
 #[test]
 fn a_loop_through_a_dark_stretch_is_closed() {
     let (t, _) = replayed("hall-loop.toml", None);
-    assert_once(&t, "hall-loop", 0, 0.010);
+    assert_once(&t, "hall-loop", 1, 0.020);
 }
 
-/// A floor under loop closure (slow tier): over the scenario's seed and eight more noise
-/// seeds (the lamp grid unchanged), the loop closes, every lamp one landmark within the match
-/// radius and no twin, on at least five. Measured 2026-12-05: 52, 53, 57, 59, 60 close; 54,
-/// 55, 56 and 58 do not (the first lamp seen again is bound to a neighbour's landmark,
-/// docs/halls.md "Loops"). Every seed closing is the target (the ignored test below).
+/// The loop over seventeen variants (slow tier): the scenario's noise reseeded (seeds 52 to
+/// 60) and its lamp grid too (seeds 53 to 60, world seeds 3536 to 3543). Never a wrong map or
+/// a twin, on any: no duplicate, at most one landmark beyond the match radius. Closed (at
+/// most two lamps missed, landmark RMS within 55 mm) on at least 14. Measured 2026-12-05:
+/// closed on all but three of the reseeded grids, where the return lane sees no mapped lamp
+/// and the place is recognised only back on the first lane, after the return lane's held
+/// lamps have aged out (15 or 16 lamps missed, none wrong).
 #[test]
-fn slow_loops_through_a_dark_stretch_close_on_most_seeds() {
+fn slow_loops_through_a_dark_stretch_close_without_a_wrong_map() {
     let mut closed = Vec::new();
-    for seed in 52..61 {
-        let (t, _) = replayed("hall-loop.toml", Some(seed));
-        if t.landmarks_duplicate == 0
-            && t.lamps_missed == 0
-            && t.landmarks_unmatched == 0
-            && t.landmark_rms <= 0.050
-        {
-            closed.push(seed);
+    let variants = (52..61)
+        .map(|seed| (seed, None))
+        .chain((53..61).map(|seed| (seed, Some(seed + 3535 - 52))));
+    for (seed, world) in variants {
+        let (t, _) = replayed_with("hall-loop.toml", Some(seed), world);
+        let d = format!("seed {seed}, world {world:?}: {t:?}");
+        assert_eq!(t.landmarks_duplicate, 0, "{d}");
+        assert!(t.landmarks_unmatched <= 1, "{d}");
+        if t.lamps_missed <= 2 && t.landmark_rms <= 0.055 {
+            closed.push((seed, world));
         }
     }
-    assert!(closed.len() >= 5, "closed on {closed:?} only");
+    assert!(closed.len() >= 14, "closed on {closed:?} only");
 }
 
-/// The same loop over other noise seeds. Measured by hand with the lamp jitter reseeded too:
-/// closed on 3 of 9 variants (docs/halls.md, "Loops"). On the others the first lamp
-/// seen again is taken for a neighbour not yet mapped (the only landmark in its gate) and the
-/// update moves the pose one grid spacing; matching the lamps of a frame as a constellation
-/// while the pose is lost is the fix, and it waits on the filter's spurious heading
-/// information from lamps mapped while lost (docs/halls.md, "Loops").
+/// Every variant closed with every lamp mapped: needs the lamps held while lost kept precise
+/// over the whole lost stretch (their path, not only the pose now), or the place recognised
+/// from fewer lamps.
 #[test]
-#[ignore = "unfinished: loops closed by constellation (issue 35 item 2) are not built"]
+#[ignore = "unfinished: lamps seen only while lost are mapped only if the place is recognised within seconds"]
 fn loops_through_dark_stretches_are_closed_on_every_seed() {
-    for seed in 53..61 {
-        let (t, _) = replayed("hall-loop.toml", Some(seed));
-        assert_once(&t, &format!("hall-loop seed {seed}"), 0, 0.050);
+    let variants = (52..61)
+        .map(|seed| (seed, None))
+        .chain((53..61).map(|seed| (seed, Some(seed + 3535 - 52))));
+    for (seed, world) in variants {
+        let (t, _) = replayed_with("hall-loop.toml", Some(seed), world);
+        assert_once(
+            &t,
+            &format!("hall-loop seed {seed}, world {world:?}"),
+            0,
+            0.050,
+        );
     }
 }

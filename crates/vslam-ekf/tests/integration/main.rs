@@ -10,6 +10,7 @@ mod common;
 mod consider;
 mod jacobians;
 mod merge;
+mod relative;
 mod simulation;
 mod update;
 mod vehicle;

@@ -393,7 +393,7 @@ fn predicted_measurement_and_visibility() {
 }
 
 /// The filter, the batch, and the prior's state and covariance.
-type LoopClosure = (
+pub(crate) type LoopClosure = (
     Setup,
     Vec<(LandmarkId, Measurement)>,
     DVector<f64>,
@@ -402,7 +402,7 @@ type LoopClosure = (
 
 /// A loop closed after a long dark stretch: the map precise, the pose a metre and several
 /// degrees uncertain (and that far off), three landmarks measured from the true pose.
-fn loop_closure_setup(seed: u64) -> LoopClosure {
+pub(crate) fn loop_closure_setup(seed: u64) -> LoopClosure {
     let mut s = setup(seed, 0, 4, Settings::default());
     let mut rng = rng(seed + 77);
     let n = s.ekf.state_len();
