@@ -177,7 +177,12 @@ fn human_summary(log: &std::path::Path, r: &ReplayEnd, took: Duration) -> String
         1 => " (1 more merged into another as the same lamp)".to_string(),
         n => format!(" ({n} more merged into others as the same lamps)"),
     };
-    let _ = writeln!(s, "map: {} landmarks{merged}", r.landmarks.len());
+    let loops = match r.counts.loops_closed {
+        0 => String::new(),
+        1 => "; 1 loop closed by the constellation of lamps held while lost".to_string(),
+        n => format!("; {n} loops closed by the constellation of lamps held while lost"),
+    };
+    let _ = writeln!(s, "map: {} landmarks{merged}{loops}", r.landmarks.len());
     for p in r.final_camera.iter().filter(|p| p.sigma > 0.0) {
         let name = p.param.name();
         let (scale, unit) = p.param.display_unit();

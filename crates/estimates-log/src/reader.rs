@@ -395,6 +395,9 @@ impl At<'_> {
             // Absent from estimates files written before the map-level guard (issue 35).
             landmarks_merged: self.uint(c, "landmarks_merged").unwrap_or(0),
             features_outside_field: self.uint(c, "features_outside_field").unwrap_or(0),
+            // Absent from estimates files written before loops were closed by constellation.
+            loops_closed: self.uint(c, "loops_closed").unwrap_or(0),
+            lamps_held_mapped: self.uint(c, "lamps_held_mapped").unwrap_or(0),
         })
     }
 

@@ -196,11 +196,17 @@ pub struct Counts {
     /// Board features outside the navigator's field of use through a lens, left out
     /// (`nav::NavStats::features_outside_field`).
     pub features_outside_field: u64,
+    /// Loops closed by the constellation of lamps held while the pose was lost
+    /// (`nav::NavStats::loops_closed`).
+    pub loops_closed: u64,
+    /// Lamps held while the pose was lost and mapped from where they were held
+    /// (`nav::NavStats::held_mapped`).
+    pub lamps_held_mapped: u64,
 }
 
 impl Counts {
     /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 19] {
+    pub fn named(&self) -> [(&'static str, u64); 21] {
         [
             ("frames", self.frames),
             ("corrupt", self.corrupt),
@@ -221,6 +227,8 @@ impl Counts {
             ("log_time_lost_ms", self.log_time_lost_ms),
             ("landmarks_merged", self.landmarks_merged),
             ("features_outside_field", self.features_outside_field),
+            ("loops_closed", self.loops_closed),
+            ("lamps_held_mapped", self.lamps_held_mapped),
         ]
     }
 }

@@ -276,6 +276,9 @@ pub struct NavStats {
     /// Lamps held while lost and mapped from their held positions once the loop was closed
     /// (or, no place recognised, once the navigator gave up holding).
     pub held_mapped: u64,
+    /// Times the navigator, lost, recognised no place in [`LOOP_GIVE_UP_LAMPS`] held lamps
+    /// and mapped on as on new ground.
+    pub loops_given_up: u64,
     /// Board features the lens model could not map into the rectified image (dropped).
     pub features_unmapped: u64,
     /// Board features mapped, but outside the field of use and left out
@@ -1197,6 +1200,7 @@ impl Navigator {
                 map_held(ekf, &self.held, &mut self.candidates, &[], &mut self.stats)?;
                 self.held.clear();
                 self.gave_up_holding = true;
+                self.stats.loops_given_up += 1;
             }
             if !closed && !self.gave_up_holding {
                 held = unbound
@@ -1463,7 +1467,7 @@ pub const MATCH_MAX_POSE_SIGMA_M: f64 = 0.5;
 
 /// Lamps held while lost (seen in [`loops::MIN_FRAMES`] frames) after which, with no place
 /// recognised, the navigator maps again (new ground).
-const LOOP_GIVE_UP_LAMPS: usize = 30;
+pub const LOOP_GIVE_UP_LAMPS: usize = 30;
 
 /// A lamp held while lost is mapped when the loop closes only if its position relative to
 /// the vehicle is known this well (one sigma, metres): dead reckoning since it was seen

@@ -53,6 +53,8 @@ COUNTS = {
     "log_time_lost_ms",
     "landmarks_merged",
     "features_outside_field",
+    "loops_closed",
+    "lamps_held_mapped",
 }
 
 

@@ -513,6 +513,8 @@ impl Replayer {
         counts.phase1_solves = stats.phase1_solves;
         counts.landmarks_merged = stats.landmarks_merged;
         counts.features_outside_field = stats.features_outside_field;
+        counts.loops_closed = stats.loops_closed;
+        counts.lamps_held_mapped = stats.held_mapped;
         let damage = self.stream.reader().damage();
         counts.log_spans_lost = damage.spans_total;
         counts.log_bytes_lost = damage.bytes_lost;
@@ -643,6 +645,25 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
         warnings.push(format!(
             "{} frame(s) had no odometry since the frame before: the pose was held there",
             stats.frames_without_odometry
+        ));
+    }
+    if stats.loops_given_up > 0 {
+        warnings.push(format!(
+            "the pose was lost (more than {} m uncertain) and {} lamps seen then matched no place of the map{}: they were mapped as new ground",
+            nav::MATCH_MAX_POSE_SIGMA_M,
+            nav::LOOP_GIVE_UP_LAMPS,
+            if stats.loops_given_up > 1 {
+                format!(" ({} times)", stats.loops_given_up)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    let held = navigator.held_lamps().len();
+    if held > 0 {
+        warnings.push(format!(
+            "the log ended with the pose lost (more than {} m uncertain): {held} lamp(s) seen since were held out of the map and are not in it",
+            nav::MATCH_MAX_POSE_SIGMA_M
         ));
     }
     if stats.odometry_dropped > 0 {

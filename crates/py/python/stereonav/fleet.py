@@ -89,6 +89,8 @@ _COUNTS: tuple[str, ...] = (
     "log_time_lost_ms",
     "landmarks_merged",
     "features_outside_field",
+    "loops_closed",
+    "lamps_held_mapped",
 )
 
 _PARAMETERS: tuple[str, ...] = CAMERA_PARAMETERS + VEHICLE_PARAMETERS

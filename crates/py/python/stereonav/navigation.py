@@ -222,8 +222,10 @@ class Replay:
         of phase 1's batch over every frame), and what a damaged log lost:
         ``log_spans_lost``, ``log_bytes_lost``, ``log_chunks_lost``, ``log_time_lost_ms``
         (docs/logs.md), ``landmarks_merged`` (landmarks the map-level guard merged into
-        another as the same lamp) and ``features_outside_field`` (board features outside the
-        field of use through a lens; docs/halls.md).
+        another as the same lamp), ``features_outside_field`` (board features outside the
+        field of use through a lens; docs/halls.md), ``loops_closed`` (loops closed by the
+        constellation of the lamps held while the pose was lost) and ``lamps_held_mapped``
+        (those lamps mapped from where they were held; docs/halls.md, "Loops").
     warnings : tuple of str
         What limits the result without stopping it (a log cut short, phase 1 never stable,
         frames without odometry, updates the filter refused), one line each.

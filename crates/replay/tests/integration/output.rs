@@ -733,6 +733,8 @@ fn summary_has_the_contract_keys_and_types() {
             "log_time_lost_ms",
             "landmarks_merged",
             "features_outside_field",
+            "loops_closed",
+            "lamps_held_mapped",
         ])
     );
     assert!(s["counts"].as_object().unwrap().values().all(Value::is_u64));
