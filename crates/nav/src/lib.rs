@@ -284,6 +284,9 @@ pub struct NavStats {
     /// Board features mapped, but outside the field of use and left out
     /// ([`vslam_ekf::Settings::max_off_axis_deg`]).
     pub features_outside_field: u64,
+    /// Stereo pairs in the outer band beyond the field of use whose noise the lens stretches
+    /// more than `vslam_ekf::Settings::outer_max_noise_gain`, left out.
+    pub observations_outer_unused: u64,
     /// Bound observations the update's budget left out (`CandidateSettings::max_observations`).
     pub observations_skipped: u64,
     /// Brief landmarks removed (`CandidateSettings::brief_observations`).
@@ -870,7 +873,11 @@ impl Navigator {
             &self.rig,
             left,
             right,
-            self.settings.ekf.max_off_axis_deg.to_radians(),
+            self.settings
+                .ekf
+                .outer_off_axis_deg
+                .max(self.settings.ekf.max_off_axis_deg)
+                .to_radians(),
         );
         let (left, right) = match &rectified {
             Some(r) => {
@@ -880,15 +887,56 @@ impl Navigator {
             }
             None => (left, right),
         };
-        let tracked = self.front_end.push_frame(t_us, left, right);
-        if let Some(pairs) = &mut self.frame_pairs {
-            pairs.push_frame(&tracked);
+        let mut tracked = self.front_end.push_frame(t_us, left, right);
+        if self.rig.lens.is_some() {
+            // The outer band's pairs whose noise the lens stretches too much are not used
+            // (`rig_model::lens::StereoField`).
+            let c = &self.rig.nominal;
+            let e = &self.settings.ekf;
+            let field = rig_model::lens::StereoField::new(
+                e.max_off_axis_deg.to_radians(),
+                e.outer_off_axis_deg.to_radians(),
+                e.outer_max_noise_gain,
+                c.f,
+                c.cx,
+                c.cy,
+            );
+            let pixel_noise = self.front_end.model().pixel_noise;
+            let before = tracked.observations.len();
+            tracked
+                .observations
+                .retain(|o| field.uses(&o.measurement, &pixel_noise.gains(&o.measurement).into()));
+            self.stats.observations_outer_unused += (before - tracked.observations.len()) as u64;
+        }
+        // Phase 1's batch and the frame pairs take the field of use only: the outer band's
+        // pairs would update everything there (`vslam_ekf::Settings::outer_off_axis_deg`).
+        let inner = (self.frame_pairs.is_some() || self.ekf.is_none()).then(|| {
+            let mut t = tracked.clone();
+            if self.rig.lens.is_some() {
+                let c = &self.rig.nominal;
+                let field = rig_model::lens::FieldOfUse::new(
+                    self.settings.ekf.max_off_axis_deg.to_radians(),
+                    c.f,
+                    c.cx,
+                    c.cy,
+                );
+                t.observations.retain(|o| {
+                    let z = &o.measurement;
+                    field.contains(z[0], z[1]) && field.contains(z[2], z[3])
+                });
+            }
+            t
+        });
+        if let (Some(pairs), Some(inner)) = (&mut self.frame_pairs, &inner) {
+            pairs.push_frame(inner);
             return Ok(outcome);
         }
-        if self.ekf.is_none() {
+        if self.ekf.is_none()
+            && let Some(inner) = &inner
+        {
             // The frame's motion goes to phase 1's batch; phase 2 takes it only from the next
             // frame on (the frame of the switch is the batch's last).
-            self.phase1(&tracked, phase1_motion.take(), &mut outcome)?;
+            self.phase1(inner, phase1_motion.take(), &mut outcome)?;
         }
         // The frame of the switch is the batch's last: its pixels are in the hand-over already.
         if self.ekf.is_some() && !outcome.switched {
@@ -1046,13 +1094,20 @@ impl Navigator {
         };
         let mut observations: Vec<(usize, rig_model::Measurement)> = Vec::new();
         let mut added: Vec<(LandmarkId, u64, rig_model::Measurement)> = Vec::new();
+        // Pairs in the outer band update only their own landmark in the filter
+        // (`Ekf::in_outer_band`): the smoother, which would let them move everything, leaves
+        // them out.
         for id in &outcome.added {
-            if let Some((track, z)) = measurement_of(*id) {
+            if let Some((track, z)) = measurement_of(*id)
+                && !ekf.in_outer_band(&z)
+            {
                 added.push((*id, track, z));
             }
         }
         for (id, _) in &outcome.accepted {
-            if let (Some(&j), Some((_, z))) = (self.smoothed.get(id), measurement_of(*id)) {
+            if let (Some(&j), Some((_, z))) = (self.smoothed.get(id), measurement_of(*id))
+                && !ekf.in_outer_band(&z)
+            {
                 observations.push((j, z));
             }
         }

@@ -449,6 +449,48 @@ impl FieldOfUse {
     }
 }
 
+/// Where a stereo measurement `(uL, vL, uR, vR)` is used: every pair inside the field of use
+/// ([`FieldOfUse`]), and in an outer band beyond it only the pairs whose rectified pixels
+/// carry the raw noise stretched no more than `max_gain` times in variance
+/// ([`PixelNoise::gains`]). A barrel lens's corners stretch it little and their lamps are
+/// worth mapping; a fisheye's far-out rays stretch it tens of times, and used, they pulled the
+/// map's scale off (docs/halls.md, "A fisheye's outer band").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StereoField {
+    inner: FieldOfUse,
+    outer: FieldOfUse,
+    max_gain: f64,
+}
+
+impl StereoField {
+    /// The field of use of half-angle `inner_rad` and the outer band out to `outer_rad`
+    /// (no band when it is not beyond `inner_rad`), of a rectified camera of focal length `f`
+    /// and principal point `(cx, cy)`.
+    pub fn new(inner_rad: f64, outer_rad: f64, max_gain: f64, f: f64, cx: f64, cy: f64) -> Self {
+        Self {
+            inner: FieldOfUse::new(inner_rad, f, cx, cy),
+            outer: FieldOfUse::new(outer_rad.max(inner_rad), f, cx, cy),
+            max_gain,
+        }
+    }
+
+    /// Whether the pair `z` is inside the field of use (both points).
+    pub fn inner_contains(&self, z: &crate::Measurement) -> bool {
+        self.inner.contains(z[0], z[1]) && self.inner.contains(z[2], z[3])
+    }
+
+    /// Whether the pair `z` is used, `gains` its four coordinates' variance gains: inside the
+    /// field of use, or inside the outer band with no gain above `max_gain`.
+    pub fn uses(&self, z: &crate::Measurement, gains: &[f64; 4]) -> bool {
+        if self.inner_contains(z) {
+            return true;
+        }
+        self.outer.contains(z[0], z[1])
+            && self.outer.contains(z[2], z[3])
+            && gains.iter().all(|g| g.is_finite() && *g <= self.max_gain)
+    }
+}
+
 /// The noise of a stereo measurement `(uL, vL, uR, vR)` in the rectified image.
 ///
 /// The rig's `[noise] pixel` is the noise of a raw board feature (vehicle-interfaces.md 1.1);
@@ -528,6 +570,34 @@ impl PixelNoise {
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
+
+    /// Inside the field of use every pair is used; in the band beyond it, only pairs whose
+    /// noise the lens stretches no more than the bound; beyond the band, none.
+    #[test]
+    fn the_stereo_field_takes_the_band_s_pairs_by_their_noise_gain() {
+        let field = StereoField::new(
+            50f64.to_radians(),
+            70f64.to_radians(),
+            4.0,
+            200.0,
+            376.0,
+            240.0,
+        );
+        let at = |deg: f64| {
+            let u = 376.0 + 200.0 * deg.to_radians().tan();
+            crate::Measurement::new(u, 240.0, u - 5.0, 240.0)
+        };
+        let low = [1.5; 4];
+        let high = [9.0; 4];
+        assert!(field.uses(&at(30.0), &high));
+        assert!(field.inner_contains(&at(30.0)));
+        assert!(field.uses(&at(60.0), &low));
+        assert!(!field.uses(&at(60.0), &high));
+        assert!(!field.inner_contains(&at(60.0)));
+        assert!(!field.uses(&at(75.0), &low));
+        assert!(!field.uses(&at(60.0), &[1.5, 1.5, f64::NAN, 1.5]));
+    }
+
     use super::*;
 
     /// EuRoC's cam0 (the rig file example of vehicle-interfaces.md section 3).

@@ -91,6 +91,16 @@ pub struct Settings {
     /// fisheye's outer band": 50 degrees kept the maps of 8 generated fisheye halls honest,
     /// 65 did not). 90 uses every ray in front of the camera; no effect without lens tables.
     pub max_off_axis_deg: f64,
+    /// The outer band beyond the field of use, degrees from the axis: a stereo pair there
+    /// updates only its own landmark (`Ekf::update`'s landmark-only update), so that lamps
+    /// seen only off to the side are mapped without their far-out rays moving the pose, the
+    /// camera or the map's scale. At or below `max_off_axis_deg`: no band.
+    pub outer_off_axis_deg: f64,
+    /// The largest variance gain of the lens's noise ([`PixelNoise::gains`]) a pair in the
+    /// outer band may have to be used at all (`rig_model::lens::StereoField`): a barrel
+    /// lens's corners stretch the noise little; a fisheye's far-out rays, tens of times, and
+    /// their landmarks came out biased even with the update confined to them.
+    pub outer_max_noise_gain: f64,
     /// Large states are updated in local sessions (`crate::local`, the compressed filter):
     /// the active landmarks are those within this many metres (horizontally) beyond the
     /// farthest one in view when a session opens, so that the vehicle can drive about as far
@@ -109,6 +119,8 @@ impl Default for Settings {
             covariance_update: CovarianceUpdate::Auto,
             camera_update: CameraUpdate::Refine,
             max_off_axis_deg: 50.0,
+            outer_off_axis_deg: 70.0,
+            outer_max_noise_gain: 4.0,
             local_margin_m: 1.0,
         }
     }
@@ -137,6 +149,22 @@ impl Settings {
                 name: "Settings.max_off_axis_deg",
                 value: a,
                 expected: "in (0, 90] degrees",
+            });
+        }
+        let o = self.outer_off_axis_deg;
+        if !(o.is_finite() && o > 0.0 && o <= 90.0) {
+            return Err(Error::BadValue {
+                name: "Settings.outer_off_axis_deg",
+                value: o,
+                expected: "in (0, 90] degrees",
+            });
+        }
+        let k = self.outer_max_noise_gain;
+        if !(k.is_finite() && k >= 1.0) {
+            return Err(Error::BadValue {
+                name: "Settings.outer_max_noise_gain",
+                value: k,
+                expected: "finite and at least 1",
             });
         }
         let m = self.local_margin_m;
@@ -242,6 +270,38 @@ impl Ekf {
         }
         let g = self.pixel_noise.gains(z);
         [r2 * g[0], r2 * g[1], r2 * g[2], r2 * g[3]]
+    }
+
+    /// Whether a stereo pair lies beyond the field of use (either point), in the outer band
+    /// ([`Settings::outer_off_axis_deg`]), with the rig's lens; never without lens tables.
+    pub fn in_outer_band(&self, z: &Measurement) -> bool {
+        if self.lens.is_none() || self.settings.outer_off_axis_deg <= self.settings.max_off_axis_deg
+        {
+            return false;
+        }
+        let c = self.camera();
+        let inner = rig_model::lens::FieldOfUse::new(
+            self.settings.max_off_axis_deg.to_radians(),
+            c.f,
+            c.cx,
+            c.cy,
+        );
+        !(inner.contains(z[0], z[1]) && inner.contains(z[2], z[3]))
+    }
+
+    /// Where the filter uses stereo pairs, with its current camera: the field of use and the
+    /// outer band's pairs whose noise the lens stretches little
+    /// ([`Settings::outer_off_axis_deg`], [`Settings::outer_max_noise_gain`]).
+    pub fn stereo_field(&self) -> rig_model::lens::StereoField {
+        let c = self.camera();
+        rig_model::lens::StereoField::new(
+            self.settings.max_off_axis_deg.to_radians(),
+            self.settings.outer_off_axis_deg.to_radians(),
+            self.settings.outer_max_noise_gain,
+            c.f,
+            c.cx,
+            c.cy,
+        )
     }
 
     /// The settings.

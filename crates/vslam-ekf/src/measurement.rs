@@ -235,17 +235,11 @@ impl Ekf {
         let pose = self.pose();
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         let inside_image = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
-        let field = rig_model::lens::FieldOfUse::new(
-            self.settings.max_off_axis_deg.to_radians(),
-            camera.f,
-            camera.cx,
-            camera.cy,
-        );
+        let field = self.stereo_field();
         let inside = |z: &Measurement| match &self.lens {
             None => inside_image(z[0], z[1]) && inside_image(z[2], z[3]),
             Some(lens) => {
-                field.contains(z[0], z[1])
-                    && field.contains(z[2], z[3])
+                field.uses(z, &self.pixel_noise.gains(z).into())
                     && lens.sees(z, camera.f, camera.cx, camera.cy, w, h)
             }
         };

@@ -333,7 +333,230 @@ impl Ekf {
     /// Each observation is linearised at the current estimate (eq. (8)) and gated on its own
     /// NIS first; the accepted ones are applied together.
     /// On an error nothing changes (the health counts refused updates).
+    ///
+    /// A pair in the outer band beyond the field of use ([`Ekf::in_outer_band`]) updates only
+    /// its own landmark ([`Ekf::landmark_only_update`]), after the others.
     pub fn update(&mut self, batch: &[(LandmarkId, Measurement)]) -> Result<UpdateReport, Error> {
+        if !batch.iter().any(|(_, z)| self.in_outer_band(z)) {
+            return self.update_within(batch);
+        }
+        let mut slots: Vec<usize> = Vec::with_capacity(batch.len());
+        for (id, z) in batch {
+            if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
+                return Err(Error::NonFiniteMeasurement { id: *id, value });
+            }
+            let s = self.slot(*id).ok_or(Error::UnknownLandmark { id: *id })?;
+            if slots.contains(&s) {
+                return Err(Error::DuplicateObservation { id: *id });
+            }
+            slots.push(s);
+        }
+        let mut outer: Vec<(LandmarkId, Measurement)> = Vec::new();
+        let mut inner: Vec<(LandmarkId, Measurement)> = Vec::new();
+        for &(id, z) in batch {
+            if self.in_outer_band(&z) {
+                outer.push((id, z));
+            } else {
+                inner.push((id, z));
+            }
+        }
+        let mut report = self.update_within(&inner)?;
+        for (id, z) in outer {
+            let Some(s) = self.slot(id) else {
+                continue;
+            };
+            let (nis, accepted) = match self.landmark_only_update(s, &z) {
+                Ok(Some(r)) => r,
+                Ok(None) => continue,
+                Err(_) => (f64::INFINITY, false),
+            };
+            self.health.record(accepted.then_some(nis));
+            let gated = Gated { id, nis };
+            if let Some(slot) = self.landmarks.get_mut(s) {
+                if accepted {
+                    slot.observations += 1;
+                    slot.rejections_in_a_row = 0;
+                } else {
+                    slot.rejections_in_a_row = slot.rejections_in_a_row.saturating_add(1);
+                }
+            }
+            if accepted {
+                report.accepted.push(gated);
+            } else {
+                report.rejected.push(gated);
+            }
+        }
+        Ok(report)
+    }
+
+    /// A stereo pair of landmark slot `s` in the outer band: a Schmidt ("consider") update of
+    /// that landmark alone. The gain's rows for every other state are zero, `K = [0; K_L; 0]`
+    /// with `K_L = (P H^T)_L S^-1`, and the covariance is the Joseph form's for that gain:
+    /// only the landmark's rows and columns change, `P_L. -= K_L H P` (Simon, "Optimal State
+    /// Estimation", 7.5). So far-out rays, whose rectified pixels carry the raw noise
+    /// stretched tens of times and pulled the map's scale off when they updated everything
+    /// (docs/halls.md, "A fisheye's outer band"), map their lamp and move nothing else; the
+    /// pose's, the camera's and the other landmarks' uncertainty is in `S`. Returns the NIS
+    /// and whether it was inside the gate (outside it nothing changes). In a local session the
+    /// change is committed there (`Local::commit`, rank 6) when the involved states are
+    /// active; a pair of a passive landmark is left out (`None`).
+    pub(crate) fn landmark_only_update(
+        &mut self,
+        s: usize,
+        z: &Measurement,
+    ) -> Result<Option<(f64, bool)>, Error> {
+        let camera = self.camera();
+        let pose = self.pose();
+        let id = self.landmarks.get(s).map_or(LandmarkId(u64::MAX), |l| l.id);
+        let (predicted, o) = self.observation_model(s, &camera, &pose)?;
+        let nu = z - predicted;
+        let r = self.measurement_variances(&predicted);
+        let li = StateLayout::landmark(s);
+        let cols: Vec<usize> = o.cols.iter().copied().take(o.q).collect();
+        let active = |e: &Ekf, c: usize| {
+            e.local.as_deref().and_then(|l| match l.place.get(c) {
+                Some(&Place::Active(k)) => Some(k),
+                _ => None,
+            })
+        };
+        if self.local.is_some() && cols.iter().any(|&c| active(self, c).is_none()) {
+            // A passive landmark (the vehicle has moved on): settling the session for one
+            // far-out pair costs more than the pair is worth; it is left out.
+            return Ok(None);
+        }
+        // P H^T over the rows that change or that S needs: the session's active rows (and
+        // phi^T H^T for its passive share), or every row when dense.
+        let n = self.x.len();
+        let in_session = self.local.is_some();
+        let rows: Vec<usize> = match self.local.as_deref() {
+            Some(l) => l.active.clone(),
+            None => (0..n).collect(),
+        };
+        let mut pht = alloc::vec![[0.0f64; 4]; rows.len()];
+        for (a, &i) in rows.iter().enumerate() {
+            for (t, &c) in cols.iter().enumerate() {
+                let pic = self.cov(i, c);
+                for (rr, out) in pht[a].iter_mut().enumerate() {
+                    *out += pic * o.h[rr][t];
+                }
+            }
+        }
+        let row_of = |i: usize| rows.iter().position(|&r| r == i);
+        let mut s_mat = Matrix4::<f64>::zeros();
+        for (t, &c) in cols.iter().enumerate() {
+            let Some(a) = row_of(c) else {
+                return Err(Error::InnovationNotPositiveDefinite { observations: 1 });
+            };
+            for rr in 0..4 {
+                for cc in 0..4 {
+                    s_mat[(rr, cc)] += o.h[rr][t] * pht[a][cc];
+                }
+            }
+        }
+        for (rr, v) in r.iter().enumerate() {
+            s_mat[(rr, rr)] += v;
+        }
+        let s_mat = 0.5 * (s_mat + s_mat.transpose());
+        let chol = s_mat
+            .cholesky()
+            .ok_or(Error::InnovationNotPositiveDefinite { observations: 1 })?;
+        let nis = nu.dot(&chol.solve(&nu));
+        if !(nis.is_finite() && nis <= self.gate) {
+            return Ok(Some((nis, false)));
+        }
+        // K_L (3 x 4) and the landmark's rows of P H^T.
+        let l_rows: [usize; 3] = core::array::from_fn(|k| li + k);
+        let mut l_at = [0usize; 3];
+        for (k, &i) in l_rows.iter().enumerate() {
+            l_at[k] = row_of(i).ok_or(Error::UnknownLandmark { id })?;
+        }
+        let k_l: [Vector4<f64>; 3] =
+            core::array::from_fn(|k| chol.solve(&Vector4::from(pht[l_at[k]])));
+        // M = K_L (H P)_L, symmetric: what P_LL loses.
+        let m = Matrix3::from_fn(|a, b| k_l[a].dot(&Vector4::from(pht[l_at[b]])));
+        let before: [f64; 3] = core::array::from_fn(|k| self.cov(l_rows[k], l_rows[k]));
+        for (k, b) in before.iter().enumerate() {
+            let after = b - m[(k, k)];
+            if !(after.is_finite() && after > 0.0) {
+                return Err(Error::VarianceNotPositive {
+                    index: l_rows[k],
+                    before: *b,
+                    after,
+                });
+            }
+        }
+        let dx: [f64; 3] = core::array::from_fn(|k| k_l[k].dot(&nu));
+        if in_session {
+            let Some(l) = self.local.as_deref_mut() else {
+                return Ok(None);
+            };
+            let (na, na0) = (l.n_active(), l.n_a0);
+            // phi^T H^T (n_A0 x 4): the passive share of P H^T.
+            let mut q = alloc::vec![[0.0f64; 4]; na0];
+            for (t, &c) in cols.iter().enumerate() {
+                let Some(&Place::Active(kc)) = l.place.get(c) else {
+                    continue;
+                };
+                if let Some(col) = l.phit.get(kc * na0..(kc + 1) * na0) {
+                    for (u, f) in col.iter().enumerate() {
+                        for (rr, out) in q[u].iter_mut().enumerate() {
+                            *out += f * o.h[rr][t];
+                        }
+                    }
+                }
+            }
+            // P -= C G^T with C = [e_L, W], G = [W - e_L M, e_L], W = P H^T K_L^T.
+            let d = 6;
+            let mut c_a = alloc::vec![0.0; na * d];
+            let mut g_a = alloc::vec![0.0; na * d];
+            let mut u = alloc::vec![0.0; na0 * d];
+            let mut v = alloc::vec![0.0; na0 * d];
+            for k in 0..3 {
+                for a in 0..na {
+                    let w = k_l[k].dot(&Vector4::from(pht[a]));
+                    c_a[(3 + k) * na + a] = w;
+                    g_a[k * na + a] = w;
+                }
+                c_a[k * na + l_at[k]] = 1.0;
+                g_a[(3 + k) * na + l_at[k]] = 1.0;
+                for (mm, &at) in l_at.iter().enumerate() {
+                    g_a[k * na + at] -= m[(mm, k)];
+                }
+                for uu in 0..na0 {
+                    let w = k_l[k].dot(&Vector4::from(q[uu]));
+                    u[(3 + k) * na0 + uu] = w;
+                    v[k * na0 + uu] = w;
+                }
+            }
+            l.commit(&c_a, &g_a, &u, &v, d);
+        } else {
+            // The landmark's new rows, from the old P (rows `rows` = every state).
+            let new_rows: [Vec<f64>; 3] = core::array::from_fn(|k| {
+                (0..n)
+                    .map(|j| {
+                        let hp = Vector4::from(pht[j]);
+                        self.cov(l_rows[k], j) - k_l[k].dot(&hp)
+                    })
+                    .collect()
+            });
+            for (k, row) in new_rows.iter().enumerate() {
+                let i = l_rows[k];
+                for (j, &val) in row.iter().enumerate() {
+                    let (a, b) = if i >= j { (i, j) } else { (j, i) };
+                    self.p[(a, b)] = val;
+                }
+            }
+        }
+        for (k, &i) in l_rows.iter().enumerate() {
+            self.x[i] += dx[k];
+        }
+        Ok(Some((nis, true)))
+    }
+
+    fn update_within(
+        &mut self,
+        batch: &[(LandmarkId, Measurement)],
+    ) -> Result<UpdateReport, Error> {
         let mut slots: Vec<usize> = Vec::with_capacity(batch.len());
         for (id, z) in batch {
             if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
@@ -1135,5 +1358,88 @@ impl Ekf {
             }
         }
         s
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod landmark_only_tests {
+    use super::*;
+
+    /// The landmark-only update is the Schmidt update: `K = [0; K_L; 0]`, `K_L = (P H^T)_L
+    /// S^-1`, `x += K nu`, `P = (I - K H) P (I - K H)^T + K R K^T`, against the dense
+    /// formulas by nalgebra, with the filter dense and in a local session; only the
+    /// landmark's state, rows and columns change.
+    #[test]
+    fn a_landmark_only_update_is_the_schmidt_update_dense_and_in_a_session() {
+        for margin in [0.0, 1.0] {
+            let mut ekf = crate::local::tests::drive(margin);
+            let (id, z0) = ekf.visible_landmarks()[0];
+            let s = ekf.slot(id).unwrap();
+            if margin > 0.0 {
+                ekf.prepare_local(&[s]);
+                assert!(ekf.local.is_some(), "no session open");
+            }
+            let z = z0 + Vector4::new(0.4, -0.3, 0.2, 0.1);
+            let n = ekf.state_len();
+            let x = ekf.state().clone();
+            // Read through a settled copy (entry by entry, a session's passive block is slow).
+            let dense = |e: &Ekf| {
+                let mut e = e.clone();
+                e.settle();
+                e.covariance()
+            };
+            let p = dense(&ekf);
+            let (zhat, h) = ekf.measurement_jacobian(id).unwrap();
+            let r =
+                DMatrix::from_diagonal(&DVector::from_row_slice(&ekf.measurement_variances(&zhat)));
+            let s_mat = &h * &p * h.transpose() + &r;
+            let li = ekf.landmark_state_index(id).unwrap();
+            let pht = &p * h.transpose();
+            let k_l = pht.rows(li, 3) * s_mat.clone().try_inverse().unwrap();
+            let mut k = DMatrix::zeros(n, 4);
+            k.rows_mut(li, 3).copy_from(&k_l);
+            let nu = DVector::from_row_slice((z - zhat).as_slice());
+            let x_want = &x + &k * &nu;
+            let a = DMatrix::identity(n, n) - &k * &h;
+            let p_want = &a * &p * a.transpose() + &k * &r * k.transpose();
+            let (nis, accepted) = ekf.landmark_only_update(s, &z).unwrap().unwrap();
+            assert!(accepted, "margin {margin}: NIS {nis}");
+            let nis_want = nu.dot(&(s_mat.try_inverse().unwrap() * &nu));
+            assert!((nis - nis_want).abs() < 1e-9 * nis_want.max(1.0));
+            let dx = (ekf.state() - &x_want).amax();
+            assert!(dx < 1e-10, "margin {margin}: state off by {dx}");
+            let got = dense(&ekf);
+            let dp = (&got - &p_want).amax() / p.amax();
+            assert!(
+                dp < 1e-9,
+                "margin {margin}: covariance off by {dp} (relative)"
+            );
+            // Nothing but the landmark's rows and columns moved.
+            let scale = p.amax();
+            for i in 0..n {
+                for j in 0..n {
+                    if !(li..li + 3).contains(&i) && !(li..li + 3).contains(&j) {
+                        assert!((got[(i, j)] - p[(i, j)]).abs() <= 1e-12 * scale);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Outside the gate nothing changes.
+    #[test]
+    fn a_landmark_only_update_outside_the_gate_changes_nothing() {
+        let mut ekf = crate::local::tests::drive(0.0);
+        let (id, z0) = ekf.visible_landmarks()[0];
+        let s = ekf.slot(id).unwrap();
+        let before = ekf.clone();
+        let (nis, accepted) = ekf
+            .landmark_only_update(s, &(z0 + Vector4::new(60.0, 0.0, 60.0, 0.0)))
+            .unwrap()
+            .unwrap();
+        assert!(!accepted && nis > ekf.gate_bound(), "{nis}");
+        assert_eq!(ekf.state(), before.state());
+        assert_eq!(ekf.covariance(), before.covariance());
     }
 }

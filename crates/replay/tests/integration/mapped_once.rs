@@ -97,11 +97,13 @@ fn the_radtan_hall_maps_each_lamp_once() {
 /// the seventeen variants below; the lamps are now held while lost and the loop closed when
 /// their constellation is recognised (docs/halls.md, "Loops"). Two lamps of the return lane,
 /// seen only while held and seconds before the place was recognised, are mapped from where
-/// they were held: one 66 mm off, one beyond the match radius (counted missed).
+/// they were held: one 66 mm off, one beyond the match radius (counted missed). 15.3 mm
+/// then; 24.9 mm since pairs in the lens's corners update their own landmarks (the outer
+/// band, docs/halls.md), with a 41st lamp in view.
 #[test]
 fn a_loop_through_a_dark_stretch_is_closed() {
     let (t, _) = replayed("hall-loop.toml", None);
-    assert_once(&t, "hall-loop", 1, 0.020);
+    assert_once(&t, "hall-loop", 1, 0.030);
 }
 
 /// The loop over seventeen variants (slow tier): the scenario's noise reseeded (seeds 52 to
