@@ -888,19 +888,14 @@ impl Navigator {
             None => (left, right),
         };
         let mut tracked = self.front_end.push_frame(t_us, left, right);
-        if self.rig.lens.is_some() {
-            // The outer band's pairs whose noise the lens stretches too much are not used
-            // (`rig_model::lens::StereoField`).
-            let c = &self.rig.nominal;
-            let e = &self.settings.ekf;
-            let field = rig_model::lens::StereoField::new(
-                e.max_off_axis_deg.to_radians(),
-                e.outer_off_axis_deg.to_radians(),
-                e.outer_max_noise_gain,
-                c.f,
-                c.cx,
-                c.cy,
-            );
+        // With a lens: where pairs are used (`rig_model::lens::StereoField`).
+        let field = self
+            .rig
+            .lens
+            .is_some()
+            .then(|| self.settings.ekf.stereo_field(&self.rig.nominal));
+        if let Some(field) = &field {
+            // The outer band's pairs whose noise the lens stretches too much are not used.
             let pixel_noise = self.front_end.model().pixel_noise;
             let before = tracked.observations.len();
             tracked
@@ -912,18 +907,9 @@ impl Navigator {
         // pairs would update everything there (`vslam_ekf::Settings::outer_off_axis_deg`).
         let inner = (self.frame_pairs.is_some() || self.ekf.is_none()).then(|| {
             let mut t = tracked.clone();
-            if self.rig.lens.is_some() {
-                let c = &self.rig.nominal;
-                let field = rig_model::lens::FieldOfUse::new(
-                    self.settings.ekf.max_off_axis_deg.to_radians(),
-                    c.f,
-                    c.cx,
-                    c.cy,
-                );
-                t.observations.retain(|o| {
-                    let z = &o.measurement;
-                    field.contains(z[0], z[1]) && field.contains(z[2], z[3])
-                });
+            if let Some(field) = &field {
+                t.observations
+                    .retain(|o| field.inner_contains(&o.measurement));
             }
             t
         });

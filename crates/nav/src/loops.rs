@@ -363,8 +363,6 @@ pub struct Held {
     /// and heading (rad^2), from the odometry increments' covariances.
     odometry_position_var: f64,
     odometry_heading_var: f64,
-    /// The lever dead reckoning's heading error acts on between held lamps, metres.
-    spread: f64,
     /// The latest frame a lamp was added in.
     frame: u64,
 }
@@ -387,10 +385,7 @@ struct HeldLamp {
 impl Held {
     /// Nothing held.
     pub fn new() -> Self {
-        Self {
-            spread: SPREAD_M,
-            ..Self::default()
-        }
+        Self::default()
     }
 
     /// Lamps held.
@@ -537,17 +532,13 @@ impl Held {
         )
     }
 
-    /// Held lamps seen in [`MIN_FRAMES`] frames or more.
+    /// Held lamps seen in [`MIN_FRAMES`] frames or more, the last within [`MAX_AGE_FRAMES`]
+    /// (those the constellation takes).
     pub fn mature(&self) -> usize {
         self.lamps
             .values()
             .filter(|l| l.frames >= MIN_FRAMES && self.recent(l))
             .count()
-    }
-
-    /// Forgets one held lamp (its track was bound or ended).
-    pub fn remove(&mut self, key: u64) {
-        self.lamps.remove(&key);
     }
 
     /// The held lamps seen in [`MIN_FRAMES`] frames or more as constellation candidates, the
@@ -568,7 +559,7 @@ impl Held {
                 let position = averaged * l.weighted;
                 // Dead reckoning since the lamp was seen moves it against the lamps seen now.
                 let (dp, dh) = self.drift_since(l);
-                let horizontal = dp + dh * (self.spread * self.spread);
+                let horizontal = dp + dh * (SPREAD_M * SPREAD_M);
                 let covariance = averaged
                     + l.systematic
                     + Matrix3::from_diagonal(&Vector3::new(horizontal, horizontal, 0.0));

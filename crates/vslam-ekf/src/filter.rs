@@ -127,6 +127,20 @@ impl Default for Settings {
 }
 
 impl Settings {
+    /// Where stereo pairs are used, for a rectified camera `c`: the field of use
+    /// ([`Settings::max_off_axis_deg`]) and the outer band's pairs whose noise the lens
+    /// stretches little ([`Settings::outer_off_axis_deg`], [`Settings::outer_max_noise_gain`]).
+    pub fn stereo_field(&self, c: &CameraParams) -> rig_model::lens::StereoField {
+        rig_model::lens::StereoField::new(
+            self.max_off_axis_deg.to_radians(),
+            self.outer_off_axis_deg.to_radians(),
+            self.outer_max_noise_gain,
+            c.f,
+            c.cx,
+            c.cy,
+        )
+    }
+
     pub(crate) fn check(&self) -> Result<(), Error> {
         let p = self.gate_probability;
         if !(p.is_finite() && p > 0.0 && p < 1.0) {
@@ -143,21 +157,17 @@ impl Settings {
                 expected: "at least 1",
             });
         }
-        let a = self.max_off_axis_deg;
-        if !(a.is_finite() && a > 0.0 && a <= 90.0) {
-            return Err(Error::BadValue {
-                name: "Settings.max_off_axis_deg",
-                value: a,
-                expected: "in (0, 90] degrees",
-            });
-        }
-        let o = self.outer_off_axis_deg;
-        if !(o.is_finite() && o > 0.0 && o <= 90.0) {
-            return Err(Error::BadValue {
-                name: "Settings.outer_off_axis_deg",
-                value: o,
-                expected: "in (0, 90] degrees",
-            });
+        for (name, a) in [
+            ("Settings.max_off_axis_deg", self.max_off_axis_deg),
+            ("Settings.outer_off_axis_deg", self.outer_off_axis_deg),
+        ] {
+            if !(a.is_finite() && a > 0.0 && a <= 90.0) {
+                return Err(Error::BadValue {
+                    name,
+                    value: a,
+                    expected: "in (0, 90] degrees",
+                });
+            }
         }
         let k = self.outer_max_noise_gain;
         if !(k.is_finite() && k >= 1.0) {
@@ -275,33 +285,16 @@ impl Ekf {
     /// Whether a stereo pair lies beyond the field of use (either point), in the outer band
     /// ([`Settings::outer_off_axis_deg`]), with the rig's lens; never without lens tables.
     pub fn in_outer_band(&self, z: &Measurement) -> bool {
-        if self.lens.is_none() || self.settings.outer_off_axis_deg <= self.settings.max_off_axis_deg
-        {
-            return false;
-        }
-        let c = self.camera();
-        let inner = rig_model::lens::FieldOfUse::new(
-            self.settings.max_off_axis_deg.to_radians(),
-            c.f,
-            c.cx,
-            c.cy,
-        );
-        !(inner.contains(z[0], z[1]) && inner.contains(z[2], z[3]))
+        self.lens.is_some()
+            && self.settings.outer_off_axis_deg > self.settings.max_off_axis_deg
+            && !self.stereo_field().inner_contains(z)
     }
 
     /// Where the filter uses stereo pairs, with its current camera: the field of use and the
     /// outer band's pairs whose noise the lens stretches little
     /// ([`Settings::outer_off_axis_deg`], [`Settings::outer_max_noise_gain`]).
     pub fn stereo_field(&self) -> rig_model::lens::StereoField {
-        let c = self.camera();
-        rig_model::lens::StereoField::new(
-            self.settings.max_off_axis_deg.to_radians(),
-            self.settings.outer_off_axis_deg.to_radians(),
-            self.settings.outer_max_noise_gain,
-            c.f,
-            c.cx,
-            c.cy,
-        )
+        self.settings.stereo_field(&self.camera())
     }
 
     /// The settings.

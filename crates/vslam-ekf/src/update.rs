@@ -340,17 +340,8 @@ impl Ekf {
         if !batch.iter().any(|(_, z)| self.in_outer_band(z)) {
             return self.update_within(batch);
         }
-        let mut slots: Vec<usize> = Vec::with_capacity(batch.len());
-        for (id, z) in batch {
-            if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
-                return Err(Error::NonFiniteMeasurement { id: *id, value });
-            }
-            let s = self.slot(*id).ok_or(Error::UnknownLandmark { id: *id })?;
-            if slots.contains(&s) {
-                return Err(Error::DuplicateObservation { id: *id });
-            }
-            slots.push(s);
-        }
+        // Checked whole before anything changes.
+        self.batch_slots(batch)?;
         let mut outer: Vec<(LandmarkId, Measurement)> = Vec::new();
         let mut inner: Vec<(LandmarkId, Measurement)> = Vec::new();
         for &(id, z) in batch {
@@ -370,23 +361,45 @@ impl Ekf {
                 Ok(None) => continue,
                 Err(_) => (f64::INFINITY, false),
             };
-            self.health.record(accepted.then_some(nis));
-            let gated = Gated { id, nis };
-            if let Some(slot) = self.landmarks.get_mut(s) {
-                if accepted {
-                    slot.observations += 1;
-                    slot.rejections_in_a_row = 0;
-                } else {
-                    slot.rejections_in_a_row = slot.rejections_in_a_row.saturating_add(1);
-                }
-            }
-            if accepted {
-                report.accepted.push(gated);
-            } else {
-                report.rejected.push(gated);
-            }
+            self.record_gated(&mut report, s, Gated { id, nis }, accepted);
         }
         Ok(report)
+    }
+
+    /// The slots of a batch's landmarks, the batch checked: every measurement finite, every
+    /// landmark known and observed once.
+    fn batch_slots(&self, batch: &[(LandmarkId, Measurement)]) -> Result<Vec<usize>, Error> {
+        let mut slots: Vec<usize> = Vec::with_capacity(batch.len());
+        for (id, z) in batch {
+            if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
+                return Err(Error::NonFiniteMeasurement { id: *id, value });
+            }
+            let s = self.slot(*id).ok_or(Error::UnknownLandmark { id: *id })?;
+            if slots.contains(&s) {
+                return Err(Error::DuplicateObservation { id: *id });
+            }
+            slots.push(s);
+        }
+        Ok(slots)
+    }
+
+    /// One observation's gate outcome recorded: the health's NIS window, the report, and its
+    /// landmark's counts of observations and of rejections in a row.
+    fn record_gated(&mut self, report: &mut UpdateReport, s: usize, gated: Gated, accepted: bool) {
+        self.health.record(accepted.then_some(gated.nis));
+        if let Some(slot) = self.landmarks.get_mut(s) {
+            if accepted {
+                slot.observations += 1;
+                slot.rejections_in_a_row = 0;
+            } else {
+                slot.rejections_in_a_row = slot.rejections_in_a_row.saturating_add(1);
+            }
+        }
+        if accepted {
+            report.accepted.push(gated);
+        } else {
+            report.rejected.push(gated);
+        }
     }
 
     /// A stereo pair of landmark slot `s` in the outer band: a Schmidt ("consider") update of
@@ -427,7 +440,6 @@ impl Ekf {
         // P H^T over the rows that change or that S needs: the session's active rows (and
         // phi^T H^T for its passive share), or every row when dense.
         let n = self.x.len();
-        let in_session = self.local.is_some();
         let rows: Vec<usize> = match self.local.as_deref() {
             Some(l) => l.active.clone(),
             None => (0..n).collect(),
@@ -486,10 +498,7 @@ impl Ekf {
             }
         }
         let dx: [f64; 3] = core::array::from_fn(|k| k_l[k].dot(&nu));
-        if in_session {
-            let Some(l) = self.local.as_deref_mut() else {
-                return Ok(None);
-            };
+        if let Some(l) = self.local.as_deref_mut() {
             let (na, na0) = (l.n_active(), l.n_a0);
             // phi^T H^T (n_A0 x 4): the passive share of P H^T.
             let mut q = alloc::vec![[0.0f64; 4]; na0];
@@ -557,17 +566,7 @@ impl Ekf {
         &mut self,
         batch: &[(LandmarkId, Measurement)],
     ) -> Result<UpdateReport, Error> {
-        let mut slots: Vec<usize> = Vec::with_capacity(batch.len());
-        for (id, z) in batch {
-            if let Some(&value) = z.iter().find(|v| !v.is_finite()) {
-                return Err(Error::NonFiniteMeasurement { id: *id, value });
-            }
-            let s = self.slot(*id).ok_or(Error::UnknownLandmark { id: *id })?;
-            if slots.contains(&s) {
-                return Err(Error::DuplicateObservation { id: *id });
-            }
-            slots.push(s);
-        }
+        let slots = self.batch_slots(batch)?;
         self.prepare_local(&slots);
         let camera = self.camera();
         let pose = self.pose();
@@ -610,21 +609,7 @@ impl Ekf {
         }
         for ((&s, (id, _)), &v) in slots.iter().zip(batch).zip(&nis) {
             let accepted = v <= self.gate;
-            self.health.record(accepted.then_some(v));
-            let gated = Gated { id: *id, nis: v };
-            if accepted {
-                report.accepted.push(gated);
-            } else {
-                report.rejected.push(gated);
-            }
-            if let Some(slot) = self.landmarks.get_mut(s) {
-                if accepted {
-                    slot.observations += 1;
-                    slot.rejections_in_a_row = 0;
-                } else {
-                    slot.rejections_in_a_row = slot.rejections_in_a_row.saturating_add(1);
-                }
-            }
+            self.record_gated(&mut report, s, Gated { id: *id, nis: v }, accepted);
         }
         let limit = self.settings.max_consecutive_rejections;
         if self
