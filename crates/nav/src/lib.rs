@@ -889,18 +889,18 @@ impl Navigator {
         };
         let mut tracked = self.front_end.push_frame(t_us, left, right);
         // With a lens: where pairs are used (`rig_model::lens::StereoField`).
-        let field = self
-            .rig
-            .lens
-            .is_some()
-            .then(|| self.settings.ekf.stereo_field(&self.rig.nominal));
+        let field = self.rig.lens.is_some().then(|| {
+            self.settings
+                .ekf
+                .stereo_field(&self.rig.nominal, self.rig.noise.pixel)
+        });
         if let Some(field) = &field {
             // The outer band's pairs whose noise the lens stretches too much are not used.
             let pixel_noise = self.front_end.model().pixel_noise;
             let before = tracked.observations.len();
-            tracked
-                .observations
-                .retain(|o| field.uses(&o.measurement, &pixel_noise.gains(&o.measurement).into()));
+            tracked.observations.retain(|o| {
+                field.reaches(&o.measurement, &pixel_noise.gains(&o.measurement).into())
+            });
             self.stats.observations_outer_unused += (before - tracked.observations.len()) as u64;
         }
         // Phase 1's batch and the frame pairs take the field of use only: the outer band's
@@ -1255,7 +1255,7 @@ impl Navigator {
         } else if !unbound.is_empty() {
             // The landmarks in view, and those near it: a match is unique only if no other
             // landmark the feature might be, in view or just outside it, is in its gate.
-            let in_view = ekf.visible_landmarks();
+            let in_view = ekf.landmarks_reached();
             let predicted: Vec<(LandmarkId, Vector4<f64>, Matrix4<f64>)> = in_view
                 .iter()
                 .filter_map(|&(id, _)| {

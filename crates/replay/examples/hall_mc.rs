@@ -7,7 +7,7 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--reference] [--keep DIR]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--reference] [--keep DIR]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
@@ -63,7 +63,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--smooth-near] [--reference] [--keep DIR]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--reference] [--keep DIR]";
     let mut settings = NavSettings::default();
     let mut lens = None;
     let mut positional = Vec::new();
@@ -81,6 +81,28 @@ fn run() -> Result<(), String> {
                 let v = rest.next().ok_or(usage)?;
                 settings.ekf.local_margin_m =
                     v.parse().map_err(|_| format!("--margin {v:?}: {usage}"))?;
+            }
+            "--outer-gain" => {
+                let v = rest.next().ok_or(usage)?;
+                settings.ekf.outer_max_noise_gain = v
+                    .parse()
+                    .map_err(|_| format!("--outer-gain {v:?}: {usage}"))?;
+            }
+            "--outer-birth" => {
+                let v = rest.next().ok_or(usage)?;
+                settings.candidates.outer_birth_relative_sigma = v
+                    .parse()
+                    .map_err(|_| format!("--outer-birth {v:?}: {usage}"))?;
+            }
+            "--far-snr" => {
+                let v = rest.next().ok_or(usage)?;
+                settings.ekf.far_min_snr = v.parse().map_err(|_| usage.to_string())?;
+            }
+            "--far-gain" => {
+                let v = rest.next().ok_or(usage)?;
+                settings.ekf.far_max_noise_gain = v
+                    .parse()
+                    .map_err(|_| format!("--far-gain {v:?}: {usage}"))?;
             }
             "--smooth-near" => settings.smooth_near_vehicle = true,
             "--reference" => with_reference = true,

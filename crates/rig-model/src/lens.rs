@@ -460,6 +460,10 @@ pub struct StereoField {
     inner: FieldOfUse,
     outer: FieldOfUse,
     max_gain: f64,
+    far_max_gain: f64,
+    /// The far band's smallest disparity, in sigmas of its noise, squared over the raw
+    /// pixel variance: `k^2 / sigma^2`.
+    far_snr2_per_var: f64,
 }
 
 impl StereoField {
@@ -471,7 +475,20 @@ impl StereoField {
             inner: FieldOfUse::new(inner_rad, f, cx, cy),
             outer: FieldOfUse::new(outer_rad.max(inner_rad), f, cx, cy),
             max_gain,
+            far_max_gain: max_gain,
+            far_snr2_per_var: 0.0,
         }
+    }
+
+    /// The same field with a far band: the outer band's pairs whose gains exceed the
+    /// bound of [`StereoField::uses`] but not `far_max_gain`, and whose disparity is at
+    /// least `min_snr` sigmas of its noise (`pixel_sigma` the raw feature's, stretched by
+    /// the gains) ([`StereoField::in_far_band`]).
+    #[must_use]
+    pub fn with_far_band(mut self, far_max_gain: f64, min_snr: f64, pixel_sigma: f64) -> Self {
+        self.far_max_gain = far_max_gain.max(self.max_gain);
+        self.far_snr2_per_var = (min_snr * min_snr) * (pixel_sigma * pixel_sigma);
+        self
     }
 
     /// Whether the pair `z` is inside the field of use (both points).
@@ -485,9 +502,31 @@ impl StereoField {
         if self.inner_contains(z) {
             return true;
         }
+        self.in_band(z, gains, self.max_gain)
+    }
+
+    /// Whether the pair `z` is in the far band: in the outer band, not used
+    /// ([`StereoField::uses`]), with no gain above the far band's bound
+    /// ([`StereoField::with_far_band`]; without one the far band is empty). A fisheye's
+    /// far-out rays: a lamp there is born from many frames at once, never from one pair, and
+    /// its pairs update its landmark alone (`vslam_ekf`).
+    pub fn in_far_band(&self, z: &crate::Measurement, gains: &[f64; 4]) -> bool {
+        let d = z[0] - z[2];
+        self.far_max_gain > self.max_gain
+            && !self.uses(z, gains)
+            && self.in_band(z, gains, self.far_max_gain)
+            && d * d >= self.far_snr2_per_var * (gains[0] + gains[2])
+    }
+
+    /// Whether the pair is used or in the far band.
+    pub fn reaches(&self, z: &crate::Measurement, gains: &[f64; 4]) -> bool {
+        self.uses(z, gains) || self.in_far_band(z, gains)
+    }
+
+    fn in_band(&self, z: &crate::Measurement, gains: &[f64; 4], max_gain: f64) -> bool {
         self.outer.contains(z[0], z[1])
             && self.outer.contains(z[2], z[3])
-            && gains.iter().all(|g| g.is_finite() && *g <= self.max_gain)
+            && gains.iter().all(|g| g.is_finite() && *g <= max_gain)
     }
 }
 
@@ -596,6 +635,26 @@ mod tests {
         assert!(!field.inner_contains(&at(60.0)));
         assert!(!field.uses(&at(75.0), &low));
         assert!(!field.uses(&at(60.0), &[1.5, 1.5, f64::NAN, 1.5]));
+        // No far band unless asked for.
+        assert!(!field.in_far_band(&at(60.0), &high));
+        // The far band: beyond the gain bound, within the far one, a disparity (5 px here)
+        // of at least 2 sigmas (sigma^2 = 0.3^2 (9 + 9) = 1.62 px^2, 2 sigma = 2.5 px).
+        let far = field.with_far_band(100.0, 2.0, 0.3);
+        assert!(far.in_far_band(&at(60.0), &high));
+        assert!(far.reaches(&at(60.0), &high));
+        assert!(!far.uses(&at(60.0), &high));
+        assert!(!far.in_far_band(&at(60.0), &low), "used, not far");
+        assert!(
+            !far.in_far_band(&at(60.0), &[200.0; 4]),
+            "beyond the far gain"
+        );
+        assert!(!far.in_far_band(&at(75.0), &high), "beyond the band");
+        let strict = field.with_far_band(100.0, 4.0, 0.3);
+        assert!(
+            !strict.in_far_band(&at(60.0), &high),
+            "5 px is under 4 sigmas"
+        );
+        assert!(!strict.reaches(&at(60.0), &high));
     }
 
     use super::*;

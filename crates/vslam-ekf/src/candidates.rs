@@ -26,6 +26,7 @@ use crate::chi2::chi2_quantile;
 use crate::error::Error;
 use crate::filter::{Ekf, UpdateReport};
 use crate::landmarks::LandmarkId;
+use crate::views::{self, View};
 
 /// Confirmation settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,6 +57,12 @@ pub struct CandidateSettings {
     /// retired: it is a second feature of the same thing (the two corners of a tube's end,
     /// a blurred corner's two maxima), metres.
     pub min_separation_m: f64,
+    /// A candidate whose pair lies in the outer band beyond the field of use
+    /// (`Ekf::in_outer_band`) is born from all its frames at once (`crate::views`), and
+    /// only once that estimate's largest sigma is at most this share of its distance from
+    /// the cameras: one far-out pair fixes a lamp's depth too poorly to start a landmark
+    /// from. 0: born from one pair like the rest.
+    pub outer_birth_relative_sigma: f64,
 }
 
 /// Observations one update may use when the state has `n` elements: the batch update costs
@@ -84,6 +91,7 @@ impl Default for CandidateSettings {
             prune_above: 200,
             brief_frames: 20,
             min_separation_m: 0.05,
+            outer_birth_relative_sigma: 0.05,
         }
     }
 }
@@ -163,13 +171,18 @@ fn select_observations(
 }
 
 /// A candidate's last sighting.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 struct Pending {
     hits: u32,
     last_frame: u64,
     point: Vector3<f64>,
     /// Covariance of `point` from the pixel noise.
     covariance: Matrix3<f64>,
+    /// Its frames since it was last found inconsistent (the latest [`views::MAX_VIEWS`]).
+    views: Vec<View>,
+    /// The dead reckoning's covariance accumulated over `views` (summed, a bound over the
+    /// seconds they span).
+    drift: Matrix3<f64>,
 }
 
 /// What one frame did.
@@ -416,7 +429,7 @@ impl Candidates {
                 tri.covariance_in_world_of(&camera, &pose, &r, None, None)
             };
             let gp = tri.jac_pose(&camera, &pose);
-            let hits = match self.pending.get(&track) {
+            let (hits, mut track_views, drift) = match self.pending.remove(&track) {
                 Some(prev) if prev.last_frame + 1 == self.frame => {
                     let joint = prev.covariance + covariance + gp * motion * gp.transpose();
                     let delta = point - prev.point;
@@ -424,29 +437,48 @@ impl Candidates {
                         .cholesky()
                         .map(|c| delta.dot(&c.solve(&delta)))
                         .is_some_and(|d2| d2 <= self.gate);
-                    if consistent { prev.hits + 1 } else { 1 }
+                    if consistent {
+                        (prev.hits + 1, prev.views, prev.drift + motion)
+                    } else {
+                        (1, Vec::new(), Matrix3::zeros())
+                    }
                 }
-                _ => 1,
+                _ => (1, Vec::new(), Matrix3::zeros()),
             };
-            let ready = hits >= self.settings.frames_to_confirm;
+            views::push_view(&mut track_views, View { pose, z });
+            let confirmed = hits >= self.settings.frames_to_confirm;
+            // Far out, the frames together decide, and only once they fix the point well.
+            let from_views = (confirmed
+                && self.settings.outer_birth_relative_sigma > 0.0
+                && ekf.in_outer_band(&z))
+            .then(|| {
+                self.triangulated_from_views(ekf, &camera, &pose, &track_views, point, &drift)
+            });
+            let ready = confirmed && from_views.as_ref().is_none_or(Option::is_some);
+            let from_views = from_views.flatten();
+            let birth_point = from_views.as_ref().map_or(point, |(p, _, _)| *p);
             let room = ready && {
                 let seen = *in_view.get_or_insert_with(|| ekf.visible_landmarks().len());
                 seen + report.added.len() < self.settings.max_in_view
             };
             if ready
-                && ekf
-                    .landmark_positions()
-                    .any(|(_, position)| (position - point).norm() < self.settings.min_separation_m)
+                && ekf.landmark_positions().any(|(_, position)| {
+                    (position - birth_point).norm() < self.settings.min_separation_m
+                })
             {
                 // A second feature of something already mapped.
-                self.pending.remove(&track);
                 self.retired.insert(track);
                 report.merged += 1;
                 continue;
             }
             if room {
-                self.pending.remove(&track);
-                if let Ok(id) = ekf.add_landmark(&z) {
+                let added = match &from_views {
+                    Some((position, jacobian, noise)) => {
+                        ekf.add_landmark_from_views(position, jacobian, noise)
+                    }
+                    None => ekf.add_landmark(&z),
+                };
+                if let Ok(id) = added {
                     self.landmark_of.insert(track, id);
                     self.track_of.insert(id, track);
                     self.last_seen.insert(id, self.frame);
@@ -460,6 +492,8 @@ impl Candidates {
                         last_frame: self.frame,
                         point,
                         covariance,
+                        views: track_views,
+                        drift,
                     },
                 );
             }
@@ -468,5 +502,52 @@ impl Candidates {
         self.pending.retain(|_, p| p.last_frame == now);
         report.pending = self.pending.len();
         Ok(report)
+    }
+
+    /// A far-out candidate triangulated from its frames (`crate::views`), if the frames
+    /// agree (their residual inside the gate's probability) and fix the point to within
+    /// [`CandidateSettings::outer_birth_relative_sigma`] of its distance: the point, its
+    /// camera derivative and its covariance (pixels and the dead reckoning over the frames,
+    /// which moves the point rigidly with the pose).
+    fn triangulated_from_views(
+        &self,
+        ekf: &Ekf,
+        camera: &rig_model::CameraParams,
+        pose: &rig_model::Pose2,
+        track_views: &[View],
+        start: Vector3<f64>,
+        drift: &Matrix3<f64>,
+    ) -> Option<(Vector3<f64>, rig_model::rig::Jac3xC, Matrix3<f64>)> {
+        if track_views.len() < 2 {
+            return None;
+        }
+        let variances = |h: &Measurement| ekf.measurement_variances(h);
+        let mut t = views::triangulate_views(camera, track_views, start, variances)?;
+        #[allow(clippy::cast_precision_loss)] // a few hundred rows
+        let dof = (t.rows - 3) as f64;
+        if t.chi2 > chi2_quantile(self.settings.consistency_probability, dof) {
+            return None;
+        }
+        views::add_vehicle_sensitivity(camera, track_views, pose, &mut t, variances);
+        let range = rig_model::point_in_rig(camera, pose, &t.position).norm();
+        let g = Matrix3::new(
+            1.0,
+            0.0,
+            -(t.position.y - pose.y),
+            0.0,
+            1.0,
+            t.position.x - pose.x,
+            0.0,
+            0.0,
+            0.0,
+        );
+        let noise = t.covariance + g * drift * g.transpose();
+        let largest = noise.symmetric_eigenvalues().max();
+        let bound = self.settings.outer_birth_relative_sigma * range;
+        (largest.is_finite() && largest <= bound * bound).then_some((
+            t.position,
+            t.camera_jacobian,
+            noise,
+        ))
     }
 }

@@ -101,6 +101,19 @@ pub struct Settings {
     /// lens's corners stretch the noise little; a fisheye's far-out rays, tens of times, and
     /// their landmarks came out biased even with the update confined to them.
     pub outer_max_noise_gain: f64,
+    /// The far band (`rig_model::lens::StereoField::in_far_band`): the outer band's pairs
+    /// whose gains exceed `outer_max_noise_gain` but not this, a fisheye's far-out rays
+    /// (1000: every ray out to `outer_off_axis_deg`; the fisheye passes' side lamps have
+    /// gains above 100 in the diagonal bound of `rig_model::lens::PixelNoise`). A lamp seen there is born from all its frames at once
+    /// (`crate::candidates`, `CandidateSettings::outer_birth_relative_sigma`), never from
+    /// one pair, and its pairs update its landmark alone, as in the rest of the outer band.
+    /// At or below `outer_max_noise_gain`: no far band.
+    pub far_max_noise_gain: f64,
+    /// A far pair is used only if its disparity is at least this many sigmas of its own
+    /// noise (the lens's gains at the pair): far rays whose disparity is lost in its noise
+    /// (lamps high above the cameras, seen far out) moved the maps of tall fisheye halls
+    /// (docs/halls.md, "The far band"). 0: every far pair.
+    pub far_min_snr: f64,
     /// Large states are updated in local sessions (`crate::local`, the compressed filter):
     /// the active landmarks are those within this many metres (horizontally) beyond the
     /// farthest one in view when a session opens, so that the vehicle can drive about as far
@@ -121,6 +134,8 @@ impl Default for Settings {
             max_off_axis_deg: 50.0,
             outer_off_axis_deg: 70.0,
             outer_max_noise_gain: 4.0,
+            far_max_noise_gain: 1000.0,
+            far_min_snr: 2.0,
             local_margin_m: 1.0,
         }
     }
@@ -130,7 +145,7 @@ impl Settings {
     /// Where stereo pairs are used, for a rectified camera `c`: the field of use
     /// ([`Settings::max_off_axis_deg`]) and the outer band's pairs whose noise the lens
     /// stretches little ([`Settings::outer_off_axis_deg`], [`Settings::outer_max_noise_gain`]).
-    pub fn stereo_field(&self, c: &CameraParams) -> rig_model::lens::StereoField {
+    pub fn stereo_field(&self, c: &CameraParams, pixel_sigma: f64) -> rig_model::lens::StereoField {
         rig_model::lens::StereoField::new(
             self.max_off_axis_deg.to_radians(),
             self.outer_off_axis_deg.to_radians(),
@@ -139,6 +154,7 @@ impl Settings {
             c.cx,
             c.cy,
         )
+        .with_far_band(self.far_max_noise_gain, self.far_min_snr, pixel_sigma)
     }
 
     pub(crate) fn check(&self) -> Result<(), Error> {
@@ -175,6 +191,22 @@ impl Settings {
                 name: "Settings.outer_max_noise_gain",
                 value: k,
                 expected: "finite and at least 1",
+            });
+        }
+        let k = self.far_max_noise_gain;
+        if !(k.is_finite() && k >= 1.0) {
+            return Err(Error::BadValue {
+                name: "Settings.far_max_noise_gain",
+                value: k,
+                expected: "finite and at least 1",
+            });
+        }
+        let k = self.far_min_snr;
+        if !(k.is_finite() && k >= 0.0) {
+            return Err(Error::BadValue {
+                name: "Settings.far_min_snr",
+                value: k,
+                expected: "finite and at least 0",
             });
         }
         let m = self.local_margin_m;
@@ -290,11 +322,19 @@ impl Ekf {
             && !self.stereo_field().inner_contains(z)
     }
 
+    /// Whether a stereo pair lies in the far band ([`Settings::far_max_noise_gain`]).
+    pub fn in_far_band(&self, z: &Measurement) -> bool {
+        self.lens.is_some()
+            && self
+                .stereo_field()
+                .in_far_band(z, &self.pixel_noise.gains(z).into())
+    }
+
     /// Where the filter uses stereo pairs, with its current camera: the field of use and the
     /// outer band's pairs whose noise the lens stretches little
     /// ([`Settings::outer_off_axis_deg`], [`Settings::outer_max_noise_gain`]).
     pub fn stereo_field(&self) -> rig_model::lens::StereoField {
-        self.settings.stereo_field(&self.camera())
+        self.settings.stereo_field(&self.camera(), self.noise.pixel)
     }
 
     /// The settings.

@@ -316,6 +316,49 @@ impl Ekf {
         self.insert_landmark(world, &idx, &g, POSE_DIM, &noise)
     }
 
+    /// Adds a landmark triangulated from several frames (`crate::views`): `position` in
+    /// the world, `camera_jacobian` its derivative in every camera parameter, `noise` its
+    /// covariance from the pixels and the dead reckoning over those frames. The frames'
+    /// poses are the filter's, whose error is the current pose's to first order (the dead
+    /// reckoning between them is in `noise`), so the landmark moves rigidly with the pose.
+    pub(crate) fn add_landmark_from_views(
+        &mut self,
+        position: &Vector3<f64>,
+        camera_jacobian: &rig_model::rig::Jac3xC,
+        noise: &Matrix3<f64>,
+    ) -> Result<LandmarkId, Error> {
+        if let Some(&value) = position
+            .iter()
+            .chain(noise.iter())
+            .chain(camera_jacobian.iter())
+            .find(|v| !v.is_finite())
+        {
+            return Err(Error::NonFinite {
+                what: "landmark triangulated from several frames",
+                value,
+            });
+        }
+        let pose = self.pose();
+        let c0 = self.camera_offset();
+        let mut idx: [usize; POSE_DIM + N_PARAMS] = [0; POSE_DIM + N_PARAMS];
+        let mut g = [[0.0; POSE_DIM + N_PARAMS]; 3];
+        for (k, i) in idx.iter_mut().enumerate().take(POSE_DIM) {
+            *i = k;
+        }
+        g[0][0] = 1.0;
+        g[1][1] = 1.0;
+        g[0][2] = -(position.y - pose.y);
+        g[1][2] = position.x - pose.x;
+        for (k, p) in self.estimated.iter().enumerate() {
+            idx[POSE_DIM + k] = c0 + k;
+            for (a, row) in g.iter_mut().enumerate() {
+                row[POSE_DIM + k] = camera_jacobian[(a, p.index())];
+            }
+        }
+        let q = POSE_DIM + self.estimated.len();
+        self.insert_landmark(*position, &idx, &g, q, noise)
+    }
+
     /// Appends a landmark at `position` whose covariance is `G P Gᵀ + noise` over the states
     /// `idx[..q]` (`g` their Jacobian rows) and whose cross-covariances are `G P`.
     fn insert_landmark(

@@ -192,6 +192,8 @@ pub mod state;
 #[cfg(feature = "alloc")]
 mod update;
 
+mod views;
+
 #[cfg(feature = "alloc")]
 pub use candidates::{CandidateSettings, Candidates, FrameReport};
 #[cfg(feature = "alloc")]

@@ -231,6 +231,16 @@ impl Ekf {
     /// its corners, a fisheye far past its edges; issue 35), and only within the field of use
     /// ([`crate::Settings::max_off_axis_deg`]), where the navigator takes features.
     pub fn visible_landmarks(&self) -> Vec<(LandmarkId, Measurement)> {
+        self.landmarks_in_view(false)
+    }
+
+    /// [`Ekf::visible_landmarks`] and those predicted in the far band
+    /// ([`crate::Settings::far_max_noise_gain`]): the landmarks a feature may be of.
+    pub fn landmarks_reached(&self) -> Vec<(LandmarkId, Measurement)> {
+        self.landmarks_in_view(true)
+    }
+
+    fn landmarks_in_view(&self, far: bool) -> Vec<(LandmarkId, Measurement)> {
         let camera = self.camera();
         let pose = self.pose();
         let (w, h) = (f64::from(self.width), f64::from(self.height));
@@ -239,8 +249,12 @@ impl Ekf {
         let inside = |z: &Measurement| match &self.lens {
             None => inside_image(z[0], z[1]) && inside_image(z[2], z[3]),
             Some(lens) => {
-                field.uses(z, &self.pixel_noise.gains(z).into())
-                    && lens.sees(z, camera.f, camera.cx, camera.cy, w, h)
+                let gains = self.pixel_noise.gains(z).into();
+                (if far {
+                    field.reaches(z, &gains)
+                } else {
+                    field.uses(z, &gains)
+                }) && lens.sees(z, camera.f, camera.cx, camera.cy, w, h)
             }
         };
         self.landmarks

@@ -60,14 +60,14 @@ fn assert_once(t: &TruthErrors, what: &str, missed: usize, rms_m: f64) {
 fn a_fisheye_over_three_passes_maps_each_lamp_once() {
     for seed in [None, Some(37), Some(38)] {
         let (t, _) = replayed("fisheye-passes.toml", seed);
-        assert_once(&t, &format!("seed {seed:?}"), 8, 0.030);
+        assert_once(&t, &format!("seed {seed:?}"), 0, 0.030);
     }
 }
 
-/// Every lamp of the fisheye passes mapped, the outer rows too: needs far-out rays used
-/// without the scale bias they bring today (docs/halls.md, "A fisheye's outer band").
+/// Every lamp of the fisheye passes mapped, the outer rows too, seen only far off the axis:
+/// they are born from many frames at once in the far band and updated alone there
+/// (docs/halls.md, "The far band"; 7 of 36 were not mapped before).
 #[test]
-#[ignore = "unfinished: lamps seen only beyond the 50-degree field of use are not mapped"]
 fn every_lamp_of_the_fisheye_passes_is_mapped() {
     let (t, _) = replayed("fisheye-passes.toml", None);
     assert_once(&t, "fisheye-passes", 0, 0.030);
