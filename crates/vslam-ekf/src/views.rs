@@ -83,8 +83,8 @@ pub(crate) fn triangulate_views(
     let (a, _, chi2, jlc) = normal_equations(camera, views, &l, &variances)?;
     let covariance = a.try_inverse()?;
     // At the solution sum J_L^T W (z - h(L, C)) = 0; differentiating in C gives
-    // dL/dC = A^-1 sum J_L^T W J_C.
-    let camera_jacobian = covariance * jlc;
+    // dL/dC = -A^-1 sum J_L^T W J_C.
+    let camera_jacobian = -(covariance * jlc);
     Some(Triangulated {
         position: l,
         covariance: (covariance + covariance.transpose()) * 0.5,
