@@ -1255,14 +1255,49 @@ impl Navigator {
         } else if !unbound.is_empty() {
             // The landmarks in view, and those near it: a match is unique only if no other
             // landmark the feature might be, in view or just outside it, is in its gate.
-            let in_view = ekf.landmarks_reached();
+            let reached = ekf.landmarks_reached();
+            let mut in_view = reached.clone();
+            // A landmark in the far band is a candidate only if its ray is within
+            // `FAR_MATCH_CONE_RAD` of an unbound feature's: the far band of a tall hall holds
+            // dozens of landmarks, most of them passive in the local session, whose
+            // covariances cost a quarter of the frame to form (profile in docs/benchmarks.md,
+            // "The far band").
+            let camera = ekf.camera();
+            let ray = |u: f64, v: f64| {
+                nalgebra::Vector3::new((u - camera.cx) / camera.f, (v - camera.cy) / camera.f, 1.0)
+                    .normalize()
+            };
+            let rays: Vec<nalgebra::Vector3<f64>> = unbound
+                .iter()
+                .filter_map(|&i| tracked.observations.get(i))
+                .map(|o| ray(o.measurement.x, o.measurement.y))
+                .collect();
+            let cos_cone = libm::cos(FAR_MATCH_CONE_RAD);
+            let mut far: Vec<LandmarkId> = Vec::new();
+            in_view.retain(|(id, z)| {
+                !ekf.in_far_band(z) || {
+                    let r = ray(z.x, z.y);
+                    let near = rays.iter().any(|t| t.dot(&r) >= cos_cone);
+                    if near {
+                        far.push(*id);
+                    }
+                    near
+                }
+            });
+            // The far band's landmarks with the bound of their innovation covariance (exact
+            // but for landmarks passive in the filter's local session, whose exact blocks
+            // cost O(n^2) each).
             let predicted: Vec<(LandmarkId, Vector4<f64>, Matrix4<f64>)> = in_view
                 .iter()
                 .filter_map(|&(id, _)| {
-                    let (z, s) = ekf.predict_measurement(id).ok()?;
+                    let (z, s) = if far.contains(&id) {
+                        ekf.predict_measurement_bound(id).ok()?
+                    } else {
+                        ekf.predict_measurement(id).ok()?
+                    };
                     Some((id, z, s))
                 })
-                .chain(ekf.landmarks_near_view(NEAR_VIEW_SIGMAS, &in_view))
+                .chain(ekf.landmarks_near_view(NEAR_VIEW_SIGMAS, &reached))
                 .filter(|(id, _, _)| !observed.contains(id))
                 .filter_map(|(id, z, s)| Some((id, z, s.try_inverse()?)))
                 .collect();
@@ -1493,6 +1528,11 @@ pub const MERGE_SEARCH_M: f64 = 1.0;
 /// How far outside the image, in standard deviations of its predicted pixel, a landmark still
 /// counts for map matching's uniqueness ([`vslam_ekf::Ekf::landmarks_near_view`]).
 const NEAR_VIEW_SIGMAS: f64 = 3.0;
+
+/// A landmark predicted in the far band is tried for an unbound feature only within this
+/// angle of the feature's ray, radians: 8 degrees, a landmark 10 m off with the pose 0.5 m
+/// uncertain (the most map matching allows, `MATCH_MAX_POSE_SIGMA_M`) is 3 degrees off.
+const FAR_MATCH_CONE_RAD: f64 = 0.14;
 
 /// Frames between the merge guard's passes over the whole map (5 s at 20 Hz).
 const MERGE_PASS_FRAMES: u64 = 100;

@@ -34,8 +34,23 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 }
 
 fn run() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: frame_times LOG.mcap [RIG.toml]";
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let usage = "usage: frame_times LOG.mcap [RIG.toml] [--far-gain G]";
+    let mut settings = NavSettings::default();
+    if let Some(k) = args.iter().position(|a| a == "--far-gain") {
+        let v = args.get(k + 1).ok_or(usage)?;
+        settings.ekf.far_max_noise_gain = v
+            .parse()
+            .map_err(|_| format!("--far-gain {v:?}: {usage}"))?;
+        args.drain(k..k + 2);
+    }
+    if let Some(k) = args.iter().position(|a| a == "--far-budget") {
+        let v = args.get(k + 1).ok_or(usage)?;
+        settings.ekf.far_updates_per_frame = v
+            .parse()
+            .map_err(|_| format!("--far-budget {v:?}: {usage}"))?;
+        args.drain(k..k + 2);
+    }
     let log = args.first().ok_or(usage)?;
     let rig = match args.get(1) {
         Some(path) => {
@@ -46,8 +61,7 @@ fn run() -> Result<(), String> {
     };
     let input =
         replay::read_vehicle_log(std::path::Path::new(log), rig).map_err(|e| e.to_string())?;
-    let mut nav =
-        Navigator::new(input.rig.clone(), NavSettings::default()).map_err(|e| e.to_string())?;
+    let mut nav = Navigator::new(input.rig.clone(), settings).map_err(|e| e.to_string())?;
     let mut odometry = input.odometry.iter().peekable();
     // (milliseconds, frame index, landmarks after it)
     let mut times: Vec<(f64, usize, usize)> = Vec::with_capacity(input.frames.len());

@@ -114,6 +114,9 @@ pub struct Settings {
     /// (lamps high above the cameras, seen far out) moved the maps of tall fisheye halls
     /// (docs/halls.md, "The far band"). 0: every far pair.
     pub far_min_snr: f64,
+    /// The far band's pairs used in one frame at most, the least observed landmarks first
+    /// (0: all): the far band of a tall hall holds dozens of lamps a frame.
+    pub far_updates_per_frame: usize,
     /// Large states are updated in local sessions (`crate::local`, the compressed filter):
     /// the active landmarks are those within this many metres (horizontally) beyond the
     /// farthest one in view when a session opens, so that the vehicle can drive about as far
@@ -136,6 +139,7 @@ impl Default for Settings {
             outer_max_noise_gain: 4.0,
             far_max_noise_gain: 1000.0,
             far_min_snr: 2.0,
+            far_updates_per_frame: 8,
             local_margin_m: 1.0,
         }
     }

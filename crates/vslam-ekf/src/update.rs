@@ -352,6 +352,19 @@ impl Ekf {
             }
         }
         let mut report = self.update_within(&inner)?;
+        // The far band's pairs: the least observed landmarks first, at most
+        // `Settings::far_updates_per_frame` of them.
+        let budget = self.settings.far_updates_per_frame;
+        if budget > 0 && outer.iter().filter(|(_, z)| self.in_far_band(z)).count() > budget {
+            let mut far: Vec<(u64, LandmarkId)> = outer
+                .iter()
+                .filter(|(_, z)| self.in_far_band(z))
+                .map(|(id, _)| (self.observations_of(*id).unwrap_or(0), *id))
+                .collect();
+            far.sort_unstable();
+            let dropped: Vec<LandmarkId> = far.iter().skip(budget).map(|(_, id)| *id).collect();
+            outer.retain(|(id, _)| !dropped.contains(id));
+        }
         for (id, z) in outer {
             let Some(s) = self.slot(id) else {
                 continue;
