@@ -85,6 +85,12 @@ pub struct HallSpec {
     pub beam_corners: bool,
     /// A row of tubes along the hall's wall at `y < 0`.
     pub tubes: bool,
+    /// A row of square LED panels (0.6 m) along the hall's other wall: four corners each.
+    pub panels: bool,
+    /// A dark stretch across the hall's middle, metres (0: none): no lamp, sprinkler head,
+    /// beam corner, tube or panel there, so that each aisle drives this far blind and comes
+    /// back to lamps mapped from the neighbouring aisle (a loop, item 2 of issue 35).
+    pub dark_stretch_m: f64,
     /// The lens.
     pub lens: HallLens,
     /// A real vehicle's errors: odometry 1 % fast, yaw rates 0.5 % high with a 0.002 rad/s
@@ -110,6 +116,8 @@ impl Default for HallSpec {
             sprinklers: true,
             beam_corners: false,
             tubes: false,
+            panels: false,
+            dark_stretch_m: 0.0,
             lens: HallLens::Radtan,
             vehicle_errors: true,
             max_speed_mps: 1.2,
@@ -121,7 +129,9 @@ impl Default for HallSpec {
 impl HallSpec {
     /// A hall drawn from `seed`: 3 to 6 aisles of 24 to 48 m, 5 to 8 m apart, lamps every 2.5
     /// to 4.5 m, 5.5 to 9 m up, with jitter up to 0.4 m; sprinkler heads, beam corners and
-    /// tubes each in about half the halls; either lens; always a real vehicle's errors.
+    /// tubes each in about half the halls; either lens; always a real vehicle's errors; LED
+    /// panels in about half the halls and a dark stretch of 8 to 16 m across the middle in
+    /// about half (drawn after the rest, so that a seed's other features are as before).
     pub fn draw(seed: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4841_4c4c); // "HALL"
         let mut uniform = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
@@ -141,6 +151,14 @@ impl HallSpec {
         } else {
             HallLens::Fisheye
         };
+        let panels = uniform(0.0, 1.0) < 0.5;
+        let dark = uniform(0.0, 1.0) < 0.5;
+        // At least 6 m of lamps left at each end.
+        let dark_stretch_m = if dark {
+            round(uniform(8.0, 16.0).min(aisle_length_m - 12.0), 1.0).max(0.0)
+        } else {
+            0.0
+        };
         Self {
             aisles,
             aisle_length_m,
@@ -151,11 +169,24 @@ impl HallSpec {
             sprinklers,
             beam_corners,
             tubes,
+            panels,
+            dark_stretch_m,
             lens,
             vehicle_errors: true,
             max_speed_mps: 1.2,
             stop_s: 3.0,
         }
+    }
+
+    /// The dark stretch's `[from, to]` in x, if any: centred on the aisles' middle.
+    fn dark_band(&self) -> Option<(f64, f64)> {
+        (self.dark_stretch_m > 0.0).then(|| {
+            let mid = 0.5 * self.aisle_length_m;
+            (
+                mid - 0.5 * self.dark_stretch_m,
+                mid + 0.5 * self.dark_stretch_m,
+            )
+        })
     }
 
     /// One line saying what the hall is.
@@ -170,8 +201,16 @@ impl HallSpec {
         if self.tubes {
             extras.push("tubes");
         }
+        if self.panels {
+            extras.push("LED panels");
+        }
+        let dark = if self.dark_stretch_m > 0.0 {
+            format!(", {:.0} m dark across the middle", self.dark_stretch_m)
+        } else {
+            String::new()
+        };
         format!(
-            "{} aisles of {:.0} m {:.1} m apart, lamps every {:.1} m {:.1} m up{}{}, {} lens{}",
+            "{} aisles of {:.0} m {:.1} m apart, lamps every {:.1} m {:.1} m up{}{}{dark}, {} lens{}",
             self.aisles,
             self.aisle_length_m,
             self.aisle_spacing_m,
@@ -194,6 +233,28 @@ fn grid_count(lo: f64, hi: f64, step: f64) -> usize {
     #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
     let n = ((hi - lo) / step).floor().max(0.0) as usize;
     n + 1
+}
+
+/// A grid row of `nx` points from `x0`, `d` apart, as the runs outside the dark band
+/// `(from, to)`: `(x0, nx)` of each.
+fn split_row(x0: f64, nx: usize, d: f64, band: Option<(f64, f64)>) -> Vec<(f64, usize)> {
+    let Some((a, b)) = band else {
+        return vec![(x0, nx)];
+    };
+    let mut runs: Vec<(f64, usize)> = Vec::new();
+    for k in 0..nx {
+        #[allow(clippy::cast_precision_loss)]
+        let x = x0 + d * k as f64;
+        if x >= a && x <= b {
+            continue;
+        }
+        match runs.last_mut() {
+            #[allow(clippy::cast_precision_loss)]
+            Some((start, n)) if (x - (*start + d * *n as f64)).abs() < 1e-9 => *n += 1,
+            _ => runs.push((x, 1)),
+        }
+    }
+    runs
 }
 
 /// The hall as a scenario file (TOML) with `seed` (the noise's and the jitter's); its `rig`
@@ -241,47 +302,78 @@ pub fn scenario_toml(spec: &HallSpec, seed: u64) -> String {
         "[world]\nlamp_radius_m = 0.003\nlamp_radiance_dn = 400.0\nseed = {}\ngrids = [",
         seed.wrapping_mul(7).wrapping_add(1)
     );
+    let band = spec.dark_band();
+    // One grid line (`rest` its keys after the spacing), split around the dark stretch.
+    let mut grid = |x0: f64, y0: f64, z: f64, nx: usize, ny: usize, d: f64, rest: &str| {
+        for (x0, nx) in split_row(x0, nx, d, band) {
+            let _ = writeln!(
+                t,
+                "  {{ x0_m = {x0}, y0_m = {y0}, z_m = {z}, nx = {nx}, ny = {ny}, dx_m = {d}, dy_m = {d}, {rest} }},"
+            );
+        }
+    };
     let (nx, ny) = (grid_count(x_lo, x_hi, s), grid_count(y_lo, y_hi, s));
-    let _ = writeln!(
-        t,
-        "  {{ x0_m = {x_lo}, y0_m = {y_lo}, z_m = {}, nx = {nx}, ny = {ny}, dx_m = {s}, dy_m = {s}, jitter_xy_m = {}, jitter_z_m = 0.1 }},",
-        spec.lamp_height_m, spec.jitter_xy_m
+    grid(
+        x_lo,
+        y_lo,
+        spec.lamp_height_m,
+        nx,
+        ny,
+        s,
+        &format!("jitter_xy_m = {}, jitter_z_m = 0.1", spec.jitter_xy_m),
     );
     if spec.sprinklers {
         let (x0, y0) = (x_lo + 0.5 * s, y_lo + 0.5 * s);
-        let _ = writeln!(
-            t,
-            "  {{ x0_m = {x0}, y0_m = {y0}, z_m = {}, nx = {}, ny = {}, dx_m = {s}, dy_m = {s}, jitter_xy_m = {}, jitter_z_m = 0.05, radius_m = 0.002, radiance_dn = 150.0 }},",
+        grid(
+            x0,
+            y0,
             spec.lamp_height_m - 0.4,
             grid_count(x0, x_hi, s),
             grid_count(y0, y_hi, s),
-            spec.jitter_xy_m
+            s,
+            &format!(
+                "jitter_xy_m = {}, jitter_z_m = 0.05, radius_m = 0.002, radiance_dn = 150.0",
+                spec.jitter_xy_m
+            ),
         );
     }
     if spec.beam_corners {
         let b = 2.0 * s;
         let (x0, y0) = (x_lo + 0.25 * s, y_lo + 0.25 * s);
-        let _ = writeln!(
-            t,
-            "  {{ x0_m = {x0}, y0_m = {y0}, z_m = {}, nx = {}, ny = {}, dx_m = {b}, dy_m = {b}, jitter_xy_m = 0.05, jitter_z_m = 0.02, radius_m = 0.002, radiance_dn = 120.0 }},",
+        grid(
+            x0,
+            y0,
             spec.lamp_height_m + 0.5,
             grid_count(x0, x_hi, b),
-            grid_count(y0, y_hi, b)
+            grid_count(y0, y_hi, b),
+            b,
+            "jitter_xy_m = 0.05, jitter_z_m = 0.02, radius_m = 0.002, radiance_dn = 120.0",
         );
     }
     let _ = writeln!(t, "]");
-    if spec.tubes {
+    let lit = |x: f64, half: f64| band.is_none_or(|(a, b)| x + half < a || x - half > b);
+    if spec.tubes || spec.panels {
         let _ = writeln!(t, "panels = [");
         let step = 2.0 * s;
         for k in 0..grid_count(x_lo + s, x_hi - s, step) {
             #[allow(clippy::cast_precision_loss)]
             let x = x_lo + s + step * k as f64;
-            let _ = writeln!(
-                t,
-                "  {{ x_m = {x}, y_m = {}, z_m = {}, length_m = 1.2, width_m = 0.08 }},",
-                y_lo - 1.0,
-                spec.lamp_height_m - 0.2
-            );
+            if spec.tubes && lit(x, 0.6) {
+                let _ = writeln!(
+                    t,
+                    "  {{ x_m = {x}, y_m = {}, z_m = {}, length_m = 1.2, width_m = 0.08 }},",
+                    y_lo - 1.0,
+                    spec.lamp_height_m - 0.2
+                );
+            }
+            if spec.panels && lit(x, 0.3) {
+                let _ = writeln!(
+                    t,
+                    "  {{ x_m = {x}, y_m = {}, z_m = {}, length_m = 0.6, width_m = 0.6 }},",
+                    y_hi + 1.0,
+                    spec.lamp_height_m - 0.1
+                );
+            }
         }
         let _ = writeln!(t, "]");
     }
@@ -365,5 +457,39 @@ mod tests {
         }
         assert_eq!(lenses.len(), 2);
         assert_ne!(HallSpec::draw(1), HallSpec::draw(2));
+    }
+
+    #[test]
+    fn a_dark_stretch_leaves_no_feature_in_its_band_and_panels_have_their_row() {
+        let spec = HallSpec {
+            dark_stretch_m: 12.0,
+            panels: true,
+            tubes: true,
+            beam_corners: true,
+            ..HallSpec::default()
+        };
+        let sc = scenario(&spec, 35).unwrap();
+        let (a, b) = spec.dark_band().unwrap();
+        assert_eq!((a, b), (15.0, 27.0));
+        let w = &sc.spec.world;
+        // Each of the three grids split in two around the band.
+        assert_eq!(w.grids.len(), 6);
+        for g in &w.grids {
+            for k in 0..g.nx {
+                #[allow(clippy::cast_precision_loss)]
+                let x = g.x0_m + g.dx_m * k as f64;
+                assert!(x < a || x > b, "a grid point at x = {x} in the dark band");
+            }
+        }
+        let panels = w.panels.iter().filter(|p| p.length_m == 0.6).count();
+        let tubes = w.panels.iter().filter(|p| p.length_m == 1.2).count();
+        assert!(panels > 0 && tubes > 0);
+        assert!(w.panels.iter().all(|p| p.x_m + 0.6 < a || p.x_m - 0.6 > b));
+        // Without a dark stretch nothing is split.
+        assert_eq!(split_row(0.0, 5, 1.0, None), vec![(0.0, 5)]);
+        assert_eq!(
+            split_row(0.0, 10, 1.0, Some((3.5, 6.5))),
+            vec![(0.0, 4), (7.0, 3)]
+        );
     }
 }
