@@ -53,9 +53,10 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
+    let mut every_frame = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value; {usage}"));
@@ -63,6 +64,7 @@ fn run() -> Result<(), String> {
             "--vehicle" => opts.vehicle = true,
             "--no-smoother" => opts.no_smoother = true,
             "--missed" => opts.missed = true,
+            "--every-frame" => every_frame = true,
             "--rig" => opts.rig = Some(value("--rig")?),
             "--field" => {
                 let v = value("--field")?;
@@ -369,7 +371,8 @@ fn run() -> Result<(), String> {
         if t_s < from || t_s > to {
             continue;
         }
-        if wrong.is_empty()
+        if !every_frame
+            && wrong.is_empty()
             && outcome.rematched.is_empty()
             && outcome.merged.is_empty()
             && jump < JUMP_M
