@@ -46,18 +46,10 @@ pub const ITERATE_HEADING_SIGMA_RAD: f64 = 0.035;
 /// sigmas of its linear model's.
 pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 
-/// First-estimates Jacobians (the FEJ-EKF of Huang, Mourikis and Roumeliotis, ICRA 2008): the
-/// update's Jacobians of a landmark's observation are taken at a fixed linearisation point of
-/// that landmark, which follows its estimate until the landmark's largest position sigma is
-/// below this, metres, and then stays. Jacobians at each update's estimate gave the filter
-/// information on its global heading from lamps seen for the first time: on a loop (5.6
-/// degrees of heading sigma became 0.4 within a second, docs/halls.md "Loops") and after
-/// every dark stretch of the generated halls (the heading's sigma halved by new lamps while
-/// its error grew to 0.5 degrees, 3 sigma; docs/benchmarks.md, "Halls with LED panels and
-/// dark stretches"). Frozen at the landmark's very first estimate, a narrow lens's lamps 5 m
-/// above the cameras were linearised too far off (two of eight halls inconsistent); 0.5 m
-/// left every hall consistent.
-pub const FEJ_SETTLE_SIGMA_M: f64 = 0.5;
+/// While the pose's position sigma is above this, metres, the update's Jacobians are taken at
+/// each landmark's first estimate (first-estimates Jacobians: the pose is lost, and lamps seen
+/// for the first time must not tell the filter where it is).
+pub const FEJ_POSITION_SIGMA_M: f64 = 0.5;
 
 /// Passes of the iterated update at most (the first, linear one included).
 pub const ITERATE_MAX_PASSES: usize = 8;

@@ -11,7 +11,7 @@ use rig_model::rig::{Jac4x3, RigError};
 use rig_model::{CameraParams, Measurement, N_PARAMS, Pose2, project_with_jacobians};
 
 use crate::error::Error;
-use crate::filter::Ekf;
+use crate::filter::{Ekf, FEJ_POSITION_SIGMA_M};
 use crate::kernels::Obs;
 use crate::landmarks::LandmarkId;
 use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout};
@@ -102,9 +102,14 @@ impl Ekf {
             &landmark,
         )
         .map_err(|source| Error::Projection { id, source })?;
-        // `H` at the landmark's linearisation point (`crate::FEJ_SETTLE_SIGMA_M`); the
-        // innovation stays the current estimate's.
-        if let Some(first) = self.landmarks.get(s).and_then(|l| l.first)
+        // While the pose is lost, `H` at the landmark's first estimate (the FEJ-EKF of Huang,
+        // Mourikis and Roumeliotis, ICRA 2008): Jacobians at the estimates of each update gave
+        // the filter information on the global heading from lamps seen for the first time
+        // (5.6 degrees of sigma became 0.4 within a second on a loop; docs/halls.md, "Loops").
+        // The innovation stays the current estimate's.
+        let position_sigma2 = self.cov(0, 0).max(self.cov(1, 1));
+        if position_sigma2 > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M
+            && let Some(first) = self.landmarks.get(s).and_then(|l| l.first)
             && let Ok((_, at_first)) = measurement_jacobian_columns(
                 &self.layout(),
                 s,

@@ -252,7 +252,6 @@ impl Ekf {
                 first: None,
                 observations: l.observations,
                 rejections_in_a_row: 0,
-                settled: true,
             });
             ids.push(id);
         }

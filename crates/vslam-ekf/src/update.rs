@@ -12,9 +12,9 @@ use rig_model::{Measurement, N_PARAMS};
 
 use crate::error::Error;
 use crate::filter::{
-    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, FEJ_SETTLE_SIGMA_M, Gated,
-    ITERATE_HEADING_SIGMA_RAD, ITERATE_MAX_PASSES, ITERATE_POSITION_SIGMA_M,
-    ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES, UpdateReport,
+    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, Gated, ITERATE_HEADING_SIGMA_RAD,
+    ITERATE_MAX_PASSES, ITERATE_POSITION_SIGMA_M, ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES,
+    UpdateReport,
 };
 use crate::kernels::gather_columns;
 use crate::kernels::{
@@ -412,19 +412,6 @@ impl Ekf {
             report.accepted.push(gated);
         } else {
             report.rejected.push(gated);
-        }
-        // The landmark's linearisation point follows it until it is known well enough
-        // (`FEJ_SETTLE_SIGMA_M`).
-        if accepted && self.landmarks.get(s).is_some_and(|l| !l.settled) {
-            let i = StateLayout::landmark(s);
-            let b = self.block3(i);
-            let at = self.x.fixed_rows::<3>(i).into_owned();
-            if let Some(slot) = self.landmarks.get_mut(s) {
-                slot.first = Some(at);
-                if b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M {
-                    slot.settled = true;
-                }
-            }
         }
     }
 
