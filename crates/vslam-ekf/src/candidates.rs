@@ -530,17 +530,7 @@ impl Candidates {
         }
         views::add_vehicle_sensitivity(camera, track_views, pose, &mut t, variances);
         let range = rig_model::point_in_rig(camera, pose, &t.position).norm();
-        let g = Matrix3::new(
-            1.0,
-            0.0,
-            -(t.position.y - pose.y),
-            0.0,
-            1.0,
-            t.position.x - pose.x,
-            0.0,
-            0.0,
-            0.0,
-        );
+        let g = crate::landmarks::carried_by_pose(pose, &t.position);
         let noise = t.covariance + g * drift * g.transpose();
         let largest = noise.symmetric_eigenvalues().max();
         let bound = self.settings.outer_birth_relative_sigma * range;

@@ -345,10 +345,12 @@ impl Ekf {
         for (k, i) in idx.iter_mut().enumerate().take(POSE_DIM) {
             *i = k;
         }
-        g[0][0] = 1.0;
-        g[1][1] = 1.0;
-        g[0][2] = -(position.y - pose.y);
-        g[1][2] = position.x - pose.x;
+        let carried = carried_by_pose(&pose, position);
+        for (a, row) in g.iter_mut().enumerate() {
+            for (k, v) in row.iter_mut().enumerate().take(POSE_DIM) {
+                *v = carried[(a, k)];
+            }
+        }
         for (k, p) in self.estimated.iter().enumerate() {
             idx[POSE_DIM + k] = c0 + k;
             for (a, row) in g.iter_mut().enumerate() {
@@ -580,4 +582,20 @@ struct PairDifference {
     c: nalgebra::Cholesky<f64, nalgebra::U3>,
     /// The squared Mahalanobis distance `d^T S^-1 d`.
     d2: f64,
+}
+
+/// `d world / d (x, y, theta)` of a point held fixed relative to the vehicle at `pose`, now at
+/// `world`: it moves with the pose's position and turns about it with its heading.
+pub(crate) fn carried_by_pose(pose: &rig_model::Pose2, world: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(
+        1.0,
+        0.0,
+        -(world.y - pose.y),
+        0.0,
+        1.0,
+        world.x - pose.x,
+        0.0,
+        0.0,
+        0.0,
+    )
 }
