@@ -46,9 +46,33 @@ pub const ITERATE_HEADING_SIGMA_RAD: f64 = 0.035;
 /// sigmas of its linear model's.
 pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 
-/// While the pose's position sigma is above this, metres, the update's Jacobians are taken at
-/// each landmark's first estimate (first-estimates Jacobians: the pose is lost, and lamps seen
-/// for the first time must not tell the filter where it is).
+/// First-estimates Jacobians (the FEJ-EKF of Huang, Mourikis and Roumeliotis, ICRA 2008): the
+/// update's Jacobians of a landmark's observation are taken at a fixed linearisation point of
+/// that landmark (the pose's and the landmark's columns; the camera's at the estimate, as
+/// they are not in the unobservable directions), which follows the landmark's estimate until
+/// its largest position sigma is below this, metres, and the camera is learned
+/// ([`FEJ_CAMERA_RELATIVE`]), and then stays; a joint estimate from the smoother
+/// (`Ekf::set_joint`) is a new linearisation point, and the iterated update relinearises at
+/// the estimate unless the pose is lost ([`FEJ_POSITION_SIGMA_M`]). Jacobians at each update's estimate gave the filter
+/// information on its global heading from lamps seen for the first time: on a loop (5.6
+/// degrees of heading sigma became 0.4 within a second, docs/halls.md "Loops") and after
+/// every dark stretch of the generated halls (the heading's sigma halved by new lamps while
+/// its error grew to 0.5 degrees, 3 sigma; docs/benchmarks.md, "Halls with LED panels and
+/// dark stretches"). Frozen at the landmark's very first estimate, a narrow lens's lamps 5 m
+/// above the cameras were linearised too far off (two of eight halls inconsistent); 0.5 m
+/// left every hall consistent.
+pub const FEJ_SETTLE_SIGMA_M: f64 = 0.5;
+
+/// A landmark's linearisation point settles ([`FEJ_SETTLE_SIGMA_M`]) only once the camera's
+/// estimated parameters move a landmark by at most this share of its distance (their sigmas
+/// over the focal length or the baseline, or in radians and metres): from nominal values
+/// 2.5 % off (the paper's square) a point settled early left the focal length 6.8 sigma off
+/// and lost every lamp of a seed as the camera converged.
+pub const FEJ_CAMERA_RELATIVE: f64 = 0.005;
+
+/// While the pose's position sigma is above this, metres, the pose is lost: a new landmark's
+/// linearisation point stays at its first estimate (lamps seen for the first time must not
+/// tell the filter where it is), and the iterated update keeps the first-estimates Jacobians.
 pub const FEJ_POSITION_SIGMA_M: f64 = 0.5;
 
 /// Passes of the iterated update at most (the first, linear one included).

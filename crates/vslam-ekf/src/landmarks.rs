@@ -40,12 +40,15 @@ pub struct LandmarkEstimate {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Slot {
     pub(crate) id: LandmarkId,
-    /// Its position when it was added (the first-estimates Jacobians' linearisation point
-    /// while the pose is lost, `Ekf::observation_model`); `None` for the landmarks handed
-    /// over by phase 1.
+    /// The first-estimates Jacobians' linearisation point (`Ekf::observation_model`): its
+    /// position when added, following its estimate until `settled`; `None` for the
+    /// landmarks handed over by phase 1.
     pub(crate) first: Option<Vector3<f64>>,
     pub(crate) observations: u64,
     pub(crate) rejections_in_a_row: u32,
+    /// Whether `first` is frozen: it follows the estimate until the landmark is known to
+    /// [`crate::FEJ_SETTLE_SIGMA_M`].
+    pub(crate) settled: bool,
 }
 
 impl Ekf {
@@ -436,6 +439,7 @@ impl Ekf {
             first: Some(position),
             observations: 1,
             rejections_in_a_row: 0,
+            settled: false,
         });
         self.health.landmarks_added += 1;
         Ok(id)

@@ -200,9 +200,10 @@ pub use candidates::{CandidateSettings, Candidates, FrameReport};
 pub use error::Error;
 #[cfg(feature = "alloc")]
 pub use filter::{
-    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, FEJ_POSITION_SIGMA_M, Gated,
-    ITERATE_HEADING_SIGMA_RAD, ITERATE_MAX_PASSES, ITERATE_POSITION_SIGMA_M,
-    ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES, Settings, UpdateReport,
+    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, FEJ_CAMERA_RELATIVE,
+    FEJ_POSITION_SIGMA_M, FEJ_SETTLE_SIGMA_M, Gated, ITERATE_HEADING_SIGMA_RAD, ITERATE_MAX_PASSES,
+    ITERATE_POSITION_SIGMA_M, ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES, Settings,
+    UpdateReport,
 };
 #[cfg(feature = "alloc")]
 pub use health::Health;

@@ -553,7 +553,10 @@ pub(crate) mod tests {
         assert_eq!(p_open, p_local);
         assert_eq!(dense.state_len(), local.state_len());
         close(&dense.covariance(), &p_local);
+        // To rounding: 1e-10 of the state's scale (12 m). With the first-estimates
+        // Jacobians the two forms' rounding grows to about 3e-9 m over this drive (it was
+        // under 1e-9 without them); no step of the session is approximate.
         let dx = (dense.state() - local.state()).abs().max();
-        assert!(dx < 1e-9, "state differs by {dx}");
+        assert!(dx < 1e-8, "state differs by {dx}");
     }
 }

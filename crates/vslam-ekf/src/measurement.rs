@@ -11,7 +11,7 @@ use rig_model::rig::{Jac4x3, RigError};
 use rig_model::{CameraParams, Measurement, N_PARAMS, Pose2, project_with_jacobians};
 
 use crate::error::Error;
-use crate::filter::{Ekf, FEJ_POSITION_SIGMA_M};
+use crate::filter::Ekf;
 use crate::kernels::Obs;
 use crate::landmarks::LandmarkId;
 use crate::state::{LANDMARK_DIM, POSE_DIM, StateLayout};
@@ -88,6 +88,18 @@ impl Ekf {
         camera: &CameraParams,
         pose: &Pose2,
     ) -> Result<(Measurement, Obs), Error> {
+        self.observation_model_with(s, camera, pose, true)
+    }
+
+    /// [`Self::observation_model`]; with `fej` false `H` is at the current estimate throughout
+    /// (the derivative itself, and the iterated update's relinearisations).
+    pub(crate) fn observation_model_with(
+        &self,
+        s: usize,
+        camera: &CameraParams,
+        pose: &Pose2,
+        fej: bool,
+    ) -> Result<(Measurement, Obs), Error> {
         let id = self.landmarks.get(s).map_or(LandmarkId(u64::MAX), |l| l.id);
         let landmark = self
             .x
@@ -102,13 +114,9 @@ impl Ekf {
             &landmark,
         )
         .map_err(|source| Error::Projection { id, source })?;
-        // While the pose is lost, `H` at the landmark's first estimate (the FEJ-EKF of Huang,
-        // Mourikis and Roumeliotis, ICRA 2008): Jacobians at the estimates of each update gave
-        // the filter information on the global heading from lamps seen for the first time
-        // (5.6 degrees of sigma became 0.4 within a second on a loop; docs/halls.md, "Loops").
-        // The innovation stays the current estimate's.
-        let position_sigma2 = self.cov(0, 0).max(self.cov(1, 1));
-        if position_sigma2 > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M
+        // `H` at the landmark's linearisation point (`crate::FEJ_SETTLE_SIGMA_M`); the
+        // innovation stays the current estimate's.
+        if fej
             && let Some(first) = self.landmarks.get(s).and_then(|l| l.first)
             && let Ok((_, at_first)) = measurement_jacobian_columns(
                 &self.layout(),
@@ -119,7 +127,16 @@ impl Ekf {
                 &first,
             )
         {
-            h = at_first;
+            // The pose's and the landmark's columns only; the camera's at the estimate.
+            for (row, first_row) in h.h.iter_mut().zip(at_first.h.iter()) {
+                for (v, f) in row
+                    .iter_mut()
+                    .zip(first_row.iter())
+                    .take(POSE_DIM + LANDMARK_DIM)
+                {
+                    *v = *f;
+                }
+            }
         }
         Ok((predicted, Obs::new(&h)))
     }
@@ -164,6 +181,22 @@ impl Ekf {
         &self,
         id: LandmarkId,
     ) -> Result<(Measurement, DMatrix<f64>), Error> {
+        let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
+        let (z, m) = self.observation_model_with(s, &self.camera(), &self.pose(), false)?;
+        let mut h = DMatrix::zeros(4, self.x.len());
+        for (t, &c) in m.cols.iter().enumerate().take(m.q) {
+            for r in 0..4 {
+                h[(r, c)] = m.h[r][t];
+            }
+        }
+        Ok((z, h))
+    }
+
+    /// The predicted measurement of a landmark and the `4 x n` matrix `H` the update uses for
+    /// it, dense: [`Self::measurement_jacobian`] but for the pose's and the landmark's
+    /// columns, which are taken at the landmark's linearisation point where the update uses
+    /// first-estimates Jacobians (`crate::FEJ_SETTLE_SIGMA_M`). For tests and tools.
+    pub fn update_jacobian(&self, id: LandmarkId) -> Result<(Measurement, DMatrix<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
         let (z, m) = self.observation_model(s, &self.camera(), &self.pose())?;
         let mut h = DMatrix::zeros(4, self.x.len());

@@ -252,6 +252,7 @@ impl Ekf {
                 first: None,
                 observations: l.observations,
                 rejections_in_a_row: 0,
+                settled: true,
             });
             ids.push(id);
         }
@@ -326,6 +327,17 @@ impl Ekf {
         self.local = None;
         self.x = x;
         self.p = p;
+        // A joint estimate from outside (the smoother's batch) is the landmarks' new
+        // linearisation point for the first-estimates Jacobians.
+        for (k, slot) in self.landmarks.iter_mut().enumerate() {
+            if slot.first.is_some() {
+                slot.first = Some(
+                    self.x
+                        .fixed_rows::<3>(StateLayout::landmark(k))
+                        .into_owned(),
+                );
+            }
+        }
         Ok(())
     }
 

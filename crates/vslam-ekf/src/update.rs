@@ -12,9 +12,9 @@ use rig_model::{Measurement, N_PARAMS};
 
 use crate::error::Error;
 use crate::filter::{
-    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, Gated, ITERATE_HEADING_SIGMA_RAD,
-    ITERATE_MAX_PASSES, ITERATE_POSITION_SIGMA_M, ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES,
-    UpdateReport,
+    AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, FEJ_CAMERA_RELATIVE,
+    FEJ_POSITION_SIGMA_M, FEJ_SETTLE_SIGMA_M, Gated, ITERATE_HEADING_SIGMA_RAD, ITERATE_MAX_PASSES,
+    ITERATE_POSITION_SIGMA_M, ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES, UpdateReport,
 };
 use crate::kernels::gather_columns;
 use crate::kernels::{
@@ -413,6 +413,41 @@ impl Ekf {
         } else {
             report.rejected.push(gated);
         }
+        // The landmark's linearisation point follows it until it is known well enough
+        // (`FEJ_SETTLE_SIGMA_M`), except while the pose is lost (`FEJ_POSITION_SIGMA_M`).
+        let lost = self.cov(0, 0).max(self.cov(1, 1)) > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M;
+        if accepted && !lost && self.landmarks.get(s).is_some_and(|l| !l.settled) {
+            let camera_learned = self.camera_learned();
+            let i = StateLayout::landmark(s);
+            let b = self.block3(i);
+            let at = self.x.fixed_rows::<3>(i).into_owned();
+            if let Some(slot) = self.landmarks.get_mut(s) {
+                slot.first = Some(at);
+                if b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M && camera_learned {
+                    slot.settled = true;
+                }
+            }
+        }
+    }
+
+    /// Whether the camera's estimated parameters move a landmark by at most
+    /// `FEJ_CAMERA_RELATIVE` of its distance (their sigmas over the focal length, the
+    /// baseline, one radian, one metre): a landmark's linearisation point settles only then,
+    /// while a camera started from nominal values still carries every landmark with it.
+    fn camera_learned(&self) -> bool {
+        let c = self.camera();
+        let c0 = self.camera_offset();
+        self.estimated.iter().enumerate().all(|(k, p)| {
+            let scale = match p {
+                Param::F | Param::Cx | Param::Cy => c.f,
+                Param::Baseline => c.baseline,
+                _ => 1.0,
+            };
+            p.is_vehicle() || {
+                let r = libm::sqrt(self.cov(c0 + k, c0 + k).max(0.0)) / scale;
+                r <= FEJ_CAMERA_RELATIVE
+            }
+        })
     }
 
     /// A stereo pair of landmark slot `s` in the outer band: a Schmidt ("consider") update of
@@ -588,8 +623,13 @@ impl Ekf {
         let mut obs: Vec<Obs> = Vec::with_capacity(batch.len());
         let mut nis: Vec<f64> = alloc::vec![f64::INFINITY; batch.len()];
         let mut projected: Vec<usize> = Vec::with_capacity(batch.len());
+        // An update that will be iterated is Gauss-Newton on the measurement model from its
+        // first pass on: first-estimates Jacobians only while the pose is lost.
+        let iterating = self.pose_uncertain_for_linear_update();
+        let fej = !iterating
+            || self.cov(0, 0).max(self.cov(1, 1)) > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M;
         for (b, (&s, (_, z))) in slots.iter().zip(batch).enumerate() {
-            if let Ok((predicted, mut o)) = self.observation_model(s, &camera, &pose) {
+            if let Ok((predicted, mut o)) = self.observation_model_with(s, &camera, &pose, fej) {
                 // Eq. (6)'s innovation, nu = z - h(x).
                 let nu = z - predicted;
                 o.nu = [nu[0], nu[1], nu[2], nu[3]];
@@ -602,9 +642,7 @@ impl Ekf {
         // projection is not linear over the prior's spread: the prior is kept for the
         // iterated update below.
         let mut ws = core::mem::take(&mut self.workspace);
-        let prior = self
-            .pose_uncertain_for_linear_update()
-            .then(|| self.clone());
+        let prior = iterating.then(|| self.clone());
         let mut result = self.gate_and_update(&obs, &projected, &mut nis, &mut ws);
         if result.is_ok()
             && let Some(prior) = prior
@@ -849,7 +887,12 @@ impl Ekf {
                 let (Some(&s), Some((_, z))) = (slots.get(b), batch.get(b)) else {
                     return Ok(());
                 };
-                let Ok((predicted, mut at)) = self.observation_model(s, &camera, &pose) else {
+                // Relinearised at the estimate: the iterated update is Gauss-Newton on the
+                // measurement model (first-estimates Jacobians only while lost).
+                let lost = self.cov(0, 0).max(self.cov(1, 1))
+                    > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M;
+                let Ok((predicted, mut at)) = self.observation_model_with(s, &camera, &pose, lost)
+                else {
                     return Ok(());
                 };
                 // The linear model's residual here: `nu - H (x - x_0)` (its `nu` is taken back
@@ -1388,7 +1431,7 @@ mod landmark_only_tests {
                 e.covariance()
             };
             let p = dense(&ekf);
-            let (zhat, h) = ekf.measurement_jacobian(id).unwrap();
+            let (zhat, h) = ekf.update_jacobian(id).unwrap();
             let r =
                 DMatrix::from_diagonal(&DVector::from_row_slice(&ekf.measurement_variances(&zhat)));
             let s_mat = &h * &p * h.transpose() + &r;

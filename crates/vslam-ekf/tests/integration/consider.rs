@@ -25,7 +25,7 @@ fn dense_schmidt(ekf: &Ekf, batch: &[(LandmarkId, Measurement)]) -> (DVector<f64
     let mut h = DMatrix::zeros(4 * k, n);
     let mut nu = DVector::zeros(4 * k);
     for (j, (id, z)) in batch.iter().enumerate() {
-        let (zhat, hj) = ekf.measurement_jacobian(*id).unwrap();
+        let (zhat, hj) = ekf.update_jacobian(*id).unwrap();
         h.view_mut((4 * j, 0), (4, n)).copy_from(&hj);
         nu.rows_mut(4 * j, 4).copy_from(&(z - zhat));
     }
