@@ -169,7 +169,9 @@ impl Ekf {
         upper: bool,
     ) -> Result<(Measurement, Matrix4<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
-        let (z, mut m) = self.observation_model(s, &self.camera(), &self.pose())?;
+        // The derivative at the estimate: where the landmark is predicted and how uncertainly
+        // (the first-estimates Jacobians are the update's, for its information).
+        let (z, mut m) = self.observation_model_with(s, &self.camera(), &self.pose(), false)?;
         m.r = self.measurement_variances(&z);
         Ok((z, self.innovation_covariance_with(&m, upper)))
     }

@@ -376,7 +376,7 @@ fn predicted_measurement_and_visibility() {
     let r = s.ekf.noise().pixel.powi(2);
     for (id, _) in &s.points {
         let (z, cov) = s.ekf.predict_measurement(*id).unwrap();
-        let (z2, h) = s.ekf.update_jacobian(*id).unwrap();
+        let (z2, h) = s.ekf.measurement_jacobian(*id).unwrap();
         assert_eq!(z, z2);
         let dense = &h * &s.ekf.covariance() * h.transpose() + DMatrix::identity(4, 4) * r;
         for i in 0..4 {
