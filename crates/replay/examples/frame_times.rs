@@ -33,23 +33,30 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted.get(i).copied().unwrap_or(f64::NAN)
 }
 
+/// The value after `flag` in `args`, parsed, both taken out of `args`.
+fn take_value<T: std::str::FromStr>(
+    args: &mut Vec<String>,
+    flag: &str,
+    usage: &str,
+) -> Result<Option<T>, String> {
+    let Some(k) = args.iter().position(|a| a == flag) else {
+        return Ok(None);
+    };
+    let v = args.get(k + 1).ok_or(usage)?;
+    let parsed = v.parse().map_err(|_| format!("{flag} {v:?}: {usage}"))?;
+    args.drain(k..k + 2);
+    Ok(Some(parsed))
+}
+
 fn run() -> Result<(), String> {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: frame_times LOG.mcap [RIG.toml] [--far-gain G]";
+    let usage = "usage: frame_times LOG.mcap [RIG.toml] [--far-gain G] [--far-budget N]";
     let mut settings = NavSettings::default();
-    if let Some(k) = args.iter().position(|a| a == "--far-gain") {
-        let v = args.get(k + 1).ok_or(usage)?;
-        settings.ekf.far_max_noise_gain = v
-            .parse()
-            .map_err(|_| format!("--far-gain {v:?}: {usage}"))?;
-        args.drain(k..k + 2);
+    if let Some(v) = take_value(&mut args, "--far-gain", usage)? {
+        settings.ekf.far_max_noise_gain = v;
     }
-    if let Some(k) = args.iter().position(|a| a == "--far-budget") {
-        let v = args.get(k + 1).ok_or(usage)?;
-        settings.ekf.far_updates_per_frame = v
-            .parse()
-            .map_err(|_| format!("--far-budget {v:?}: {usage}"))?;
-        args.drain(k..k + 2);
+    if let Some(v) = take_value(&mut args, "--far-budget", usage)? {
+        settings.ekf.far_updates_per_frame = v;
     }
     let log = args.first().ok_or(usage)?;
     let rig = match args.get(1) {

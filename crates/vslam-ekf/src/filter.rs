@@ -53,8 +53,8 @@ pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 /// its largest position sigma is below this, metres, and the camera is learned
 /// ([`FEJ_CAMERA_RELATIVE`]), and then stays; a joint estimate from the smoother
 /// (`Ekf::set_joint`) is a new linearisation point, and the iterated update relinearises at
-/// the estimate unless the pose is lost ([`FEJ_POSITION_SIGMA_M`]). Jacobians at each update's estimate gave the filter
-/// information on its global heading from lamps seen for the first time: on a loop (5.6
+/// the estimate unless the pose is lost ([`FEJ_POSITION_SIGMA_M`]). Jacobians at each
+/// update's estimate gave the filter information on its global heading from lamps seen for the first time: on a loop (5.6
 /// degrees of heading sigma became 0.4 within a second, docs/halls.md "Loops") and after
 /// every dark stretch of the generated halls (the heading's sigma halved by new lamps while
 /// its error grew to 0.5 degrees, 3 sigma; docs/benchmarks.md, "Halls with LED panels and
@@ -213,37 +213,39 @@ impl Settings {
                 });
             }
         }
-        let k = self.outer_max_noise_gain;
-        if !(k.is_finite() && k >= 1.0) {
-            return Err(Error::BadValue {
-                name: "Settings.outer_max_noise_gain",
-                value: k,
-                expected: "finite and at least 1",
-            });
-        }
-        let k = self.far_max_noise_gain;
-        if !(k.is_finite() && k >= 1.0) {
-            return Err(Error::BadValue {
-                name: "Settings.far_max_noise_gain",
-                value: k,
-                expected: "finite and at least 1",
-            });
-        }
-        let k = self.far_min_snr;
-        if !(k.is_finite() && k >= 0.0) {
-            return Err(Error::BadValue {
-                name: "Settings.far_min_snr",
-                value: k,
-                expected: "finite and at least 0",
-            });
-        }
-        let m = self.local_margin_m;
-        if !(m.is_finite() && m >= 0.0) {
-            return Err(Error::BadValue {
-                name: "Settings.local_margin_m",
-                value: m,
-                expected: "finite and at least 0",
-            });
+        for (name, value, least, expected) in [
+            (
+                "Settings.outer_max_noise_gain",
+                self.outer_max_noise_gain,
+                1.0,
+                "finite and at least 1",
+            ),
+            (
+                "Settings.far_max_noise_gain",
+                self.far_max_noise_gain,
+                1.0,
+                "finite and at least 1",
+            ),
+            (
+                "Settings.far_min_snr",
+                self.far_min_snr,
+                0.0,
+                "finite and at least 0",
+            ),
+            (
+                "Settings.local_margin_m",
+                self.local_margin_m,
+                0.0,
+                "finite and at least 0",
+            ),
+        ] {
+            if !(value.is_finite() && value >= least) {
+                return Err(Error::BadValue {
+                    name,
+                    value,
+                    expected,
+                });
+            }
         }
         if self.max_consecutive_rejections == 0 {
             return Err(Error::BadValue {
@@ -348,6 +350,12 @@ impl Ekf {
         self.lens.is_some()
             && self.settings.outer_off_axis_deg > self.settings.max_off_axis_deg
             && !self.stereo_field().inner_contains(z)
+    }
+
+    /// Whether the pose is lost for the first-estimates Jacobians: its position sigma above
+    /// [`FEJ_POSITION_SIGMA_M`].
+    pub(crate) fn pose_lost(&self) -> bool {
+        self.cov(0, 0).max(self.cov(1, 1)) > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M
     }
 
     /// Whether a stereo pair lies in the far band ([`Settings::far_max_noise_gain`]).

@@ -364,6 +364,23 @@ impl Ekf {
         self.insert_landmark(*position, &idx, &g, q, noise)
     }
 
+    /// Every landmark's estimate as its linearisation point for the first-estimates Jacobians
+    /// (after a joint estimate from outside: `Ekf::set_joint`, `Ekf::replace_marginal`); the
+    /// landmarks handed over by phase 1 have none and keep none.
+    pub(crate) fn relinearise_landmarks(&mut self) {
+        for k in 0..self.landmarks.len() {
+            let at = self
+                .x
+                .fixed_rows::<3>(StateLayout::landmark(k))
+                .into_owned();
+            if let Some(slot) = self.landmarks.get_mut(k)
+                && slot.first.is_some()
+            {
+                slot.first = Some(at);
+            }
+        }
+    }
+
     /// Appends a landmark at `position` whose covariance is `G P Gᵀ + noise` over the states
     /// `idx[..q]` (`g` their Jacobian rows) and whose cross-covariances are `G P`.
     fn insert_landmark(

@@ -167,19 +167,7 @@ impl Ekf {
                 self.replace_dense(&pairs, &g, &m)?;
             }
         }
-        // As after `Ekf::set_joint`: the landmarks' new estimates are their linearisation
-        // points for the first-estimates Jacobians.
-        for k in 0..self.landmarks.len() {
-            let at = self
-                .x
-                .fixed_rows::<3>(StateLayout::landmark(k))
-                .into_owned();
-            if let Some(slot) = self.landmarks.get_mut(k)
-                && slot.first.is_some()
-            {
-                slot.first = Some(at);
-            }
-        }
+        self.relinearise_landmarks();
         Ok(slots.len())
     }
 

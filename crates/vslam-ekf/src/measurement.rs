@@ -183,15 +183,7 @@ impl Ekf {
         &self,
         id: LandmarkId,
     ) -> Result<(Measurement, DMatrix<f64>), Error> {
-        let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
-        let (z, m) = self.observation_model_with(s, &self.camera(), &self.pose(), false)?;
-        let mut h = DMatrix::zeros(4, self.x.len());
-        for (t, &c) in m.cols.iter().enumerate().take(m.q) {
-            for r in 0..4 {
-                h[(r, c)] = m.h[r][t];
-            }
-        }
-        Ok((z, h))
+        self.dense_jacobian(id, false)
     }
 
     /// The predicted measurement of a landmark and the `4 x n` matrix `H` the update uses for
@@ -199,8 +191,18 @@ impl Ekf {
     /// columns, which are taken at the landmark's linearisation point where the update uses
     /// first-estimates Jacobians (`crate::FEJ_SETTLE_SIGMA_M`). For tests and tools.
     pub fn update_jacobian(&self, id: LandmarkId) -> Result<(Measurement, DMatrix<f64>), Error> {
+        self.dense_jacobian(id, true)
+    }
+
+    /// A landmark's predicted measurement and its `H` as a dense `4 x n` matrix, at the
+    /// estimate or (`fej`) as the update takes it ([`Self::observation_model_with`]).
+    fn dense_jacobian(
+        &self,
+        id: LandmarkId,
+        fej: bool,
+    ) -> Result<(Measurement, DMatrix<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
-        let (z, m) = self.observation_model(s, &self.camera(), &self.pose())?;
+        let (z, m) = self.observation_model_with(s, &self.camera(), &self.pose(), fej)?;
         let mut h = DMatrix::zeros(4, self.x.len());
         for (t, &c) in m.cols.iter().enumerate().take(m.q) {
             for r in 0..4 {

@@ -327,17 +327,7 @@ impl Ekf {
         self.local = None;
         self.x = x;
         self.p = p;
-        // A joint estimate from outside (the smoother's batch) is the landmarks' new
-        // linearisation point for the first-estimates Jacobians.
-        for (k, slot) in self.landmarks.iter_mut().enumerate() {
-            if slot.first.is_some() {
-                slot.first = Some(
-                    self.x
-                        .fixed_rows::<3>(StateLayout::landmark(k))
-                        .into_owned(),
-                );
-            }
-        }
+        self.relinearise_landmarks();
         Ok(())
     }
 

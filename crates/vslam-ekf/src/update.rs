@@ -13,7 +13,7 @@ use rig_model::{Measurement, N_PARAMS};
 use crate::error::Error;
 use crate::filter::{
     AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, FEJ_CAMERA_RELATIVE,
-    FEJ_POSITION_SIGMA_M, FEJ_SETTLE_SIGMA_M, Gated, ITERATE_HEADING_SIGMA_RAD, ITERATE_MAX_PASSES,
+    FEJ_SETTLE_SIGMA_M, Gated, ITERATE_HEADING_SIGMA_RAD, ITERATE_MAX_PASSES,
     ITERATE_POSITION_SIGMA_M, ITERATE_TOLERANCE_SIGMAS, SEQUENTIAL_MAX_STATES, UpdateReport,
 };
 use crate::kernels::gather_columns;
@@ -415,8 +415,7 @@ impl Ekf {
         }
         // The landmark's linearisation point follows it until it is known well enough
         // (`FEJ_SETTLE_SIGMA_M`), except while the pose is lost (`FEJ_POSITION_SIGMA_M`).
-        let lost = self.cov(0, 0).max(self.cov(1, 1)) > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M;
-        if accepted && !lost && self.landmarks.get(s).is_some_and(|l| !l.settled) {
+        if accepted && !self.pose_lost() && self.landmarks.get(s).is_some_and(|l| !l.settled) {
             let camera_learned = self.camera_learned();
             let i = StateLayout::landmark(s);
             let b = self.block3(i);
@@ -626,8 +625,7 @@ impl Ekf {
         // An update that will be iterated is Gauss-Newton on the measurement model from its
         // first pass on: first-estimates Jacobians only while the pose is lost.
         let iterating = self.pose_uncertain_for_linear_update();
-        let fej = !iterating
-            || self.cov(0, 0).max(self.cov(1, 1)) > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M;
+        let fej = !iterating || self.pose_lost();
         for (b, (&s, (_, z))) in slots.iter().zip(batch).enumerate() {
             if let Ok((predicted, mut o)) = self.observation_model_with(s, &camera, &pose, fej) {
                 // Eq. (6)'s innovation, nu = z - h(x).
@@ -877,20 +875,19 @@ impl Ekf {
             .iter()
             .filter_map(|&(j, _)| obs.get(j).copied())
             .collect();
+        // Each pass relinearised at the estimate: the iterated update is Gauss-Newton on the
+        // measurement model (first-estimates Jacobians only while lost).
         for _ in 1..ITERATE_MAX_PASSES {
             // The residuals at the corrected state against the linear model's.
             let camera = self.camera();
             let pose = self.pose();
             let mut worst = 0.0f64;
+            let lost = self.pose_lost();
             let mut next: Vec<Obs> = Vec::with_capacity(accepted.len());
             for (o, &(_, b)) in linearised.iter().zip(&accepted) {
                 let (Some(&s), Some((_, z))) = (slots.get(b), batch.get(b)) else {
                     return Ok(());
                 };
-                // Relinearised at the estimate: the iterated update is Gauss-Newton on the
-                // measurement model (first-estimates Jacobians only while lost).
-                let lost = self.cov(0, 0).max(self.cov(1, 1))
-                    > FEJ_POSITION_SIGMA_M * FEJ_POSITION_SIGMA_M;
                 let Ok((predicted, mut at)) = self.observation_model_with(s, &camera, &pose, lost)
                 else {
                     return Ok(());
