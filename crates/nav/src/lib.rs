@@ -298,10 +298,49 @@ pub struct NavStats {
     pub significant_translation_m: f64,
     /// Rotation the odometry turned, the same way, radians.
     pub significant_rotation_rad: f64,
+    /// The odometry's noise model widened because the batch's residuals showed the odometry
+    /// worse or its errors longer-lived than the rig file states ([`OdometryWidening`]).
+    pub odometry_widened: Option<OdometryWidening>,
     /// Changes of speed between frame intervals, summed, counting a change only once it
     /// exceeds 0.05 m/s from the last counted speed (the clock offset's excitation), m/s.
     pub significant_speed_change_mps: f64,
 }
+
+/// How the navigator widened the odometry's noise model (issue 36): the batch's solved
+/// trajectory disagreed with the odometry over spans of [`selfcal::CONSISTENCY_WINDOW_S`]
+/// by more than the rig file's noise allows ([`ODOMETRY_RATIO_LIMIT`] times its variance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryWidening {
+    /// The first frame at which it widened, board time, microseconds.
+    pub first_t_us: u64,
+    /// The consistency that first triggered it (ratios against the rig file's model).
+    pub first: selfcal::OdometryConsistency,
+    /// The variance factors applied so far, all widenings together: `(translation, heading)`.
+    pub factors: (f64, f64),
+    /// The time constants of the odometry's errors the check saw, `(translation, heading)`,
+    /// seconds (0: none seen, or not yet measurable).
+    pub time_constants_s: (f64, f64),
+    /// The noise model in use after it (`velocity` and `yaw_rate` widened; the rig file's time
+    /// constants kept).
+    pub noise: rig_model::Noise,
+}
+
+/// The long-run ratio of the odometry's residual variance to the rig file's model above which
+/// the navigator widens the model (4: odometry twice as bad as stated in sigma; errors of
+/// 0.6 s memory stated as white give about 120 at 100 Hz). Odometry as good as stated gives
+/// about 1: the batch's relative poses over a second are good to a millimetre or two.
+pub const ODOMETRY_RATIO_LIMIT: f64 = 4.0;
+
+/// The longest time constant of the odometry's errors the check extrapolates with, seconds
+/// (a real vehicle's wheel slip lasts about 0.6 s).
+pub const ODOMETRY_MAX_TAU_S: f64 = 3.0;
+
+/// The most the odometry's variance is widened, all widenings together (sigma 100-fold).
+pub const ODOMETRY_MAX_WIDENING: f64 = 1e4;
+
+/// Windows of a span needed before the batch's odometry check over it is trusted (8 s of
+/// data over the 1 s span, 24 s over the 3 s one).
+pub const ODOMETRY_MIN_WINDOWS: usize = 8;
 
 /// The two phases of the method in one object (see the crate docs).
 #[derive(Debug, Clone)]
@@ -339,6 +378,9 @@ pub struct Navigator {
     merge_gate: f64,
     /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
     frame_pairs: Option<FramePairCalibration>,
+    /// The odometry's noise model in use: the rig file's, widened when the batch's residuals
+    /// showed it too small ([`NavStats::odometry_widened`]).
+    odometry_noise: rig_model::Noise,
 }
 
 impl Navigator {
@@ -379,7 +421,9 @@ impl Navigator {
             None
         };
         let smoother = Smoother::new(rig.clone(), settings.phase1);
+        let odometry_noise = rig.noise;
         let navigator = Self {
+            odometry_noise,
             rig,
             settings,
             front_end,
@@ -560,6 +604,93 @@ impl Navigator {
 
     /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
     /// 3 sigma of its noise: a standing vehicle's noise is not motion).
+    /// Widens the odometry's noise model when the batch's last solve showed the odometry
+    /// worse, or its errors longer-lived, than the model in use allows (issue 36, item 2;
+    /// [`selfcal::OdometryConsistency`]). When the ratio over spans of 1 or 3 s is above
+    /// [`ODOMETRY_RATIO_LIMIT`], the variance of `vx, vy` (or of `vtheta`) is multiplied by
+    /// it, or by the long-run ratio that the two spans' ratios give with the errors' time
+    /// constant ([`selfcal::long_run_ratio`]), in the batch's stored factors, in the front
+    /// end's gates and for every later frame; at most [`ODOMETRY_MAX_WIDENING`] in all.
+    /// Never narrows it.
+    fn judge_odometry(&mut self, t_us: u64) {
+        let [short, long] = self.smoother.odometry_consistency();
+        let usable = |c: Option<selfcal::OdometryConsistency>| {
+            c.filter(|c| c.windows >= ODOMETRY_MIN_WINDOWS)
+        };
+        let (short, long) = (usable(short), usable(long));
+        let Some(first) = short.or(long) else {
+            return;
+        };
+        // An axis is judged on the largest of its ratios over the spans with enough windows;
+        // when both spans have them, their quotient shows the errors' memory, and the factor
+        // is the long-run ratio ([`selfcal::long_run_ratio`], its time constant at most
+        // [`ODOMETRY_MAX_TAU_S`]: the extrapolation from 3 s is at most 2.3-fold).
+        let judge = |pick: fn(&selfcal::OdometryConsistency) -> f64| -> (f64, f64) {
+            let raw = [short, long]
+                .iter()
+                .flatten()
+                .map(pick)
+                .filter(|r| r.is_finite())
+                .fold(f64::NAN, f64::max);
+            if !(raw > ODOMETRY_RATIO_LIMIT) {
+                return (1.0, 0.0);
+            }
+            let (long_run, tau) = match (short, long) {
+                (Some(s), Some(l)) => selfcal::long_run_ratio(pick(&s), pick(&l)),
+                _ => (raw, 0.0),
+            };
+            if long_run.is_finite() && tau > 0.0 && tau <= ODOMETRY_MAX_TAU_S {
+                (long_run.max(raw), tau)
+            } else {
+                (raw, 0.0)
+            }
+        };
+        let (kt, tau_t) = judge(|c| c.translation);
+        let (kh, tau_h) = judge(|c| c.heading);
+        // A cap on the model's widening (sigma 100-fold): past it the odometry is not
+        // odometry, and the batch's trajectory, which the check measures against, would no
+        // longer be held by it between landmarks.
+        let widened = self
+            .stats
+            .odometry_widened
+            .map_or((1.0, 1.0), |w| w.factors);
+        let kt = kt.min(ODOMETRY_MAX_WIDENING / widened.0).max(1.0);
+        let kh = kh.min(ODOMETRY_MAX_WIDENING / widened.1).max(1.0);
+        if kt <= 1.0 && kh <= 1.0 {
+            return;
+        }
+        let (rt, rh) = (kt, kh);
+        #[cfg(feature = "std")]
+        if std::env::var_os("SN_DEBUG_ODOM").is_some() {
+            std::eprintln!(
+                "widen at {t_us}: short {short:?} long {long:?} -> ({rt}, {tau_t}) ({rh}, {tau_h})"
+            );
+        }
+        self.smoother.widen_odometry(kt, kh);
+        self.odometry_noise.velocity *= libm::sqrt(kt);
+        self.odometry_noise.yaw_rate *= libm::sqrt(kh);
+        let mut model = self.front_end.model().clone();
+        model.noise.velocity = self.odometry_noise.velocity;
+        model.noise.yaw_rate = self.odometry_noise.yaw_rate;
+        self.front_end.set_model(model);
+        let noise = self.odometry_noise;
+        let w = self.stats.odometry_widened.get_or_insert(OdometryWidening {
+            first_t_us: t_us,
+            first,
+            factors: (1.0, 1.0),
+            time_constants_s: (0.0, 0.0),
+            noise,
+        });
+        w.factors = (w.factors.0 * kt, w.factors.1 * kh);
+        if kt > 1.0 && tau_t > 0.0 {
+            w.time_constants_s.0 = tau_t;
+        }
+        if kh > 1.0 && tau_h > 0.0 {
+            w.time_constants_s.1 = tau_h;
+        }
+        w.noise = noise;
+    }
+
     fn excite(&mut self, m: &rig_model::odometry::Motion, cov: &Matrix3<f64>) {
         let d = nalgebra::Vector2::new(m.dx, m.dy);
         let c2 = cov.fixed_view::<2, 2>(0, 0).into_owned();
@@ -812,7 +943,7 @@ impl Navigator {
         let estimates_vehicle = self.rig.estimate.iter().any(|p| p.is_vehicle());
         let vehicle = self.vehicle();
         if let Some(t0) = self.last_frame_t {
-            let noise = self.ekf.as_ref().map_or(self.rig.noise, |e| *e.noise());
+            let noise = self.odometry_noise;
             let moved = match Increment::from_odometry_vehicle(
                 &self.odometry,
                 t0,
@@ -976,6 +1107,7 @@ impl Navigator {
             if let Some(p) = self.smoother.last_pose() {
                 self.pose = p;
             }
+            self.judge_odometry(tracked.t_us);
         }
         if self.smoother.handover().is_none() {
             return Ok(());
@@ -1120,6 +1252,7 @@ impl Navigator {
             .smoother
             .add_mapped_frame(tracked.t_us, motion, pose, &observations)
         {
+            self.judge_odometry(tracked.t_us);
             self.reseed();
         }
     }

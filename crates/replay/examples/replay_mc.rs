@@ -1,14 +1,16 @@
 //! The whole stack over many seeds of a scenario: each seed simulated to a vehicle log (the
 //! board's byte stream, link faults and all), replayed, and scored against the truth.
 //!
-//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near]`
+//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near] [--odometry-tau S] [--tau-unstated]`
 //!
 //! Prints, over the seeds: when phase 1 handed over (time since the first frame, and since the
 //! vehicle first moved), the whole method's errors (landmark RMS, trajectory RMS in the first
 //! frame's world frame, every estimated camera parameter) and the 3-sigma counts (camera
 //! parameters; landmarks, by their 3-D Mahalanobis distance against the 3-sigma-equivalent
 //! chi-square bound 14.16). `--velocity-noise` overrides the scenario's odometry noise (and the
-//! rig's noise model with it).
+//! rig's noise model with it). `--odometry-tau` gives the odometry's errors (both axes) that
+//! time constant of memory, in the simulator and in the rig file; `--tau-unstated` leaves the
+//! rig file silent about the memory the scenario has (its time constants 0).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::path::PathBuf;
@@ -36,7 +38,7 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near]";
+    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near] [--odometry-tau S] [--tau-unstated]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -45,6 +47,8 @@ fn run() -> Result<(), String> {
         .unwrap_or(10);
     let mut settings = NavSettings::default();
     let mut velocity_noise: Option<f64> = None;
+    let mut odometry_tau: Option<f64> = None;
+    let mut tau_unstated = false;
     let mut detail = false;
     let mut rest = args.iter().skip(2);
     while let Some(a) = rest.next() {
@@ -76,6 +80,11 @@ fn run() -> Result<(), String> {
                 let v = rest.next().ok_or("--velocity-noise needs a value")?;
                 velocity_noise = Some(v.parse().map_err(|_| format!("--velocity-noise {v:?}"))?);
             }
+            "--odometry-tau" => {
+                let v = rest.next().ok_or("--odometry-tau needs a value")?;
+                odometry_tau = Some(v.parse().map_err(|_| format!("--odometry-tau {v:?}"))?);
+            }
+            "--tau-unstated" => tau_unstated = true,
             other => return Err(format!("unknown argument {other:?}; {usage}")),
         }
     }
@@ -83,6 +92,16 @@ fn run() -> Result<(), String> {
     if let Some(v) = velocity_noise {
         scenario.spec.noise.velocity_mps = v;
         scenario.rig.noise.velocity = v;
+    }
+    if let Some(tau) = odometry_tau {
+        scenario.spec.noise.velocity_tau_s = tau;
+        scenario.spec.noise.yaw_rate_tau_s = tau;
+        scenario.rig.noise.velocity_tau = tau;
+        scenario.rig.noise.yaw_rate_tau = tau;
+    }
+    if tau_unstated {
+        scenario.rig.noise.velocity_tau = 0.0;
+        scenario.rig.noise.yaw_rate_tau = 0.0;
     }
     let log = std::env::temp_dir().join(format!("replay-mc-{}.mcap", std::process::id()));
     let (mut lm, mut ate, mut switch_s, mut switch_motion_s) =

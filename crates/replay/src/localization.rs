@@ -178,11 +178,6 @@ pub fn localize_log(
     trajectory: &mut dyn FnMut(&LocalizedFrame) -> Result<(), Error>,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<LocalizeEnd, Error> {
-    let memory_warning = rig
-        .as_ref()
-        .unwrap_or(&map.rig)
-        .noise
-        .memory_not_modelled_warning();
     let mut localizer = localizer_for(map, rig, settings)?;
     let mut stream = LogStream::open(path)?;
     stream.preamble(false)?;
@@ -223,7 +218,6 @@ pub fn localize_log(
         }
     }
     let mut warnings: Vec<String> = Vec::new();
-    warnings.extend(memory_warning);
     if let Some(why) = stream.reader().truncated() {
         warnings.push(format!(
             "the log ends early ({why}): localised as far as it goes"

@@ -630,10 +630,41 @@ pub(crate) fn time_lost_ms(damage: &vehicle_log::Damage) -> u64 {
         / 1_000_000
 }
 
+/// The warning for an odometry noise model the navigator widened (issue 36): what the rig file
+/// stated, what the batch's residuals showed, what was used.
+pub(crate) fn odometry_widened_warning(
+    stated: &rig_model::Noise,
+    w: &nav::OdometryWidening,
+) -> String {
+    let memory = |tau: f64| {
+        if tau > 0.0 {
+            format!(", errors lasting about {tau:.2} s")
+        } else {
+            String::new()
+        }
+    };
+    format!(
+        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, the batch's trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}): state the odometry's noise and memory in the rig file's [noise]",
+        stated.velocity,
+        stated.yaw_rate,
+        stated.velocity_tau,
+        stated.yaw_rate_tau,
+        w.first_t_us as f64 * 1e-6,
+        w.first.span_s,
+        w.first.translation,
+        w.first.heading,
+        memory(w.time_constants_s.0),
+        memory(w.time_constants_s.1),
+        w.noise.velocity,
+        w.noise.yaw_rate,
+        w.factors.0,
+        w.factors.1,
+    )
+}
+
 /// The navigator's warnings at the end of a replay.
 fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut Vec<String>) {
     let stats = navigator.stats();
-    warnings.extend(navigator.rig().noise.memory_not_modelled_warning());
     for (n, first) in refused.values() {
         warnings.push(if *n == 1 {
             format!("1 input refused by the navigator: {first}")
@@ -665,6 +696,9 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
             "the log ended with the pose lost (more than {} m uncertain): {held} lamp(s) seen since were held out of the map and are not in it",
             nav::MATCH_MAX_POSE_SIGMA_M
         ));
+    }
+    if let Some(w) = &stats.odometry_widened {
+        warnings.push(odometry_widened_warning(&navigator.rig().noise, w));
     }
     if stats.odometry_dropped > 0 {
         warnings.push(format!(

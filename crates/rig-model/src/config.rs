@@ -1,7 +1,6 @@
 //! The rig configuration (vehicle-interfaces.md section 3) as data; reading and writing the
 //! file is in [`crate::rig_file`] (feature `std`).
 
-use alloc::string::String;
 use alloc::vec::Vec;
 
 use crate::camera::{CameraParams, N_PARAMS, Param};
@@ -42,16 +41,41 @@ impl Noise {
         self.velocity_tau > 0.0 || self.yaw_rate_tau > 0.0
     }
 
-    /// The warning for a rig file that states time constants the estimators do not model
-    /// yet: its odometry errors are taken as white (`None` when it states none).
-    pub fn memory_not_modelled_warning(&self) -> Option<String> {
-        self.odometry_has_memory().then(|| {
-            alloc::format!(
-                "the rig file gives the odometry's errors memory (velocity_tau {} s, yaw_rate_tau {} s), which this version does not model yet: they are taken as white, and the sigmas may be too small",
-                self.velocity_tau, self.yaw_rate_tau
-            )
-        })
+    /// The odometry noise that a white model of samples `period_s` apart needs so that the
+    /// variance of their sum over spans longer than the time constants is that of the
+    /// Gauss-Markov errors the rig file states (vehicle-interfaces.md section 2): the
+    /// stationary sigma times `sqrt((1 + phi) / (1 - phi))`, `phi = exp(-period / tau)`, on
+    /// each axis with memory (an AR(1) sequence's sum of `K` samples has variance
+    /// `K sigma^2 (1 + phi) / (1 - phi)` for large `K`); time constants 0. With 0.6 s of memory
+    /// and 100 Hz odometry the sigma grows 11-fold. Over spans shorter than the time constant
+    /// this white equivalent is pessimistic (the held error integrates as `sigma dt` while
+    /// the equivalent gives `sigma sqrt(2 tau dt)`), never optimistic: the estimators weigh
+    /// correlated odometry as they would weigh white odometry of that spread. A
+    /// `period_s` of 0 or below (unknown) leaves the noise as it is.
+    #[must_use]
+    pub fn white_equivalent(&self, period_s: f64) -> Self {
+        Self {
+            velocity: self.velocity * memory_gain(self.velocity_tau, period_s),
+            yaw_rate: self.yaw_rate * memory_gain(self.yaw_rate_tau, period_s),
+            velocity_tau: 0.0,
+            yaw_rate_tau: 0.0,
+            ..*self
+        }
     }
+}
+
+/// `sqrt((1 + phi) / (1 - phi))`, `phi = exp(-period / tau)`: the factor on the sigma of a
+/// white model equivalent to first-order Gauss-Markov errors of time constant `tau` over long
+/// spans ([`Noise::white_equivalent`]); 1 without memory or without a period.
+fn memory_gain(tau: f64, period_s: f64) -> f64 {
+    if !(tau > 0.0 && period_s > 0.0 && tau.is_finite() && period_s.is_finite()) {
+        return 1.0;
+    }
+    let phi = libm::exp(-period_s / tau);
+    // (1 + phi) / (1 - phi) = coth(period / (2 tau)); for period << tau, 2 tau / period.
+    // expm1 keeps 1 - phi exact when the period is a tiny fraction of tau.
+    let one_minus_phi = -libm::expm1(-period_s / tau);
+    libm::sqrt((1.0 + phi) / one_minus_phi)
 }
 
 /// The board's detector registers that a rig file may set (`[board]`, vehicle-interfaces.md

@@ -45,5 +45,7 @@ pub mod step;
 pub use calibrator::{SelfCalibrator, StableRule};
 pub use error::Error;
 pub use observability::structural_trap;
-pub use smoother::{Smoother, SmootherSettings};
+pub use smoother::{
+    CONSISTENCY_SPANS_S, OdometryConsistency, Smoother, SmootherSettings, long_run_ratio,
+};
 pub use solve::{Calibration, SolveStatus, SolverSettings, calibrate};

@@ -127,15 +127,17 @@ impl PreparedPair {
             .collect::<Result<Vec<_>, RigError>>()
             .ok()?;
         let m = &pair.motion;
-        // Odometry noise: white velocity noise per sample, held for the sample period.
+        // Odometry noise: white velocity noise per sample, held for the sample period (errors
+        // with memory as their white equivalent, `Noise::white_equivalent`).
         let motion_var = if m.samples > 0 {
             #[allow(clippy::cast_precision_loss)]
             let n = m.samples as f64;
             let period = m.dt_s / n;
+            let noise = rig.noise.white_equivalent(period);
             Vector3::new(
-                sq(rig.noise.velocity * period) * n,
-                sq(rig.noise.velocity * period) * n,
-                sq(rig.noise.yaw_rate * period) * n,
+                sq(noise.velocity * period) * n,
+                sq(noise.velocity * period) * n,
+                sq(noise.yaw_rate * period) * n,
             )
         } else {
             Vector3::zeros()

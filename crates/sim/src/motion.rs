@@ -234,28 +234,51 @@ impl Motion {
             .collect()
     }
 
-    /// The measured odometry as sent: `(1 + scale) v + white noise`,
-    /// `(1 + yaw scale) w + bias + white noise`. Every sample draws its noise, sent or not, so
-    /// that a sample's noise does not depend on what the odometry did before it.
+    /// The measured odometry as sent: `(1 + scale) v + e_v`, `(1 + yaw scale) w + bias + e_w`.
+    /// The errors `e` are white, or with `velocity_tau_s` / `yaw_rate_tau_s` a first-order
+    /// Gauss-Markov process of that time constant and of the stationary sigma given
+    /// (vehicle-interfaces.md section 2): `e_k = phi e_(k-1) + sqrt(1 - phi^2) sigma n_k`,
+    /// `phi = exp(-dt / tau)`, started from its stationary distribution. Every sample draws its
+    /// three normals, sent or not, so that a sample's noise does not depend on what the odometry
+    /// did before it, and a white run (`tau = 0`, `phi = 0`) draws the same numbers as before.
     pub(crate) fn measured(
         &self,
         noise: &crate::scenario::NoiseSpec,
         rng: &mut impl Rng,
     ) -> Vec<OdomSample> {
+        let mut errors = [0.0_f64; 3];
+        let mut last_t: Option<u64> = None;
+        let sigma = [noise.velocity_mps, noise.velocity_mps, noise.yaw_rate_radps];
+        let tau = [
+            noise.velocity_tau_s,
+            noise.velocity_tau_s,
+            noise.yaw_rate_tau_s,
+        ];
         let measured = self.samples.iter().map(|s| {
-            let (nx, ny, nw): (f64, f64, f64) = (
+            let draws: [f64; 3] = [
                 StandardNormal.sample(rng),
                 StandardNormal.sample(rng),
                 StandardNormal.sample(rng),
-            );
+            ];
+            #[allow(clippy::cast_precision_loss)] // microsecond spans far below 2^53
+            let dt = last_t.map(|t0| s.t_us.saturating_sub(t0) as f64 * 1e-6);
+            last_t = Some(s.t_us);
+            for ((e, n), (sd, tc)) in errors.iter_mut().zip(draws).zip(sigma.into_iter().zip(tau)) {
+                // The first sample starts from the stationary distribution (phi = 0).
+                let phi = match dt {
+                    Some(dt) if tc > 0.0 => (-dt / tc).exp(),
+                    _ => 0.0,
+                };
+                *e = phi * *e + (1.0 - phi * phi).sqrt() * sd * n;
+            }
             let scale = 1.0 + noise.velocity_scale_error;
             OdomSample {
                 t_us: s.t_us,
-                vx: scale * s.vx + noise.velocity_mps * nx,
-                vy: scale * s.vy + noise.velocity_mps * ny,
+                vx: scale * s.vx + errors[0],
+                vy: scale * s.vy + errors[1],
                 vtheta: (1.0 + noise.yaw_rate_scale_error) * s.vtheta
                     + noise.yaw_rate_bias_radps
-                    + noise.yaw_rate_radps * nw,
+                    + errors[2],
             }
         });
         measured

@@ -179,6 +179,14 @@ pub struct NoiseSpec {
     /// Yaw rate scale error: measured `vtheta` is `(1 + e)` times the truth (plus the bias).
     #[serde(default)]
     pub yaw_rate_scale_error: f64,
+    /// Time constant of the errors on `vx, vy`, seconds: a first-order Gauss-Markov process of
+    /// stationary sigma [`Self::velocity_mps`] (vehicle-interfaces.md section 2, as real
+    /// wheels slip for a while); 0 (the default): white.
+    #[serde(default)]
+    pub velocity_tau_s: f64,
+    /// Time constant of the errors on `vtheta`, seconds, likewise.
+    #[serde(default)]
+    pub yaw_rate_tau_s: f64,
     /// Spread of the lamps' Harris responses in fast mode (sigma of the natural logarithm).
     #[serde(default = "default_response_spread")]
     pub response_log_sigma: f64,
@@ -956,6 +964,8 @@ impl ScenarioSpec {
         v.non_negative("noise.pixel_px", n.pixel_px);
         v.non_negative("noise.velocity_mps", n.velocity_mps);
         v.non_negative("noise.yaw_rate_radps", n.yaw_rate_radps);
+        v.within("noise.velocity_tau_s", n.velocity_tau_s, 0.0, 3600.0);
+        v.within("noise.yaw_rate_tau_s", n.yaw_rate_tau_s, 0.0, 3600.0);
         v.within(
             "noise.velocity_scale_error",
             n.velocity_scale_error,

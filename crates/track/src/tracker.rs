@@ -249,7 +249,8 @@ pub struct Prediction {
     pub covariance: Matrix4<f64>,
 }
 
-/// The odometry noise of a motion: white noise per sample (as phase 1 models it) plus a
+/// The odometry noise of a motion: white noise per sample (as phase 1 models it; errors with
+/// memory as their white equivalent) plus a
 /// relative error `scale_sigma` of each component. Covariance of `(dx, dy, dtheta)`.
 pub fn motion_covariance(motion: &Motion, noise: &Noise, scale_sigma: f64) -> Matrix3<f64> {
     let finite_sq = |s: f64| if s.is_finite() { s * s } else { 0.0 };
@@ -257,6 +258,8 @@ pub fn motion_covariance(motion: &Motion, noise: &Noise, scale_sigma: f64) -> Ma
     let n = motion.samples.max(1) as f64;
     let white = finite_sq(motion.dt_s) / n;
     let k = finite_sq(scale_sigma);
+    // Errors with memory as their white equivalent (`Noise::white_equivalent`).
+    let noise = &noise.white_equivalent(motion.dt_s / n);
     Matrix3::from_diagonal(&nalgebra::Vector3::new(
         finite_sq(noise.velocity) * white + k * finite_sq(motion.dx),
         finite_sq(noise.velocity) * white + k * finite_sq(motion.dy),

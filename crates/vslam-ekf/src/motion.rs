@@ -4,7 +4,9 @@
 //!
 //! Noise model, the one phase 1 uses (`selfcal::solver`): each odometry sample's velocities
 //! carry white noise (`velocity` m/s on `vx` and `vy`, `yaw_rate` rad/s on `vtheta`) that is
-//! *held* with the sample, so one sample held for `dt` contributes `G diag(sv^2, sv^2, sw^2) G^T`
+//! *held* with the sample (errors with memory, `velocity_tau` and `yaw_rate_tau`, as the white
+//! noise of the same variance over spans longer than the time constant:
+//! [`rig_model::Noise::white_equivalent`]), so one sample held for `dt` contributes `G diag(sv^2, sv^2, sw^2) G^T`
 //! with `G` the exact Jacobian of the arc with respect to the velocities; for short steps
 //! `G ~ dt I`, the `(sigma dt)^2` of phase 1. A frame time usually falls inside an odometry
 //! sample, which two predictions then share; treating its two pieces as independent would
@@ -267,6 +269,10 @@ impl Increment {
                 .map_or(0, |n| n.t_us.saturating_sub(s.t_us));
             #[allow(clippy::cast_precision_loss)]
             let period = period as f64 * 1e-6;
+            // Errors with memory (`[noise] velocity_tau`, `yaw_rate_tau`) are weighed as the
+            // white noise that gives their variance over spans longer than the time constant
+            // (`Noise::white_equivalent`; the last sample's period is unknown: its piece's).
+            let noise = &noise.white_equivalent(if period > 0.0 { period } else { dt });
             let mut piece_noise = if period > dt && dt > 0.0 {
                 let k = libm::sqrt(period / dt);
                 Noise {

@@ -27,10 +27,12 @@
 //! (`factors`), the normal equations, their elimination and the damped step (`system`); the
 //! [`Smoother`] here holds the frames, the landmarks, the marginalised prior and the hand-over.
 
+mod consistency;
 mod factors;
 mod settings;
 mod system;
 
+pub use consistency::{OdometryConsistency, SPANS_S as CONSISTENCY_SPANS_S, long_run_ratio};
 pub use settings::SmootherSettings;
 
 use alloc::collections::BTreeMap;
@@ -162,6 +164,9 @@ pub struct Smoother {
     smoothed: Vec<(u64, Pose2)>,
     /// Frames added since the last solve (mapping).
     since_solve: usize,
+    /// The odometry against the last solve's trajectory over each of
+    /// [`CONSISTENCY_SPANS_S`] ([`Smoother::odometry_consistency`]).
+    consistency: [Option<OdometryConsistency>; 2],
 }
 
 impl Smoother {
@@ -191,7 +196,30 @@ impl Smoother {
             dropped: 0,
             smoothed: Vec::new(),
             since_solve: 0,
+            consistency: [None; 2],
         }
+    }
+
+    /// How the odometry agreed with the last solve's trajectory over each of
+    /// [`CONSISTENCY_SPANS_S`] and over single frame intervals, each residual against the
+    /// variance its factor gives it (issue 36; see [`OdometryConsistency`]): about 1 when the
+    /// rig file's odometry noise is right. `None` before a solve over at least one span.
+    pub fn odometry_consistency(&self) -> [Option<OdometryConsistency>; 2] {
+        self.consistency
+    }
+
+    /// Widens the odometry's noise model: every stored odometry factor's variance is
+    /// multiplied by `translation` on `dx, dy` and by `heading` on `dtheta` (factors below 1,
+    /// or not finite, are taken as 1). The caller adds later frames' factors with the
+    /// widened noise. The consistency is judged again at the next solve.
+    pub fn widen_odometry(&mut self, translation: f64, heading: f64) {
+        let at_least_one = |k: f64| if k.is_finite() && k > 1.0 { k } else { 1.0 };
+        consistency::widen(
+            &mut self.frames,
+            at_least_one(translation),
+            at_least_one(heading),
+        );
+        self.consistency = [None; 2];
     }
 
     /// Frames buffered.
@@ -535,6 +563,67 @@ impl Smoother {
         }
     }
 
+    /// The joint covariance of `[last pose, C, landmarks]` over every parameter in `all`, the
+    /// `held` ones at their nominal values with their prior (the consider, or Schmidt,
+    /// covariance): `P_x|u + S P_u S^T` for the others, `S P_u` across, `P_u` for the held,
+    /// with `S` the sensitivity of the solution to the held parameters. It is the inverse of
+    /// the normal equations over every parameter whose held block is changed so that the
+    /// held parameters' Schur complement is their prior's information: `H_uu + P_u^-1 -
+    /// Sigma_u^-1`. Returns `(parameters, covariance, C's 10 x 10 block)`; `None` when a
+    /// system is singular.
+    fn considered_covariance(
+        &self,
+        all: &[Param],
+        held: &[Param],
+    ) -> Option<(Vec<Param>, DMatrix<f64>, Mat10)> {
+        let poses: Vec<Pose2> = self.frames.iter().map(|f| f.pose).collect();
+        let landmarks: Vec<Vector3<f64>> = self.landmarks.iter().map(|l| l.position).collect();
+        let full = self.clone_with_estimated(all);
+        let mut sys = full.normal_equations(&self.camera, &poses, &landmarks);
+        let joint = sys.marginal_covariance()?;
+        let at: Vec<usize> = held
+            .iter()
+            .filter_map(|p| all.iter().position(|q| q == p))
+            .collect();
+        let k = at.len();
+        let sigma_u = DMatrix::from_fn(k, k, |a, b| {
+            joint[(
+                3 + at.get(a).copied().unwrap_or(0),
+                3 + at.get(b).copied().unwrap_or(0),
+            )]
+        });
+        let sigma_u_inv = sigma_u.try_inverse()?;
+        for (a, &ia) in at.iter().enumerate() {
+            for (b, &ib) in at.iter().enumerate() {
+                let prior = if a == b {
+                    let s = held.get(a).map_or(f64::INFINITY, |p| self.prior_sigma(*p));
+                    1.0 / (s * s)
+                } else {
+                    0.0
+                };
+                sys.z[(ia, ib)] += prior - sigma_u_inv[(a, b)];
+            }
+        }
+        let covariance = sys.marginal_covariance()?;
+        if !covariance.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let mut camera_covariance = Mat10::zeros();
+        for (a, pa) in all.iter().enumerate() {
+            for (b, pb) in all.iter().enumerate() {
+                camera_covariance[(pa.index(), pb.index())] = covariance[(3 + a, 3 + b)];
+            }
+        }
+        Some((all.to_vec(), covariance, camera_covariance))
+    }
+
+    /// This batch estimating `estimated` instead (for [`Self::considered_covariance`]).
+    fn clone_with_estimated(&self, estimated: &[Param]) -> Self {
+        let mut b = self.clone();
+        b.estimated = estimated.to_vec();
+        b
+    }
+
     /// Which estimated parameters the data informed.
     fn observability(&self, cov: &Mat10) -> ObservabilityReport {
         let c = &self.camera;
@@ -583,15 +672,39 @@ impl Smoother {
             .filter(|p| !p.observable)
             .map(|p| p.param)
             .collect();
+        let mut considered = None;
         if !uninformed.is_empty() {
             for p in &uninformed {
                 self.camera.set(*p, self.rig.nominal.get(*p));
             }
+            let all = self.estimated.clone();
             self.estimated.retain(|p| !uninformed.contains(p));
             self.last_covariance = None;
             if self.frames.len() >= 2 {
                 let _ = self.solve();
+                considered = self.considered_covariance(&all, &uninformed);
             }
+        }
+        if let Some((estimated, covariance, camera_covariance)) = considered {
+            // The held parameters' prior carried into the landmarks, the pose and the informed
+            // parameters (the consider covariance): a landmark's position depends on the
+            // baseline held at nominal, and its sigma must say so.
+            let Some(last) = self.frames.last() else {
+                return;
+            };
+            self.handover = Some(BatchHandover {
+                t_us: last.t_us,
+                reason,
+                camera: self.camera,
+                camera_covariance,
+                pose: last.pose,
+                landmarks: self.landmarks.clone(),
+                estimated,
+                covariance,
+                trajectory: self.frames.iter().map(|f| (f.t_us, f.pose)).collect(),
+                observability: report,
+            });
+            return;
         }
         let m = self.estimated.len();
         let covariance = self.last_covariance.clone().unwrap_or_else(|| {
@@ -978,6 +1091,8 @@ impl Smoother {
         for (l, p) in self.landmarks.iter_mut().zip(&landmarks) {
             l.position = *p;
         }
+        self.consistency = CONSISTENCY_SPANS_S
+            .map(|span| consistency::odometry_consistency(&self.frames, &camera.vehicle, span));
         let system = self.normal_equations(&camera, &poses, &landmarks);
         self.last_covariance = system.marginal_covariance();
         Some(SolveSummary {

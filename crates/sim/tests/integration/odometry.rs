@@ -151,3 +151,66 @@ fn odometry_noise_scale_and_bias_are_as_configured() {
         "{mw} {sw}"
     );
 }
+
+/// The odometry's errors with memory (vehicle-interfaces.md section 2): with
+/// `velocity_tau_s` and `yaw_rate_tau_s` the measured-minus-true velocities are a first-order
+/// Gauss-Markov process: the stationary sigma the scenario gives, and a correlation from one
+/// sample to the next of `exp(-dt / tau)`; without them, white (no correlation).
+#[test]
+fn odometry_errors_have_the_memory_the_scenario_gives() {
+    let stats = |tau_v: f64, tau_w: f64| {
+        let mut s = common::load("aisle-vehicle");
+        s.spec.noise.velocity_scale_error = 0.0;
+        s.spec.noise.yaw_rate_scale_error = 0.0;
+        s.spec.noise.yaw_rate_bias_radps = 0.0;
+        s.spec.noise.velocity_tau_s = tau_v;
+        s.spec.noise.yaw_rate_tau_s = tau_w;
+        s.spec.link.loss_probability = 0.0;
+        s.spec.link.bit_flip_probability = 0.0;
+        let run = sim::simulate(&s, sim::Mode::Fast).unwrap();
+        assert_eq!(run.odometry.len(), run.odometry_truth.len());
+        let errors: Vec<[f64; 3]> = run
+            .odometry
+            .iter()
+            .zip(&run.odometry_truth)
+            .map(|(m, t)| [m.vx - t.vx, m.vy - t.vy, m.vtheta - t.vtheta])
+            .collect();
+        let mut out = [(0.0, 0.0); 3];
+        for (axis, o) in out.iter_mut().enumerate() {
+            let e: Vec<f64> = errors.iter().map(|e| e[axis]).collect();
+            let n = e.len() as f64;
+            let var = e.iter().map(|v| v * v).sum::<f64>() / n;
+            let lag1 = e.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / (n - 1.0);
+            *o = (var.sqrt(), lag1 / var);
+        }
+        (out, errors.len())
+    };
+    // 100 Hz odometry: phi = exp(-0.01 / 0.6) = 0.9835, exp(-0.01 / 0.3) = 0.9672.
+    let (with_memory, n) = stats(0.6, 0.3);
+    assert!(n > 5000, "{n} samples");
+    for (axis, (sigma, phi), want_sigma, want_phi) in [
+        (0, with_memory[0], 0.02, (-0.01f64 / 0.6).exp()),
+        (1, with_memory[1], 0.02, (-0.01f64 / 0.6).exp()),
+        (2, with_memory[2], 0.01, (-0.01f64 / 0.3).exp()),
+    ] {
+        // A process of time constant 0.6 s over ~90 s has ~75 independent stretches: its
+        // sample sigma is within ~25 % of the stationary one at 3 sigma.
+        assert!(
+            (sigma / want_sigma - 1.0).abs() < 0.3,
+            "axis {axis}: sigma {sigma} against {want_sigma}"
+        );
+        assert!(
+            (phi - want_phi).abs() < 0.01,
+            "axis {axis}: correlation {phi} against {want_phi}"
+        );
+    }
+    let (white, _) = stats(0.0, 0.0);
+    for (axis, (sigma, phi)) in white.iter().enumerate() {
+        let want = if axis == 2 { 0.01 } else { 0.02 };
+        assert!(
+            (sigma / want - 1.0).abs() < 0.05,
+            "axis {axis}: white sigma {sigma}"
+        );
+        assert!(phi.abs() < 0.05, "axis {axis}: white correlation {phi}");
+    }
+}
