@@ -50,6 +50,6 @@ pub use summary::{end_summary_json, summary_json};
 pub use topics::Topic;
 pub use types::{
     Association, CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot,
-    ParamEstimate, Phase, Replay, ReplayEnd, TruthErrors,
+    OdometryModel, OdometryWidened, ParamEstimate, Phase, Replay, ReplayEnd, TruthErrors,
 };
 pub use writer::{EstimatesWriter, write_estimates};

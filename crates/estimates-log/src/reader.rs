@@ -33,7 +33,7 @@ use crate::error::MCAP_MAGIC;
 use crate::topics::{CAMERA, ELLIPSOID_SIGMAS, FRAME, LANDMARKS, NS_PER_US, SUMMARY, US_PER_S};
 use crate::{
     Association, CameraSample, Consistency, Counts, FrameEstimate, LandmarkEstimate, MapSnapshot,
-    ParamEstimate, Phase, ReadError, Replay, TruthErrors,
+    OdometryModel, OdometryWidened, ParamEstimate, Phase, ReadError, Replay, TruthErrors,
 };
 
 /// Reads the estimates file `EST.mcap` at `path` (written by [`crate::write_estimates`]) back
@@ -401,6 +401,43 @@ impl At<'_> {
         })
     }
 
+    /// The summary's `odometry` (`summary_json`'s `odometry_json`).
+    fn odometry(&self, o: &Value) -> Result<OdometryModel, ReadError> {
+        let pair = |v: &Value, field: &str| -> Result<[f64; 2], ReadError> {
+            let a = self.array(v, field)?;
+            match a.as_slice() {
+                [x, y] => Ok([self.element(x, field)?, self.element(y, field)?]),
+                _ => Err(self.bad(field, "an array of two numbers", v.get(field))),
+            }
+        };
+        let widened = match o.get("widened") {
+            Some(Value::Null) | None => None,
+            Some(w) => Some(OdometryWidened {
+                t_us: self.uint(w, "t_us")?,
+                span_s: self.float(w, "span_s")?,
+                ratios: [
+                    self.float(w, "translation_ratio")?,
+                    self.float(w, "heading_ratio")?,
+                ],
+                variance_factors: pair(w, "variance_factors")?,
+                time_constants_s: pair(w, "time_constants_s")?,
+            }),
+        };
+        Ok(OdometryModel {
+            stated: [
+                self.float(o, "velocity")?,
+                self.float(o, "yaw_rate")?,
+                self.float(o, "velocity_tau")?,
+                self.float(o, "yaw_rate_tau")?,
+            ],
+            used: [
+                self.float(o, "used_velocity")?,
+                self.float(o, "used_yaw_rate")?,
+            ],
+            widened,
+        })
+    }
+
     fn truth(&self, t: &Value) -> Result<TruthErrors, ReadError> {
         let objects: Vec<&Value> = ["camera", "vehicle"]
             .iter()
@@ -610,6 +647,7 @@ impl<'p> Reader<'p> {
                 truth: None,
                 warnings,
                 log_damage: None,
+                odometry: None,
             });
         };
         let landmarks = match last_map {
@@ -623,6 +661,11 @@ impl<'p> Reader<'p> {
         let truth = match summary.get("truth") {
             Some(Value::Null) | None => None,
             Some(t) => Some(at.truth(t)?),
+        };
+        // Absent from estimates files written before it was reported.
+        let odometry = match summary.get("odometry") {
+            Some(Value::Null) | None => None,
+            Some(o) => Some(at.odometry(o)?),
         };
         let mut written_warnings: Vec<String> = at
             .array(summary, "warnings")?
@@ -647,6 +690,7 @@ impl<'p> Reader<'p> {
             // The summary's `log_damage` is for readers of the file; its counts and warnings
             // say what was lost.
             log_damage: None,
+            odometry,
         })
     }
 }

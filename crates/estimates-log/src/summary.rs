@@ -5,7 +5,8 @@
 use serde_json::{Value, json};
 
 use crate::{
-    Counts, FrameEstimate, LandmarkEstimate, ParamEstimate, Replay, ReplayEnd, TruthErrors,
+    Counts, FrameEstimate, LandmarkEstimate, OdometryModel, ParamEstimate, Replay, ReplayEnd,
+    TruthErrors,
 };
 
 /// What the summary is made of, borrowed from a [`Replay`] or a [`ReplayEnd`].
@@ -20,6 +21,7 @@ struct SummaryParts<'a> {
     frames_processed: u64,
     truth: Option<&'a TruthErrors>,
     log_damage: Option<&'a vehicle_log::Damage>,
+    odometry: Option<&'a OdometryModel>,
 }
 
 /// The content of `SUMMARY.json`, and of the `/est/summary` message.
@@ -63,6 +65,7 @@ pub fn summary_json(replay: &Replay) -> Value {
         frames_processed: replay.frames.len() as u64,
         truth: replay.truth.as_ref(),
         log_damage: replay.log_damage.as_ref(),
+        odometry: replay.odometry.as_ref(),
     })
 }
 
@@ -80,6 +83,7 @@ pub fn end_summary_json(end: &ReplayEnd) -> Value {
         frames_processed: end.frames_processed,
         truth: end.truth.as_ref(),
         log_damage: end.log_damage.as_ref(),
+        odometry: end.odometry.as_ref(),
     })
 }
 
@@ -103,6 +107,28 @@ fn summary_value(s: &SummaryParts<'_>) -> Value {
         "counts": counts_json(c, s.frames_processed),
         "truth": s.truth.map_or(Value::Null, truth_json),
         "log_damage": s.log_damage.map_or(Value::Null, damage_json),
+        "odometry": s.odometry.map_or(Value::Null, odometry_json),
+    })
+}
+
+/// The summary's `odometry`: the rig file's noise model, the one used, and the widening.
+fn odometry_json(o: &OdometryModel) -> Value {
+    let [velocity, yaw_rate, velocity_tau, yaw_rate_tau] = o.stated;
+    json!({
+        "velocity": velocity,
+        "yaw_rate": yaw_rate,
+        "velocity_tau": velocity_tau,
+        "yaw_rate_tau": yaw_rate_tau,
+        "used_velocity": o.used[0],
+        "used_yaw_rate": o.used[1],
+        "widened": o.widened.map_or(Value::Null, |w| json!({
+            "t_us": w.t_us,
+            "span_s": w.span_s,
+            "translation_ratio": w.ratios[0],
+            "heading_ratio": w.ratios[1],
+            "variance_factors": w.variance_factors,
+            "time_constants_s": w.time_constants_s,
+        })),
     })
 }
 

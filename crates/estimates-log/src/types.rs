@@ -316,6 +316,36 @@ pub struct ReplayEnd {
     /// `(x, y)` (the landmarks' centroid), as `(point, covariance)`; `None` without a map of
     /// at least two landmarks (crate `map-file`'s `CommonError`, docs/maps.md).
     pub map_common_error: Option<([f64; 2], [[f64; 4]; 4])>,
+    /// The odometry's noise model used (see [`Replay::odometry`]).
+    pub odometry: Option<OdometryModel>,
+}
+
+/// The odometry's noise model a replay used (issue 36): the rig file's, and how the navigator
+/// widened it when the batch's residuals showed the odometry worse than stated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryModel {
+    /// The rig file's `[noise]` `velocity` (m/s), `yaw_rate` (rad/s), `velocity_tau` and
+    /// `yaw_rate_tau` (s).
+    pub stated: [f64; 4],
+    /// The `velocity` and `yaw_rate` in use at the end (the stated ones unless widened).
+    pub used: [f64; 2],
+    /// The widening, when there was one.
+    pub widened: Option<OdometryWidened>,
+}
+
+/// How the odometry's noise model was widened ([`OdometryModel::widened`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryWidened {
+    /// The frame at which it was first widened, board time, microseconds.
+    pub t_us: u64,
+    /// The span of the check that first showed it, seconds.
+    pub span_s: f64,
+    /// The variance ratios over that span then, `(translation, heading)`.
+    pub ratios: [f64; 2],
+    /// The variance factors applied in all, `(translation, heading)`.
+    pub variance_factors: [f64; 2],
+    /// The errors' time constants seen, `(translation, heading)`, seconds (0: none seen).
+    pub time_constants_s: [f64; 2],
 }
 
 /// A whole log replayed.
@@ -345,6 +375,9 @@ pub struct Replay {
     /// What the log lost to damage, when it is damaged (`None`: every record was read, or the
     /// replay was read back from an estimates file, whose counts and warnings say it).
     pub log_damage: Option<vehicle_log::Damage>,
+    /// The odometry's noise model used (`None`: not known, as for estimates files written
+    /// before it was reported).
+    pub odometry: Option<OdometryModel>,
 }
 
 impl Replay {
@@ -367,6 +400,7 @@ impl Replay {
             truth: end.truth,
             warnings: end.warnings,
             log_damage: end.log_damage,
+            odometry: end.odometry,
         }
     }
 }

@@ -130,6 +130,17 @@ fn synthetic() -> Replay {
         truth: Some(truth),
         warnings: vec!["a warning".to_string()],
         log_damage: None,
+        odometry: Some(estimates_log::OdometryModel {
+            stated: [0.02, 0.01, 0.0, 0.6],
+            used: [0.23, 0.1],
+            widened: Some(estimates_log::OdometryWidened {
+                t_us: 9_062_000,
+                span_s: 1.0,
+                ratios: [135.1, 23.6],
+                variance_factors: [135.1, 100.0],
+                time_constants_s: [0.0, 0.55],
+            }),
+        }),
         frames,
         camera,
         maps,

@@ -299,48 +299,17 @@ pub struct NavStats {
     /// Rotation the odometry turned, the same way, radians.
     pub significant_rotation_rad: f64,
     /// The odometry's noise model widened because the batch's residuals showed the odometry
-    /// worse or its errors longer-lived than the rig file states ([`OdometryWidening`]).
-    pub odometry_widened: Option<OdometryWidening>,
+    /// worse or its errors longer-lived than the rig file states
+    /// ([`selfcal::OdometryWidening`]).
+    pub odometry_widened: Option<selfcal::OdometryWidening>,
     /// Changes of speed between frame intervals, summed, counting a change only once it
     /// exceeds 0.05 m/s from the last counted speed (the clock offset's excitation), m/s.
     pub significant_speed_change_mps: f64,
 }
 
-/// How the navigator widened the odometry's noise model (issue 36): the batch's solved
-/// trajectory disagreed with the odometry over spans of [`selfcal::CONSISTENCY_WINDOW_S`]
-/// by more than the rig file's noise allows ([`ODOMETRY_RATIO_LIMIT`] times its variance).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OdometryWidening {
-    /// The first frame at which it widened, board time, microseconds.
-    pub first_t_us: u64,
-    /// The consistency that first triggered it (ratios against the rig file's model).
-    pub first: selfcal::OdometryConsistency,
-    /// The variance factors applied so far, all widenings together: `(translation, heading)`.
-    pub factors: (f64, f64),
-    /// The time constants of the odometry's errors the check saw, `(translation, heading)`,
-    /// seconds (0: none seen, or not yet measurable).
-    pub time_constants_s: (f64, f64),
-    /// The noise model in use after it (`velocity` and `yaw_rate` widened; the rig file's time
-    /// constants kept).
-    pub noise: rig_model::Noise,
-}
-
-/// The long-run ratio of the odometry's residual variance to the rig file's model above which
-/// the navigator widens the model (4: odometry twice as bad as stated in sigma; errors of
-/// 0.6 s memory stated as white give about 120 at 100 Hz). Odometry as good as stated gives
-/// about 1: the batch's relative poses over a second are good to a millimetre or two.
-pub const ODOMETRY_RATIO_LIMIT: f64 = 4.0;
-
-/// The longest time constant of the odometry's errors the check extrapolates with, seconds
-/// (a real vehicle's wheel slip lasts about 0.6 s).
-pub const ODOMETRY_MAX_TAU_S: f64 = 3.0;
-
-/// The most the odometry's variance is widened, all widenings together (sigma 100-fold).
-pub const ODOMETRY_MAX_WIDENING: f64 = 1e4;
-
-/// Windows of a span needed before the batch's odometry check over it is trusted (8 s of
-/// data over the 1 s span, 24 s over the 3 s one).
-pub const ODOMETRY_MIN_WINDOWS: usize = 8;
+/// A parameter estimated this many of its prior sigmas or more from its nominal value is named
+/// in a warning ([`Navigator::pulled_from_prior`]).
+pub const PULLED_PRIOR_SIGMAS: f64 = 3.0;
 
 /// The two phases of the method in one object (see the crate docs).
 #[derive(Debug, Clone)]
@@ -452,6 +421,33 @@ impl Navigator {
     /// The rig.
     pub fn rig(&self) -> &Rig {
         &self.rig
+    }
+
+    /// The estimated parameters whose estimate is [`PULLED_PRIOR_SIGMAS`] or more of their
+    /// prior sigmas from the rig file's nominal value, as `(parameter, estimate, nominal,
+    /// prior sigma, posterior sigma)`: either the rig file's nominal value or prior is wrong,
+    /// or a model error (odometry worse than stated, a standing vehicle taken for
+    /// information) pulled it there (issue 36).
+    pub fn pulled_from_prior(&self) -> Vec<(Param, f64, f64, f64, f64)> {
+        let (camera, cov) = self.camera();
+        self.rig
+            .estimate
+            .iter()
+            .filter_map(|&p| {
+                let prior = self.rig.prior.get(p.index()).copied().flatten()?;
+                let (value, nominal) = (camera.get(p), self.rig.nominal.get(p));
+                let variance = cov.get((p.index(), p.index())).copied().unwrap_or(0.0);
+                let sigma = libm::sqrt(variance.max(0.0));
+                (prior > 0.0 && libm::fabs(value - nominal) >= PULLED_PRIOR_SIGMAS * prior)
+                    .then_some((p, value, nominal, prior, sigma))
+            })
+            .collect()
+    }
+
+    /// The odometry's noise model in use: the rig file's, or wider when the batch's residuals
+    /// showed the odometry worse than stated ([`NavStats::odometry_widened`]).
+    pub fn odometry_noise(&self) -> rig_model::Noise {
+        self.odometry_noise
     }
 
     /// The settings.
@@ -604,91 +600,22 @@ impl Navigator {
 
     /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
     /// 3 sigma of its noise: a standing vehicle's noise is not motion).
-    /// Widens the odometry's noise model when the batch's last solve showed the odometry
-    /// worse, or its errors longer-lived, than the model in use allows (issue 36, item 2;
-    /// [`selfcal::OdometryConsistency`]). When the ratio over spans of 1 or 3 s is above
-    /// [`ODOMETRY_RATIO_LIMIT`], the variance of `vx, vy` (or of `vtheta`) is multiplied by
-    /// it, or by the long-run ratio that the two spans' ratios give with the errors' time
-    /// constant ([`selfcal::long_run_ratio`]), in the batch's stored factors, in the front
-    /// end's gates and for every later frame; at most [`ODOMETRY_MAX_WIDENING`] in all.
-    /// Never narrows it.
-    fn judge_odometry(&mut self, t_us: u64) {
-        let [short, long] = self.smoother.odometry_consistency();
-        let usable = |c: Option<selfcal::OdometryConsistency>| {
-            c.filter(|c| c.windows >= ODOMETRY_MIN_WINDOWS)
-        };
-        let (short, long) = (usable(short), usable(long));
-        let Some(first) = short.or(long) else {
-            return;
-        };
-        // An axis is judged on the largest of its ratios over the spans with enough windows;
-        // when both spans have them, their quotient shows the errors' memory, and the factor
-        // is the long-run ratio ([`selfcal::long_run_ratio`], its time constant at most
-        // [`ODOMETRY_MAX_TAU_S`]: the extrapolation from 3 s is at most 2.3-fold).
-        let judge = |pick: fn(&selfcal::OdometryConsistency) -> f64| -> (f64, f64) {
-            let raw = [short, long]
-                .iter()
-                .flatten()
-                .map(pick)
-                .filter(|r| r.is_finite())
-                .fold(f64::NAN, f64::max);
-            if !(raw > ODOMETRY_RATIO_LIMIT) {
-                return (1.0, 0.0);
-            }
-            let (long_run, tau) = match (short, long) {
-                (Some(s), Some(l)) => selfcal::long_run_ratio(pick(&s), pick(&l)),
-                _ => (raw, 0.0),
-            };
-            if long_run.is_finite() && tau > 0.0 && tau <= ODOMETRY_MAX_TAU_S {
-                (long_run.max(raw), tau)
-            } else {
-                (raw, 0.0)
-            }
-        };
-        let (kt, tau_t) = judge(|c| c.translation);
-        let (kh, tau_h) = judge(|c| c.heading);
-        // A cap on the model's widening (sigma 100-fold): past it the odometry is not
-        // odometry, and the batch's trajectory, which the check measures against, would no
-        // longer be held by it between landmarks.
-        let widened = self
-            .stats
-            .odometry_widened
-            .map_or((1.0, 1.0), |w| w.factors);
-        let kt = kt.min(ODOMETRY_MAX_WIDENING / widened.0).max(1.0);
-        let kh = kh.min(ODOMETRY_MAX_WIDENING / widened.1).max(1.0);
-        if kt <= 1.0 && kh <= 1.0 {
+    /// Takes the batch's widening of the odometry's noise model (issue 36, item 2;
+    /// [`selfcal::OdometryWidening`]) into the model the navigator integrates every later
+    /// frame's odometry with and into the front end's gates.
+    fn sync_odometry(&mut self) {
+        let widening = self.smoother.odometry_widening();
+        if widening == self.stats.odometry_widened {
             return;
         }
-        let (rt, rh) = (kt, kh);
-        #[cfg(feature = "std")]
-        if std::env::var_os("SN_DEBUG_ODOM").is_some() {
-            std::eprintln!(
-                "widen at {t_us}: short {short:?} long {long:?} -> ({rt}, {tau_t}) ({rh}, {tau_h})"
-            );
-        }
-        self.smoother.widen_odometry(kt, kh);
-        self.odometry_noise.velocity *= libm::sqrt(kt);
-        self.odometry_noise.yaw_rate *= libm::sqrt(kh);
+        self.stats.odometry_widened = widening;
+        let (kt, kh) = widening.map_or((1.0, 1.0), |w| w.factors);
+        self.odometry_noise.velocity = self.rig.noise.velocity * libm::sqrt(kt);
+        self.odometry_noise.yaw_rate = self.rig.noise.yaw_rate * libm::sqrt(kh);
         let mut model = self.front_end.model().clone();
         model.noise.velocity = self.odometry_noise.velocity;
         model.noise.yaw_rate = self.odometry_noise.yaw_rate;
         self.front_end.set_model(model);
-        let noise = self.odometry_noise;
-        let w = self.stats.odometry_widened.get_or_insert(OdometryWidening {
-            first_t_us: t_us,
-            first,
-            factors: (1.0, 1.0),
-            time_constants_s: (0.0, 0.0),
-            noise,
-        });
-        w.factors = (w.factors.0 * kt, w.factors.1 * kh);
-        if kt > 1.0 && tau_t > 0.0 {
-            w.time_constants_s.0 = tau_t;
-        }
-        if kh > 1.0 && tau_h > 0.0 {
-            w.time_constants_s.1 = tau_h;
-        }
-        w.noise = noise;
     }
 
     fn excite(&mut self, m: &rig_model::odometry::Motion, cov: &Matrix3<f64>) {
@@ -1107,7 +1034,7 @@ impl Navigator {
             if let Some(p) = self.smoother.last_pose() {
                 self.pose = p;
             }
-            self.judge_odometry(tracked.t_us);
+            self.sync_odometry();
         }
         if self.smoother.handover().is_none() {
             return Ok(());
@@ -1252,7 +1179,7 @@ impl Navigator {
             .smoother
             .add_mapped_frame(tracked.t_us, motion, pose, &observations)
         {
-            self.judge_odometry(tracked.t_us);
+            self.sync_odometry();
             self.reseed();
         }
     }

@@ -7,7 +7,7 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--reference] [--keep DIR]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
@@ -15,6 +15,8 @@
 //! `--reference`: each hall's frames also solved as one batch with the truth's association,
 //! its landmark RMS and the navigator's ratio to it printed: a minute or more a hall). With `--keep DIR` each
 //! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
+//! `--odometry-tau S` gives the odometry's errors that time constant of memory (issue 36), in
+//! the simulator and in the log's rig; `--tau-unstated` leaves the rig silent about it.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::process::ExitCode;
@@ -63,12 +65,14 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--reference] [--keep DIR]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
     let mut settings = NavSettings::default();
     let mut lens = None;
     let mut positional = Vec::new();
     let mut keep: Option<std::path::PathBuf> = None;
     let mut with_reference = false;
+    let mut odometry_tau: Option<f64> = None;
+    let mut tau_unstated = false;
     let mut rest = args.iter();
     while let Some(a) = rest.next() {
         match a.as_str() {
@@ -105,6 +109,14 @@ fn run() -> Result<(), String> {
                     .map_err(|_| format!("--far-gain {v:?}: {usage}"))?;
             }
             "--smooth-near" => settings.smooth_near_vehicle = true,
+            "--odometry-tau" => {
+                let v = rest.next().ok_or(usage)?;
+                odometry_tau = Some(
+                    v.parse()
+                        .map_err(|_| format!("--odometry-tau {v:?}: {usage}"))?,
+                );
+            }
+            "--tau-unstated" => tau_unstated = true,
             "--reference" => with_reference = true,
             "--keep" => {
                 keep = Some(std::path::PathBuf::from(rest.next().ok_or(usage)?));
@@ -137,7 +149,15 @@ fn run() -> Result<(), String> {
         if let Some(lens) = lens {
             spec.lens = lens;
         }
-        let scenario = sim::hall::scenario(&spec, seed).map_err(|e| e.to_string())?;
+        let mut scenario = sim::hall::scenario(&spec, seed).map_err(|e| e.to_string())?;
+        if let Some(tau) = odometry_tau {
+            let n = &mut scenario.spec.noise;
+            (n.velocity_tau_s, n.yaw_rate_tau_s) = (tau, tau);
+            if !tau_unstated {
+                let r = &mut scenario.rig.noise;
+                (r.velocity_tau, r.yaw_rate_tau) = (tau, tau);
+            }
+        }
         let run = sim::simulate(&scenario, sim::Mode::Fast).map_err(|e| e.to_string())?;
         let log = std::env::temp_dir().join(format!(
             "stereonav-hall-mc-{}-{seed}.mcap",

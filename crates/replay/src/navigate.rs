@@ -558,6 +558,7 @@ impl Replayer {
             warnings,
             log_damage,
             map_common_error: navigator.ekf().and_then(common_error),
+            odometry: Some(odometry_model(navigator)),
         })
     }
 
@@ -630,21 +631,47 @@ pub(crate) fn time_lost_ms(damage: &vehicle_log::Damage) -> u64 {
         / 1_000_000
 }
 
+/// The odometry's noise model the navigator used, for the summary (issue 36).
+fn odometry_model(navigator: &Navigator) -> estimates_log::OdometryModel {
+    let stated = navigator.rig().noise;
+    let used = navigator.odometry_noise();
+    estimates_log::OdometryModel {
+        stated: [
+            stated.velocity,
+            stated.yaw_rate,
+            stated.velocity_tau,
+            stated.yaw_rate_tau,
+        ],
+        used: [used.velocity, used.yaw_rate],
+        widened: navigator
+            .stats()
+            .odometry_widened
+            .map(|w| estimates_log::OdometryWidened {
+                t_us: w.first_t_us,
+                span_s: w.first.span_s,
+                ratios: [w.first.translation, w.first.heading],
+                variance_factors: [w.factors.0, w.factors.1],
+                time_constants_s: [w.time_constants_s.0, w.time_constants_s.1],
+            }),
+    }
+}
+
 /// The warning for an odometry noise model the navigator widened (issue 36): what the rig file
 /// stated, what the batch's residuals showed, what was used.
 pub(crate) fn odometry_widened_warning(
     stated: &rig_model::Noise,
-    w: &nav::OdometryWidening,
+    w: &selfcal::OdometryWidening,
 ) -> String {
-    let memory = |tau: f64| {
-        if tau > 0.0 {
-            format!(", errors lasting about {tau:.2} s")
-        } else {
-            String::new()
+    let memory = match w.time_constants_s {
+        (t, h) if t > 0.0 && h > 0.0 => {
+            format!("; its errors last about {t:.2} s (translation) and {h:.2} s (heading)")
         }
+        (t, _) if t > 0.0 => format!("; its translation errors last about {t:.2} s"),
+        (_, h) if h > 0.0 => format!("; its heading errors last about {h:.2} s"),
+        _ => String::new(),
     };
     format!(
-        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, the batch's trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}): state the odometry's noise and memory in the rig file's [noise]",
+        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, the batch's trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}): state the odometry's noise and memory in the rig file's [noise]",
         stated.velocity,
         stated.yaw_rate,
         stated.velocity_tau,
@@ -653,10 +680,9 @@ pub(crate) fn odometry_widened_warning(
         w.first.span_s,
         w.first.translation,
         w.first.heading,
-        memory(w.time_constants_s.0),
-        memory(w.time_constants_s.1),
-        w.noise.velocity,
-        w.noise.yaw_rate,
+        memory,
+        stated.velocity * w.factors.0.sqrt(),
+        stated.yaw_rate * w.factors.1.sqrt(),
         w.factors.0,
         w.factors.1,
     )
@@ -695,6 +721,18 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
         warnings.push(format!(
             "the log ended with the pose lost (more than {} m uncertain): {held} lamp(s) seen since were held out of the map and are not in it",
             nav::MATCH_MAX_POSE_SIGMA_M
+        ));
+    }
+    for (p, value, nominal, prior, sigma) in navigator.pulled_from_prior() {
+        let (scale, unit) = p.display_unit();
+        warnings.push(format!(
+            "{} ended {:.1} prior sigmas from its nominal value ({:.3} +- {:.3} {unit} against the rig file's {:.3} +- {:.3} {unit}): the rig file's nominal value or prior is wrong, or a model error (odometry worse than stated) pulled it there",
+            p.name(),
+            (value - nominal).abs() / prior,
+            scale * value,
+            scale * sigma,
+            scale * nominal,
+            scale * prior,
         ));
     }
     if let Some(w) = &stats.odometry_widened {

@@ -155,3 +155,34 @@ impl Rig {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_with_memory_weigh_as_their_long_run_white_equivalent() {
+        let white = Noise::white(0.3, 0.02, 0.01);
+        assert_eq!(white.white_equivalent(0.01), white);
+        let slipping = Noise {
+            velocity_tau: 0.6,
+            yaw_rate_tau: 0.3,
+            ..white
+        };
+        let e = slipping.white_equivalent(0.01);
+        // (1 + phi) / (1 - phi) with phi = exp(-0.01 / tau): 120.0 and 60.0 in variance.
+        let phi = |tau: f64| (-0.01 / tau).exp();
+        let gain = |tau: f64| ((1.0 + phi(tau)) / (1.0 - phi(tau))).sqrt();
+        assert!((e.velocity / (0.02 * gain(0.6)) - 1.0).abs() < 1e-12);
+        assert!((e.yaw_rate / (0.01 * gain(0.3)) - 1.0).abs() < 1e-12);
+        assert!((e.velocity / 0.02 - 120.0f64.sqrt()).abs() < 0.01);
+        assert_eq!((e.velocity_tau, e.yaw_rate_tau, e.pixel), (0.0, 0.0, 0.3));
+        // The sum of K samples of an AR(1) sequence: its variance over K against K sigma^2,
+        // exactly, tends to the gain squared.
+        let (p, k) = (phi(0.6), 20_000.0_f64);
+        let exact = k * (1.0 + p) / (1.0 - p) - 2.0 * p * (1.0 - p.powf(k)) / (1.0 - p).powi(2);
+        assert!((exact / k / gain(0.6).powi(2) - 1.0).abs() < 0.01);
+        // An unknown period leaves the noise as it is.
+        assert_eq!(slipping.white_equivalent(0.0).velocity, 0.02);
+    }
+}

@@ -46,6 +46,7 @@ pub use calibrator::{SelfCalibrator, StableRule};
 pub use error::Error;
 pub use observability::structural_trap;
 pub use smoother::{
-    CONSISTENCY_SPANS_S, OdometryConsistency, Smoother, SmootherSettings, long_run_ratio,
+    CONSISTENCY_SPANS_S, OdometryConsistency, OdometryWidening, Smoother, SmootherSettings,
+    long_run_ratio,
 };
 pub use solve::{Calibration, SolveStatus, SolverSettings, calibrate};

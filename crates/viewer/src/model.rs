@@ -663,6 +663,7 @@ impl Model {
             truth: None,
             warnings: end.warnings.clone(),
             log_damage: None,
+            odometry: None,
         };
         let new_lamps: Vec<NewLampMark> = end
             .new_lamps
@@ -1219,6 +1220,7 @@ mod tests {
             truth: None,
             warnings: Vec::new(),
             log_damage: None,
+            odometry: None,
             frames,
         };
         let mut features = Features::default();

@@ -13,5 +13,6 @@ mod mapped_once;
 mod navigate;
 mod output;
 mod real_log;
+mod slipping_wheels;
 mod streaming;
 mod vehicle;

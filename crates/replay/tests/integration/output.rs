@@ -195,6 +195,7 @@ fn synthetic() -> Replay {
         }),
         warnings: vec!["mount_yaw is held at its nominal value: test".to_string()],
         log_damage: None,
+        odometry: None,
         frames,
         camera,
         maps,
@@ -658,6 +659,7 @@ fn summary_has_the_contract_keys_and_types() {
             "counts",
             "truth",
             "log_damage",
+            "odometry",
         ])
     );
     assert_eq!(s["log_damage"], Value::Null);
@@ -966,6 +968,7 @@ fn an_empty_replay_writes_valid_files() {
         truth: None,
         warnings: vec![],
         log_damage: None,
+        odometry: None,
     };
     let dir = write_all("empty", &replay);
     let est = read_est(&std::fs::read(dir.join("EST.mcap")).unwrap(), false);

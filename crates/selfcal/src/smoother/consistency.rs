@@ -33,12 +33,6 @@ use super::factors::odometry_residual;
 /// ([`long_run_ratio`]).
 pub const SPANS_S: [f64; 2] = [1.0, 3.0];
 
-/// The median of a chi-square variable of one degree of freedom.
-const CHI2_1_MEDIAN: f64 = 0.454_936_423_119_572_7;
-
-/// The median of the mean of two chi-square variables of one degree of freedom (`ln 2`).
-const CHI2_2_HALF_MEDIAN: f64 = core::f64::consts::LN_2;
-
 /// The odometry's residuals against the batch's solved trajectory, each normalised by the
 /// variance the noise model gives it (see the module docs): about 1 when the rig file's
 /// odometry noise is right, far above 1 when the odometry is worse or its errors last longer.
@@ -56,6 +50,141 @@ pub struct OdometryConsistency {
     pub frame_translation: f64,
     /// The heading's ratio over single frame intervals.
     pub frame_heading: f64,
+}
+
+/// How the batch widened the odometry's noise model (issue 36, item 2): its solved
+/// trajectory disagreed with the odometry over spans of [`SPANS_S`] by more than the model
+/// allows ([`RATIO_LIMIT`] times its variance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryWidening {
+    /// The frame at which it first widened, board time, microseconds.
+    pub first_t_us: u64,
+    /// The consistency that first triggered it (ratios against the rig file's model).
+    pub first: OdometryConsistency,
+    /// The variance factors applied so far, all widenings together: `(translation, heading)`.
+    pub factors: (f64, f64),
+    /// The time constants of the odometry's errors the check saw, `(translation, heading)`,
+    /// seconds (0: none seen, or not yet measurable).
+    pub time_constants_s: (f64, f64),
+    /// Looks taken with both spans (the errors' memory seen): the `k`-th needs `8 * 2^k`
+    /// windows of the long span, and there are at most [`MAX_LOOKS`].
+    pub looks: u32,
+}
+
+/// The long-run ratio of the odometry's residual variance to the model above which the batch
+/// widens the model (4: odometry twice as bad as stated in sigma; errors of 0.6 s memory
+/// stated as white give about 120 at 100 Hz). Odometry as good as stated gives about 1: the
+/// batch's relative poses over a second are good to a millimetre or two.
+pub(crate) const RATIO_LIMIT: f64 = 4.0;
+
+/// The long-run ratio above which a model widened from the short span alone is widened once
+/// more when the long span has its windows: any excess (the first widening saw a second of
+/// the errors, not their memory's whole share; the one look cannot feed itself).
+pub(crate) const REFINE_LIMIT: f64 = 1.0;
+
+/// Looks with both spans at most: the check measures against a trajectory the widened
+/// odometry holds less tightly, and must not feed itself.
+pub(crate) const MAX_LOOKS: u32 = 3;
+
+/// The longest time constant of the odometry's errors the check extrapolates with, seconds
+/// (a real vehicle's wheel slip lasts about 0.6 s).
+pub(crate) const MAX_TAU_S: f64 = 3.0;
+
+/// The most the odometry's variance is widened, all widenings together (sigma 100-fold):
+/// past it the odometry is not odometry, and the batch's trajectory, which the check measures
+/// against, would no longer be held by it between landmarks.
+pub(crate) const MAX_WIDENING: f64 = 1e4;
+
+/// Windows of a span needed before the check over it is trusted (8 s of data over the 1 s
+/// span, 24 s over the 3 s one).
+pub(crate) const MIN_WINDOWS: usize = 8;
+
+/// The variance factors `(translation, heading)` to widen the odometry's model by after a
+/// solve whose consistency over the two spans is `spans`, given the widening so far, and the
+/// widening after it (`None` when nothing changes). An axis is judged on the largest of its
+/// ratios over the spans with enough windows, against [`RATIO_LIMIT`]. When both spans have
+/// them, their quotient shows the errors' memory, and the factor is the long-run ratio
+/// ([`long_run_ratio`], its time constant at most [`MAX_TAU_S`]: the extrapolation from
+/// 3 s is at most 2.3-fold). A model widened before the long span had its windows (from the
+/// short span alone, without the memory's share) is looked at again when the long span has
+/// 8, 16 and 32 windows, against [`REFINE_LIMIT`]: each look with twice the data, at most
+/// [`MAX_LOOKS`], so that the check, which measures against a trajectory the widened
+/// odometry holds less tightly, cannot feed itself.
+pub(super) fn judge(
+    spans: [Option<OdometryConsistency>; 2],
+    so_far: Option<OdometryWidening>,
+    t_us: u64,
+) -> Option<((f64, f64), OdometryWidening)> {
+    let usable = |c: Option<OdometryConsistency>| c.filter(|c| c.windows >= MIN_WINDOWS);
+    let [short, long] = spans.map(usable);
+    let first = short.or(long)?;
+    // The look a long span of `n` windows is: 1 at 8, 2 at 16, 3 at 32.
+    let look_of = |n: usize| (usize::BITS - (n / MIN_WINDOWS).leading_zeros()).min(MAX_LOOKS);
+    let look = long.map_or(0, |l| look_of(l.windows));
+    let refine = look > 0 && so_far.is_some_and(|w| w.looks < look);
+    let limit = if refine { REFINE_LIMIT } else { RATIO_LIMIT };
+    // The fewest windows behind a ratio: the long span's when it is used.
+    let windows = long.or(short).map_or(MIN_WINDOWS, |c| c.windows);
+    #[allow(clippy::cast_precision_loss)] // a count of windows far below 2^53
+    let windows = windows as f64;
+    // `variance_per_window`: the variance of one window's normalised square in units of its
+    // mean (2 for a chi-square of one degree of freedom, 1 for the mean of two).
+    let axis = |pick: fn(&OdometryConsistency) -> f64, variance_per_window: f64| -> (f64, f64) {
+        let raw = [short, long]
+            .iter()
+            .flatten()
+            .map(pick)
+            .filter(|r| r.is_finite())
+            .fold(f64::NAN, f64::max);
+        let (long_run, tau) = match (short, long) {
+            (Some(s), Some(l)) => long_run_ratio(pick(&s), pick(&l)),
+            _ => (raw, 0.0),
+        };
+        let (ratio, tau) = if long_run.is_finite() && tau > 0.0 && tau <= MAX_TAU_S {
+            (long_run.max(raw), tau)
+        } else {
+            (raw, 0.0)
+        };
+        // Judged on the estimate; widened by its one-sigma upper bound, as the ratio comes
+        // from a few windows (+50 % at 8 of the heading's, +29 % at 24) and a model widened
+        // too little is the error that matters (issue 36: honesty before accuracy).
+        if ratio > limit {
+            (
+                ratio * (1.0 + libm::sqrt(variance_per_window / windows)),
+                tau,
+            )
+        } else {
+            (1.0, 0.0)
+        }
+    };
+    let (kt, tau_t) = axis(|c| c.translation, 1.0);
+    let (kh, tau_h) = axis(|c| c.heading, 2.0);
+    let applied = so_far.map_or((1.0, 1.0), |w| w.factors);
+    let kt = kt.min(MAX_WIDENING / applied.0).max(1.0);
+    let kh = kh.min(MAX_WIDENING / applied.1).max(1.0);
+    let mut w = so_far.unwrap_or(OdometryWidening {
+        first_t_us: t_us,
+        first,
+        factors: (1.0, 1.0),
+        time_constants_s: (0.0, 0.0),
+        looks: 0,
+    });
+    if kt <= 1.0 && kh <= 1.0 {
+        // This look taken: the next needs twice the windows.
+        return refine.then(|| {
+            w.looks = look;
+            ((1.0, 1.0), w)
+        });
+    }
+    w.factors = (w.factors.0 * kt, w.factors.1 * kh);
+    w.looks = w.looks.max(look);
+    if kt > 1.0 && tau_t > 0.0 {
+        w.time_constants_s.0 = tau_t;
+    }
+    if kh > 1.0 && tau_h > 0.0 {
+        w.time_constants_s.1 = tau_h;
+    }
+    Some(((kt, kh), w))
 }
 
 /// `a (+) b` of two motions with the covariance propagated (`cov_a`, `cov_b` independent).
@@ -92,16 +221,34 @@ fn normalised(r: &Vector3<f64>, cov: &Matrix3<f64>) -> Option<(f64, f64)> {
         .then(|| (0.5 * (r.x * r.x / vx + r.y * r.y / vy), r.z * r.z / vt))
 }
 
-/// The median of `v` over `expected`, the median under the model (`v` reordered); `NaN`
-/// when empty.
-fn ratio(v: &mut [f64], expected: f64) -> f64 {
+/// The ratio of `v`'s spread to what the model gives it: the mean of `v` with every value
+/// clipped at [`CLIP_MEDIANS`] times `v`'s median (an odometry gap or a slip the model covers
+/// cannot dominate it), over that clipped mean under the model, `clipped_mean` (for a
+/// chi-square `v`, its mean with the same clip at the same multiple of its own median: the
+/// ratio is the same whatever the scale). `v` is reordered; `NaN` when empty. The mean, not
+/// the median: with the 8 to 30 windows the check has, the median of a chi-square of one
+/// degree of freedom is off by 80 % (one sigma) at 8 windows, the mean by 50 %.
+fn ratio(v: &mut [f64], clipped_mean: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
     let mid = v.len() / 2;
     let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-    *m / expected
+    let clip = CLIP_MEDIANS * *m;
+    #[allow(clippy::cast_precision_loss)] // a count of windows far below 2^53
+    let mean = v.iter().map(|x| x.min(clip)).sum::<f64>() / v.len() as f64;
+    mean / clipped_mean
 }
+
+/// Values above this many medians are clipped ([`ratio`]).
+const CLIP_MEDIANS: f64 = 10.0;
+
+/// The mean of a chi-square variable of one degree of freedom clipped at [`CLIP_MEDIANS`]
+/// times its median (`1 - E[(X - c)^+]`, `c = 4.549`).
+const CHI2_1_CLIPPED_MEAN: f64 = 0.941_885_836_754_694_5;
+
+/// The same for the mean of two (an exponential variable of mean 1: `1 - exp(-10 ln 2)`).
+const CHI2_2_HALF_CLIPPED_MEAN: f64 = 0.999_023_437_5;
 
 /// The consistency of `frames`' odometry with their poses for the vehicle `v` over windows
 /// of `span_s` (see the module docs); `None` without a single window.
@@ -163,10 +310,10 @@ pub(super) fn odometry_consistency(
     Some(OdometryConsistency {
         windows: long_t.len(),
         span_s,
-        translation: ratio(&mut long_t, CHI2_2_HALF_MEDIAN),
-        heading: ratio(&mut long_h, CHI2_1_MEDIAN),
-        frame_translation: ratio(&mut frame_t, CHI2_2_HALF_MEDIAN),
-        frame_heading: ratio(&mut frame_h, CHI2_1_MEDIAN),
+        translation: ratio(&mut long_t, CHI2_2_HALF_CLIPPED_MEAN),
+        heading: ratio(&mut long_h, CHI2_1_CLIPPED_MEAN),
+        frame_translation: ratio(&mut frame_t, CHI2_2_HALF_CLIPPED_MEAN),
+        frame_heading: ratio(&mut frame_h, CHI2_1_CLIPPED_MEAN),
     })
 }
 
@@ -258,5 +405,75 @@ mod tests {
         // 0.6 s: 51 % of the long-run rate over a second, 80 % over three.
         assert!((memory_fraction(1.0, 0.6) - 0.513).abs() < 1e-3);
         assert!((memory_fraction(3.0, 0.6) - 0.801).abs() < 1e-3);
+    }
+
+    fn spans(
+        windows: usize,
+        short: (f64, f64),
+        long: Option<(f64, f64)>,
+    ) -> [Option<OdometryConsistency>; 2] {
+        let c = |span_s: f64, (translation, heading): (f64, f64)| OdometryConsistency {
+            windows,
+            span_s,
+            translation,
+            heading,
+            frame_translation: 1.0,
+            frame_heading: 1.0,
+        };
+        [Some(c(1.0, short)), long.map(|l| c(3.0, l))]
+    }
+
+    #[test]
+    fn the_odometry_is_widened_when_the_batch_disagrees_with_it_and_only_then() {
+        // As stated: nothing; too few windows: nothing.
+        assert_eq!(
+            judge(spans(20, (1.2, 0.8), Some((1.5, 0.9))), None, 5),
+            None
+        );
+        assert_eq!(
+            judge(spans(MIN_WINDOWS - 1, (100.0, 100.0), None), None, 5),
+            None
+        );
+        // Errors of 0.6 s memory stated as white, seen over the short span first: widened by
+        // its ratio's one-sigma upper bound (8 windows: the translation's +35 %), the memory
+        // not yet seen.
+        let short = 120.0 * memory_fraction(1.0, 0.6);
+        let ((kt, kh), w) = judge(spans(8, (short, 3.0), None), None, 9_000_000).unwrap();
+        assert!((kt / (short * (1.0 + (1.0f64 / 8.0).sqrt())) - 1.0).abs() < 1e-12);
+        assert_eq!(kh, 1.0);
+        assert!(w.looks == 0 && w.first_t_us == 9_000_000);
+        // The long span's windows: the memory's share, once (REFINE_LIMIT), to the long-run
+        // ratio's upper bound (24 windows: +20 %).
+        let after = |r: f64, tau: f64, t: f64| r * memory_fraction(t, tau) / kt;
+        let seen = spans(
+            24,
+            (after(120.0, 0.6, 1.0), 1.0),
+            Some((after(120.0, 0.6, 3.0), 1.0)),
+        );
+        let ((k2, kh), w) = judge(seen, Some(w), 24_000_000).unwrap();
+        let upper = 1.0 + (1.0f64 / 24.0).sqrt();
+        assert!((k2 * kt / (120.0 * upper) - 1.0).abs() < 1e-6, "{k2}");
+        assert_eq!(kh, 1.0);
+        assert!(w.looks == 2 && (w.time_constants_s.0 - 0.6).abs() < 1e-6);
+        assert!((w.factors.0 / (120.0 * upper) - 1.0).abs() < 1e-6);
+        // That look taken (24 windows): ratios of 2 are not widened again until the long span
+        // has twice the windows (only above RATIO_LIMIT meanwhile).
+        assert_eq!(
+            judge(spans(30, (2.0, 1.0), Some((3.0, 1.0))), Some(w), 30_000_000),
+            None
+        );
+        // The third and last look, at 32 windows.
+        let ((k3, _), w) =
+            judge(spans(32, (1.2, 1.0), Some((1.1, 1.0))), Some(w), 40_000_000).unwrap();
+        assert!((k3 / (1.2 * (1.0 + (1.0f64 / 32.0).sqrt())) - 1.0).abs() < 1e-12);
+        assert_eq!(w.looks, MAX_LOOKS);
+        assert_eq!(
+            judge(spans(64, (1.2, 1.0), Some((1.1, 1.0))), Some(w), 80_000_000),
+            None
+        );
+        // A widening never goes past MAX_WIDENING in all.
+        let ((kt, _), w) = judge(spans(8, (1e6, 1.0), None), None, 1).unwrap();
+        assert_eq!((kt, w.factors.0), (MAX_WIDENING, MAX_WIDENING));
+        assert_eq!(judge(spans(8, (1e6, 1.0), None), Some(w), 2), None);
     }
 }

@@ -32,7 +32,9 @@ mod factors;
 mod settings;
 mod system;
 
-pub use consistency::{OdometryConsistency, SPANS_S as CONSISTENCY_SPANS_S, long_run_ratio};
+pub use consistency::{
+    OdometryConsistency, OdometryWidening, SPANS_S as CONSISTENCY_SPANS_S, long_run_ratio,
+};
 pub use settings::SmootherSettings;
 
 use alloc::collections::BTreeMap;
@@ -126,6 +128,16 @@ const PLAUSIBLE_PRIOR_SIGMAS: f64 = 10.0;
 /// odometry noise of a frame interval.
 const SPEED_STEP_MPS: f64 = 0.05;
 
+/// A yaw rate that counts as turning, rad/s (about 1 degree a second: above a gyro's bias).
+const MOVING_YAW_RATE_RADPS: f64 = 0.02;
+
+/// Distance the vehicle must have travelled (or [`MIN_TURN_FOR_STABLE_RAD`] turned) before
+/// phase 1 may call itself stable, metres: two seconds of the paper's 0.25 m/s.
+pub const MIN_TRAVEL_FOR_STABLE_M: f64 = 0.5;
+
+/// The turn that does as well, radians (about 17 degrees).
+pub const MIN_TURN_FOR_STABLE_RAD: f64 = 0.3;
+
 /// Frames back that a newly confirmed track's earlier measurements are looked for.
 const TENTATIVE_FRAMES: usize = 8;
 
@@ -146,6 +158,10 @@ pub struct Smoother {
     speed_change: f64,
     /// The last frame interval's speed, m/s.
     last_speed: Option<f64>,
+    /// Distance the odometry travelled at [`SPEED_STEP_MPS`] or faster, and rotation it turned
+    /// at [`MOVING_YAW_RATE_RADPS`] or faster: motion, not its noise or a yaw-rate bias
+    /// ([`MIN_TRAVEL_FOR_STABLE_M`]).
+    moved: (f64, f64),
     /// `(t_us, values, sigmas)` of C after each solve.
     history: Vec<(u64, ParamVector, ParamVector)>,
     /// Joint covariance `[last pose, C, landmarks]` of the last solve.
@@ -167,6 +183,8 @@ pub struct Smoother {
     /// The odometry against the last solve's trajectory over each of
     /// [`CONSISTENCY_SPANS_S`] ([`Smoother::odometry_consistency`]).
     consistency: [Option<OdometryConsistency>; 2],
+    /// How the odometry's noise model was widened ([`Smoother::odometry_widening`]).
+    widening: Option<OdometryWidening>,
 }
 
 impl Smoother {
@@ -186,6 +204,7 @@ impl Smoother {
             total_rotation: 0.0,
             speed_change: 0.0,
             last_speed: None,
+            moved: (0.0, 0.0),
             history: Vec::new(),
             last_covariance: None,
             last_summary: None,
@@ -197,6 +216,7 @@ impl Smoother {
             smoothed: Vec::new(),
             since_solve: 0,
             consistency: [None; 2],
+            widening: None,
         }
     }
 
@@ -208,18 +228,28 @@ impl Smoother {
         self.consistency
     }
 
-    /// Widens the odometry's noise model: every stored odometry factor's variance is
-    /// multiplied by `translation` on `dx, dy` and by `heading` on `dtheta` (factors below 1,
-    /// or not finite, are taken as 1). The caller adds later frames' factors with the
-    /// widened noise. The consistency is judged again at the next solve.
-    pub fn widen_odometry(&mut self, translation: f64, heading: f64) {
-        let at_least_one = |k: f64| if k.is_finite() && k > 1.0 { k } else { 1.0 };
-        consistency::widen(
-            &mut self.frames,
-            at_least_one(translation),
-            at_least_one(heading),
-        );
+    /// How the batch widened the odometry's noise model after its solves showed the odometry
+    /// worse, or its errors longer-lived, than the rig file states (issue 36; `None`: it did
+    /// not). The caller integrates later frames' odometry with the rig file's `velocity` and
+    /// `yaw_rate` times the square roots of [`OdometryWidening::factors`].
+    pub fn odometry_widening(&self) -> Option<OdometryWidening> {
+        self.widening
+    }
+
+    /// After a solve: judges the odometry against it and widens every stored odometry
+    /// factor's variance when the check says so ([`consistency::judge`]). Returns whether it
+    /// widened.
+    fn check_odometry(&mut self, t_us: u64) -> bool {
+        let Some(((kt, kh), w)) = consistency::judge(self.consistency, self.widening, t_us) else {
+            return false;
+        };
+        self.widening = Some(w);
+        if kt <= 1.0 && kh <= 1.0 {
+            return false;
+        }
+        consistency::widen(&mut self.frames, kt, kh);
         self.consistency = [None; 2];
+        true
     }
 
     /// Frames buffered.
@@ -308,6 +338,12 @@ impl Smoother {
                 // Changes beyond SPEED_STEP_MPS from the last counted speed: the odometry's
                 // noise is not a change of speed.
                 let speed = libm::hypot(o.motion.dx, o.motion.dy) / o.motion.dt_s;
+                if speed >= SPEED_STEP_MPS {
+                    self.moved.0 += speed * o.motion.dt_s;
+                }
+                if libm::fabs(o.motion.dtheta) >= MOVING_YAW_RATE_RADPS * o.motion.dt_s {
+                    self.moved.1 += libm::fabs(o.motion.dtheta);
+                }
                 match self.last_speed {
                     Some(last) if libm::fabs(speed - last) >= SPEED_STEP_MPS => {
                         self.speed_change += libm::fabs(speed - last);
@@ -538,6 +574,11 @@ impl Smoother {
             return;
         };
         self.last_summary = Some(summary);
+        if self.check_odometry(t_us) {
+            // The sigmas of this solve were the narrower model's: not a step toward stability.
+            self.stable_run = 0;
+            return;
+        }
         let cov = self.camera_covariance();
         let values = self.camera.to_vector();
         let sigmas = ParamVector::from_fn(|i, _| libm::sqrt(cov[(i, i)].max(0.0)));
@@ -558,7 +599,12 @@ impl Smoother {
             0
         };
         self.history.push((t_us, values, sigmas));
-        if self.stable_run >= self.settings.consecutive {
+        // A standing vehicle informs no scale and no turn: whatever the batch's sigmas say
+        // (they are as right as the odometry's noise model), phase 1 is not stable before the
+        // vehicle has moved (issue 36).
+        let moved =
+            self.moved.0 >= MIN_TRAVEL_FOR_STABLE_M || self.moved.1 >= MIN_TURN_FOR_STABLE_RAD;
+        if self.stable_run >= self.settings.consecutive && moved {
             self.hand_over(HandoverReason::Stable);
         }
     }
@@ -898,6 +944,7 @@ impl Smoother {
         if self.solve().is_none() {
             return false;
         }
+        self.check_odometry(t_us);
         let excess = self.frames.len().saturating_sub(self.settings.window);
         if excess > 0 {
             self.marginalise(excess);
