@@ -195,7 +195,17 @@ fn synthetic() -> Replay {
         }),
         warnings: vec!["mount_yaw is held at its nominal value: test".to_string()],
         log_damage: None,
-        odometry: None,
+        odometry: Some(estimates_log::OdometryModel {
+            stated: [0.02, 0.01, 0.0, 0.0],
+            used: [0.2, 0.1],
+            widened: Some(estimates_log::OdometryWidened {
+                t_us: 9_000_000,
+                span_s: 1.0,
+                ratios: [100.0, 50.0],
+                variance_factors: [100.0, 100.0],
+                time_constants_s: [0.6, 0.0],
+            }),
+        }),
         frames,
         camera,
         maps,

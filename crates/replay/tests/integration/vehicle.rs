@@ -65,9 +65,12 @@ fn calibrated(sc: sim::Scenario, seeds: std::ops::Range<u64>, tag: &str) {
 }
 
 /// The same drive told nothing about the vehicle (its rig's `[estimate]` without V): the
-/// errors the issue measured come back, so the test above is not passing on an easy log.
+/// odometry's 1.5 % scale, 0.002 rad/s yaw bias and clock offset are errors the rig's noise
+/// model does not allow, so the test above is not passing on an easy log. Once the batch's
+/// residuals show it (issue 36), the navigator widens its odometry model and says so: the map
+/// is then made by the lamps, and the trajectory carries the odometry's scale until phase 2.
 #[test]
-fn without_estimating_v_the_same_drive_is_mapped_badly() {
+fn without_estimating_v_the_same_drive_is_seen_to_have_worse_odometry() {
     let mut sc = scenario("aisle-vehicle.toml");
     sc.rig.estimate.retain(|p| !p.is_vehicle());
     for p in Param::VEHICLE {
@@ -78,6 +81,14 @@ fn without_estimating_v_the_same_drive_is_mapped_badly() {
     run.write_log(&log).unwrap();
     let r = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
     let t = r.truth.as_ref().unwrap();
-    assert!(t.landmark_rms > 0.05, "{t:?}");
+    assert!(t.ate_rms > 0.05, "{t:?}");
+    assert!(r.odometry.unwrap().widened.is_some(), "{:?}", r.warnings);
+    assert!(
+        r.warnings
+            .iter()
+            .any(|w| w.starts_with("the odometry is worse than the rig file states")),
+        "{:?}",
+        r.warnings
+    );
     std::fs::remove_file(&log).ok();
 }
