@@ -1515,7 +1515,7 @@ impl Navigator {
                 continue;
             };
             let mut best: Option<(LandmarkId, f64)> = None;
-            let mut inside = 0usize;
+            let mut inside: Vec<LandmarkId> = Vec::new();
             for &(other, position) in &all {
                 if other == id
                     || !ekf.contains(other)
@@ -1535,15 +1535,32 @@ impl Navigator {
                     continue;
                 };
                 if d2 <= self.merge_gate {
-                    inside += 1;
+                    inside.push(other);
                     if best.is_none_or(|(_, b)| d2 < b) {
                         best = Some((other, d2));
                     }
                 }
             }
             // Two candidates in the gate: which lamp it is, is not known (a regular grid seen
-            // with an uncertain pose); no merge.
-            let Some((other, _)) = best.filter(|_| inside == 1) else {
+            // with an uncertain pose); no merge. Unless the candidates are one lamp mapped
+            // three times or more: every two of them never observed together, inside the gate
+            // of each other and at one point (within [`MERGE_SAME_POINT_M`]; the first pass
+            // merges the nearest, the next the others).
+            let one_lamp = |ekf: &Ekf| {
+                inside.iter().enumerate().all(|(i, &a)| {
+                    inside.iter().skip(i + 1).all(|&b| {
+                        let near = match (ekf.landmark_position(a), ekf.landmark_position(b)) {
+                            (Some(pa), Some(pb)) => (pa - pb).norm() <= MERGE_SAME_POINT_M,
+                            _ => false,
+                        };
+                        near && !self.co_observed.contains(&ordered(a, b))
+                            && ekf
+                                .landmark_pair_distance(a, b)
+                                .is_ok_and(|d2| d2 <= self.merge_gate)
+                    })
+                })
+            };
+            let Some((other, _)) = best.filter(|_| inside.len() == 1 || one_lamp(ekf)) else {
                 continue;
             };
             let (keep, drop) = ordered(id, other);
@@ -1584,6 +1601,12 @@ impl Navigator {
 /// Two landmarks further apart than this are never compared by the merge guard, metres: lamps
 /// are metres apart, and a lamp's second landmark lies where the drift of its day put it.
 pub const MERGE_SEARCH_M: f64 = 1.0;
+
+/// Landmarks closer than this to each other are at one point: several of them in one
+/// landmark's merge gate are one lamp mapped three times or more, not a grid's neighbours
+/// (two features of one thing closer than this never become two landmarks:
+/// `SmootherSettings::min_separation_m`), metres.
+pub const MERGE_SAME_POINT_M: f64 = 0.05;
 
 /// How far outside the image, in standard deviations of its predicted pixel, a landmark still
 /// counts for map matching's uniqueness ([`vslam_ekf::Ekf::landmarks_near_view`]).

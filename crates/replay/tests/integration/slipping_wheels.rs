@@ -242,6 +242,7 @@ fn slow_slipping_wheels_over_many_seeds() {
             let t = r.replay.truth.as_ref().unwrap();
             let d = format!("{tag} seed {seed}: {t:?}");
             assert_eq!(t.lamps_missed, 0, "{d}");
+            assert_eq!(t.landmarks_duplicate, 0, "{d}");
             near += r.near;
             inside += r.inside;
             matched += t.landmarks_matched;
