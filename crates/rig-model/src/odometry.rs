@@ -4,7 +4,6 @@
 #[cfg(feature = "alloc")]
 use alloc::vec::Vec;
 
-#[cfg(feature = "alloc")]
 use nalgebra::Matrix3;
 use nalgebra::{Matrix3x4, Vector3};
 
@@ -360,6 +359,29 @@ pub fn integrate_with(
         t = end;
     }
     Some(motion)
+}
+
+/// `d(a (+) b) / d a` for motions (or a pose `a` and a motion `b`): the Jacobian of the
+/// composition with respect to the first, at `a`'s angle `theta_a`.
+pub fn compose_jacobian_first(theta_a: f64, b: &Motion) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(theta_a), libm::cos(theta_a));
+    Matrix3::new(
+        1.0,
+        0.0,
+        -s * b.dx - c * b.dy,
+        0.0,
+        1.0,
+        c * b.dx - s * b.dy,
+        0.0,
+        0.0,
+        1.0,
+    )
+}
+
+/// `d(a (+) b) / d b`: the rotation of `a` in the plane, identity on the angle.
+pub fn compose_jacobian_second(theta_a: f64) -> Matrix3<f64> {
+    let (s, c) = (libm::sin(theta_a), libm::cos(theta_a));
+    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
 }
 
 #[cfg(all(test, feature = "alloc"))]

@@ -119,28 +119,8 @@ pub fn arc_velocity_jacobian(vx: f64, vy: f64, w: f64, dt: f64) -> Matrix3<f64> 
     )
 }
 
-/// `d(a (+) b) / d a` for motions (or a pose `a` and a motion `b`): the Jacobian of the
-/// composition with respect to the first.
-pub fn compose_jacobian_first(theta_a: f64, b: &Motion) -> Matrix3<f64> {
-    let (s, c) = (libm::sin(theta_a), libm::cos(theta_a));
-    Matrix3::new(
-        1.0,
-        0.0,
-        -s * b.dx - c * b.dy,
-        0.0,
-        1.0,
-        c * b.dx - s * b.dy,
-        0.0,
-        0.0,
-        1.0,
-    )
-}
-
-/// `d(a (+) b) / d b`: the rotation of `a` in the plane, identity on the angle.
-pub fn compose_jacobian_second(theta_a: f64) -> Matrix3<f64> {
-    let (s, c) = (libm::sin(theta_a), libm::cos(theta_a));
-    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
-}
+/// The Jacobians of a composition of motions (rig-model's, shared with the batch).
+pub use rig_model::odometry::{compose_jacobian_first, compose_jacobian_second};
 
 /// Checks a noise model's odometry sigmas.
 pub(crate) fn check_noise(noise: &Noise) -> Result<(), Error> {

@@ -22,7 +22,7 @@ use alloc::vec::Vec;
 
 use nalgebra::{Matrix3, Vector3};
 use rig_model::camera::Vehicle;
-use rig_model::odometry::Motion;
+use rig_model::odometry::{Motion, compose_jacobian_first, compose_jacobian_second};
 
 use super::Frame;
 use super::factors::odometry_residual;
@@ -194,19 +194,8 @@ fn compose(
     b: &Motion,
     cov_b: &Matrix3<f64>,
 ) -> (Motion, Matrix3<f64>) {
-    let (s, c) = (libm::sin(a.dtheta), libm::cos(a.dtheta));
-    let ja = Matrix3::new(
-        1.0,
-        0.0,
-        -s * b.dx - c * b.dy,
-        0.0,
-        1.0,
-        c * b.dx - s * b.dy,
-        0.0,
-        0.0,
-        1.0,
-    );
-    let jb = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+    let ja = compose_jacobian_first(a.dtheta, b);
+    let jb = compose_jacobian_second(a.dtheta);
     (
         a.then(b),
         ja * cov_a * ja.transpose() + jb * cov_b * jb.transpose(),

@@ -731,42 +731,29 @@ impl Smoother {
                 considered = self.considered_covariance(&all, &uninformed);
             }
         }
-        if let Some((estimated, covariance, camera_covariance)) = considered {
-            // The held parameters' prior carried into the landmarks, the pose and the informed
-            // parameters (the consider covariance): a landmark's position depends on the
-            // baseline held at nominal, and its sigma must say so.
-            let Some(last) = self.frames.last() else {
-                return;
-            };
-            self.handover = Some(BatchHandover {
-                t_us: last.t_us,
-                reason,
-                camera: self.camera,
-                camera_covariance,
-                pose: last.pose,
-                landmarks: self.landmarks.clone(),
-                estimated,
-                covariance,
-                trajectory: self.frames.iter().map(|f| (f.t_us, f.pose)).collect(),
-                observability: report,
-            });
-            return;
-        }
-        let m = self.estimated.len();
-        let covariance = self.last_covariance.clone().unwrap_or_else(|| {
-            // No solve: the prior for C, the landmarks known only to within a metre.
-            let w = 3 + m + 3 * self.landmarks.len();
-            let mut p = DMatrix::zeros(w, w);
-            for (a, &pa) in self.estimated.iter().enumerate() {
-                let s = self.prior_sigma(pa);
-                p[(3 + a, 3 + a)] = s * s;
+        // With parameters held, the consider covariance carries their prior into the
+        // landmarks, the pose and the informed parameters: a landmark's position depends on
+        // the baseline held at nominal, and its sigma must say so.
+        let (estimated, covariance, camera_covariance) = match considered {
+            Some(c) => c,
+            None => {
+                let m = self.estimated.len();
+                let covariance = self.last_covariance.clone().unwrap_or_else(|| {
+                    // No solve: the prior for C, the landmarks known only to within a metre.
+                    let w = 3 + m + 3 * self.landmarks.len();
+                    let mut p = DMatrix::zeros(w, w);
+                    for (a, &pa) in self.estimated.iter().enumerate() {
+                        let s = self.prior_sigma(pa);
+                        p[(3 + a, 3 + a)] = s * s;
+                    }
+                    for j in 0..3 * self.landmarks.len() {
+                        p[(3 + m + j, 3 + m + j)] = 1.0;
+                    }
+                    p
+                });
+                (self.estimated.clone(), covariance, self.camera_covariance())
             }
-            for j in 0..3 * self.landmarks.len() {
-                p[(3 + m + j, 3 + m + j)] = 1.0;
-            }
-            p
-        });
-        let camera_covariance = self.camera_covariance();
+        };
         let Some(last) = self.frames.last() else {
             return;
         };
@@ -777,7 +764,7 @@ impl Smoother {
             camera_covariance,
             pose: last.pose,
             landmarks: self.landmarks.clone(),
-            estimated: self.estimated.clone(),
+            estimated,
             covariance,
             trajectory: self.frames.iter().map(|f| (f.t_us, f.pose)).collect(),
             observability: report,
