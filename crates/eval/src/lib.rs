@@ -510,3 +510,39 @@ pub fn summarise(runs: Vec<RunResult>) -> Summary {
         runs,
     }
 }
+
+/// The 3-D chi-square bound equivalent to three sigma (probability 0.9973), the bound
+/// [`landmarks_against_lamps`] counts a landmark inside of.
+pub const THREE_SIGMA_CHI2_3: f64 = 14.16;
+
+/// A map's landmarks against the simulator's lamps: each landmark's nearest lamp within
+/// `radius` metres, and its 3-D Mahalanobis distance under the landmark's covariance. Returns
+/// `(landmarks with a lamp within radius, of them inside the three-sigma bound
+/// `THREE_SIGMA_CHI2_3`)`. `landmarks` are `(position, covariance)`, world frame.
+pub fn landmarks_against_lamps(
+    landmarks: impl IntoIterator<Item = ([f64; 3], [[f64; 3]; 3])>,
+    lamps: &[sim::Lamp],
+    radius: f64,
+) -> (usize, usize) {
+    let (mut near, mut inside) = (0, 0);
+    for (position, covariance) in landmarks {
+        let p = Vector3::from(position);
+        let Some(lamp) = lamps
+            .iter()
+            .min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm()))
+        else {
+            continue;
+        };
+        let e = p - lamp.position;
+        if e.norm() > radius {
+            continue;
+        }
+        let cov = nalgebra::Matrix3::from_fn(|i, j| covariance[i][j]);
+        let d2 = cov
+            .try_inverse()
+            .map_or(f64::INFINITY, |ci| e.dot(&(ci * e)));
+        near += 1;
+        inside += usize::from(d2 <= THREE_SIGMA_CHI2_3);
+    }
+    (near, inside)
+}

@@ -7,7 +7,7 @@
 //! vehicle first moved), the whole method's errors (landmark RMS, trajectory RMS in the first
 //! frame's world frame, every estimated camera parameter) and the 3-sigma counts (camera
 //! parameters; landmarks, by their 3-D Mahalanobis distance against the 3-sigma-equivalent
-//! chi-square bound 14.16). `--velocity-noise` overrides the scenario's odometry noise (and the
+//! chi-square bound 14.16, `eval::landmarks_against_lamps`). `--velocity-noise` overrides the scenario's odometry noise (and the
 //! rig's noise model with it). `--odometry-tau` gives the odometry's errors (both axes) that
 //! time constant of memory, in the simulator and in the rig file; `--tau-unstated` leaves the
 //! rig file silent about the memory the scenario has (its time constants 0).
@@ -203,26 +203,13 @@ fn run() -> Result<(), String> {
             }
         }
         // Each landmark against its nearest lamp (within 10 cm): its 3-D Mahalanobis distance.
-        for l in &r.landmarks {
-            let p = nalgebra::Vector3::from(l.position);
-            let Some(lamp) = sim_run
-                .landmarks
-                .iter()
-                .min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm()))
-            else {
-                continue;
-            };
-            let e = p - lamp.position;
-            if e.norm() > 0.1 {
-                continue;
-            }
-            let cov = nalgebra::Matrix3::from_fn(|i, j| l.covariance[i][j]);
-            let d2 = cov
-                .try_inverse()
-                .map_or(f64::INFINITY, |ci| e.dot(&(ci * e)));
-            lm_total += 1;
-            lm_inside += usize::from(d2 <= 14.16);
-        }
+        let (near, inside) = eval::landmarks_against_lamps(
+            r.landmarks.iter().map(|l| (l.position, l.covariance)),
+            &sim_run.landmarks,
+            0.1,
+        );
+        lm_total += near;
+        lm_inside += inside;
     }
     std::fs::remove_file(&log).ok();
     println!(

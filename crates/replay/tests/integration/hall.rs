@@ -17,16 +17,11 @@
 //! "The hall".
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use replay::{LocalizerSettings, NavSettings, Replayer};
 
-fn scenario(name: &str) -> sim::Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/scenarios")
-        .join(name);
-    sim::Scenario::load(&path).unwrap()
-}
+use crate::scenario;
 
 /// A file of its own for each call: the tests run in parallel in one process.
 fn scratch(name: &str) -> PathBuf {

@@ -16,3 +16,11 @@ mod real_log;
 mod slipping_wheels;
 mod streaming;
 mod vehicle;
+
+/// A committed scenario of `fixtures/scenarios` (`name` with its `.toml`).
+fn scenario(name: &str) -> sim::Scenario {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/scenarios")
+        .join(name);
+    sim::Scenario::load(&path).unwrap()
+}

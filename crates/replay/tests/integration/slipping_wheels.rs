@@ -8,17 +8,10 @@
 //! value is named.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::Path;
-
 use replay::NavSettings;
-use rig_model::Param;
 
-fn scenario(name: &str) -> sim::Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/scenarios")
-        .join(name);
-    sim::Scenario::load(&path).unwrap()
-}
+use crate::scenario;
+use rig_model::Param;
 
 /// The rig file silent about the odometry's memory (its time constants 0).
 fn silent(mut sc: sim::Scenario) -> sim::Scenario {
@@ -36,7 +29,7 @@ fn one_pass(mut sc: sim::Scenario) -> sim::Scenario {
 struct Run {
     replay: estimates_log::Replay,
     /// Landmarks within 10 cm of a lamp, and of them those inside the 3-D chi-square bound
-    /// of 3 sigma (14.16).
+    /// of 3 sigma (`eval::landmarks_against_lamps`).
     near: usize,
     inside: usize,
 }
@@ -47,27 +40,11 @@ fn run(sc: &sim::Scenario, seed: u64, tag: &str) -> Run {
     sim_run.write_log(&log).unwrap();
     let replay = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log).ok();
-    let (mut near, mut inside) = (0, 0);
-    for l in &replay.landmarks {
-        let p = nalgebra::Vector3::from(l.position);
-        let Some(lamp) = sim_run
-            .landmarks
-            .iter()
-            .min_by(|a, b| (a.position - p).norm().total_cmp(&(b.position - p).norm()))
-        else {
-            continue;
-        };
-        let e = p - lamp.position;
-        if e.norm() > 0.1 {
-            continue;
-        }
-        let cov = nalgebra::Matrix3::from_fn(|i, j| l.covariance[i][j]);
-        let d2 = cov
-            .try_inverse()
-            .map_or(f64::INFINITY, |ci| e.dot(&(ci * e)));
-        near += 1;
-        inside += usize::from(d2 <= 14.16);
-    }
+    let (near, inside) = eval::landmarks_against_lamps(
+        replay.landmarks.iter().map(|l| (l.position, l.covariance)),
+        &sim_run.landmarks,
+        0.1,
+    );
     Run {
         replay,
         near,

@@ -6,17 +6,10 @@
 //! 3 sigma.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::Path;
-
 use replay::NavSettings;
 use rig_model::Param;
 
-fn scenario(name: &str) -> sim::Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/scenarios")
-        .join(name);
-    sim::Scenario::load(&path).unwrap()
-}
+use crate::scenario;
 
 #[test]
 fn a_forklift_with_odometry_errors_and_a_clock_offset_is_calibrated() {
