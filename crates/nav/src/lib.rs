@@ -347,9 +347,6 @@ pub struct Navigator {
     merge_gate: f64,
     /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
     frame_pairs: Option<FramePairCalibration>,
-    /// The odometry's noise model in use: the rig file's, widened when the batch's residuals
-    /// showed it too small ([`NavStats::odometry_widened`]).
-    odometry_noise: rig_model::Noise,
 }
 
 impl Navigator {
@@ -390,9 +387,7 @@ impl Navigator {
             None
         };
         let smoother = Smoother::new(rig.clone(), settings.phase1);
-        let odometry_noise = rig.noise;
         let navigator = Self {
-            odometry_noise,
             rig,
             settings,
             front_end,
@@ -447,7 +442,15 @@ impl Navigator {
     /// The odometry's noise model in use: the rig file's, or wider when the batch's residuals
     /// showed the odometry worse than stated ([`NavStats::odometry_widened`]).
     pub fn odometry_noise(&self) -> rig_model::Noise {
-        self.odometry_noise
+        let (kt, kh) = self
+            .stats
+            .odometry_widened
+            .map_or((1.0, 1.0), |w| w.factors);
+        rig_model::Noise {
+            velocity: self.rig.noise.velocity * libm::sqrt(kt),
+            yaw_rate: self.rig.noise.yaw_rate * libm::sqrt(kh),
+            ..self.rig.noise
+        }
     }
 
     /// The settings.
@@ -598,26 +601,24 @@ impl Navigator {
             .unwrap_or_default()
     }
 
-    /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
-    /// 3 sigma of its noise: a standing vehicle's noise is not motion).
     /// Takes the batch's widening of the odometry's noise model (issue 36, item 2;
-    /// [`selfcal::OdometryWidening`]) into the model the navigator integrates every later
-    /// frame's odometry with and into the front end's gates.
+    /// [`selfcal::OdometryWidening`]) into the front end's gates; every later frame's
+    /// odometry is integrated with it ([`Self::odometry_noise`]).
     fn sync_odometry(&mut self) {
         let widening = self.smoother.odometry_widening();
         if widening == self.stats.odometry_widened {
             return;
         }
         self.stats.odometry_widened = widening;
-        let (kt, kh) = widening.map_or((1.0, 1.0), |w| w.factors);
-        self.odometry_noise.velocity = self.rig.noise.velocity * libm::sqrt(kt);
-        self.odometry_noise.yaw_rate = self.rig.noise.yaw_rate * libm::sqrt(kh);
+        let noise = self.odometry_noise();
         let mut model = self.front_end.model().clone();
-        model.noise.velocity = self.odometry_noise.velocity;
-        model.noise.yaw_rate = self.odometry_noise.yaw_rate;
+        model.noise.velocity = noise.velocity;
+        model.noise.yaw_rate = noise.yaw_rate;
         self.front_end.set_model(model);
     }
 
+    /// Adds a frame interval's odometry motion to the excitation when it is significant (beyond
+    /// 3 sigma of its noise: a standing vehicle's noise is not motion).
     fn excite(&mut self, m: &rig_model::odometry::Motion, cov: &Matrix3<f64>) {
         let d = nalgebra::Vector2::new(m.dx, m.dy);
         let c2 = cov.fixed_view::<2, 2>(0, 0).into_owned();
@@ -870,7 +871,7 @@ impl Navigator {
         let estimates_vehicle = self.rig.estimate.iter().any(|p| p.is_vehicle());
         let vehicle = self.vehicle();
         if let Some(t0) = self.last_frame_t {
-            let noise = self.odometry_noise;
+            let noise = self.odometry_noise();
             let moved = match Increment::from_odometry_vehicle(
                 &self.odometry,
                 t0,

@@ -660,6 +660,7 @@ fn odometry_model(navigator: &Navigator) -> estimates_log::OdometryModel {
 /// stated, what the batch's residuals showed, what was used.
 pub(crate) fn odometry_widened_warning(
     stated: &rig_model::Noise,
+    used: &rig_model::Noise,
     w: &selfcal::OdometryWidening,
 ) -> String {
     let memory = match w.time_constants_s {
@@ -681,8 +682,8 @@ pub(crate) fn odometry_widened_warning(
         w.first.translation,
         w.first.heading,
         memory,
-        stated.velocity * w.factors.0.sqrt(),
-        stated.yaw_rate * w.factors.1.sqrt(),
+        used.velocity,
+        used.yaw_rate,
         w.factors.0,
         w.factors.1,
     )
@@ -736,7 +737,11 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
         ));
     }
     if let Some(w) = &stats.odometry_widened {
-        warnings.push(odometry_widened_warning(&navigator.rig().noise, w));
+        warnings.push(odometry_widened_warning(
+            &navigator.rig().noise,
+            &navigator.odometry_noise(),
+            w,
+        ));
     }
     if stats.odometry_dropped > 0 {
         warnings.push(format!(
