@@ -180,9 +180,6 @@ pub struct Smoother {
     smoothed: Vec<(u64, Pose2)>,
     /// Frames added since the last solve (mapping).
     since_solve: usize,
-    /// The odometry against the last solve's trajectory over each of
-    /// [`CONSISTENCY_SPANS_S`] ([`Smoother::odometry_consistency`]).
-    consistency: [Option<OdometryConsistency>; 2],
     /// How the odometry's noise model was widened ([`Smoother::odometry_widening`]).
     widening: Option<OdometryWidening>,
 }
@@ -215,17 +212,18 @@ impl Smoother {
             dropped: 0,
             smoothed: Vec::new(),
             since_solve: 0,
-            consistency: [None; 2],
             widening: None,
         }
     }
 
-    /// How the odometry agreed with the last solve's trajectory over each of
-    /// [`CONSISTENCY_SPANS_S`] and over single frame intervals, each residual against the
-    /// variance its factor gives it (issue 36; see [`OdometryConsistency`]): about 1 when the
-    /// rig file's odometry noise is right. `None` before a solve over at least one span.
+    /// How the odometry agrees with the batch's trajectory (the last solve's, dead reckoning
+    /// since) over each of [`CONSISTENCY_SPANS_S`] and over single frame intervals, each
+    /// residual against the variance its factor gives it (issue 36; see
+    /// [`OdometryConsistency`]): about 1 when the rig file's odometry noise is right. `None`
+    /// for a span the frames do not cover once. `O(frames)`.
     pub fn odometry_consistency(&self) -> [Option<OdometryConsistency>; 2] {
-        self.consistency
+        CONSISTENCY_SPANS_S
+            .map(|span| consistency::odometry_consistency(&self.frames, &self.camera.vehicle, span))
     }
 
     /// How the batch widened the odometry's noise model after its solves showed the odometry
@@ -240,7 +238,8 @@ impl Smoother {
     /// factor's variance when the check says so ([`consistency::judge`]). Returns whether it
     /// widened.
     fn check_odometry(&mut self, t_us: u64) -> bool {
-        let Some(((kt, kh), w)) = consistency::judge(self.consistency, self.widening, t_us) else {
+        let spans = self.odometry_consistency();
+        let Some(((kt, kh), w)) = consistency::judge(spans, self.widening, t_us) else {
             return false;
         };
         self.widening = Some(w);
@@ -248,7 +247,6 @@ impl Smoother {
             return false;
         }
         consistency::widen(&mut self.frames, kt, kh);
-        self.consistency = [None; 2];
         true
     }
 
@@ -618,14 +616,17 @@ impl Smoother {
     /// Sigma_u^-1`. Returns `(parameters, covariance, C's 10 x 10 block)`; `None` when a
     /// system is singular.
     fn considered_covariance(
-        &self,
+        &mut self,
         all: &[Param],
         held: &[Param],
     ) -> Option<(Vec<Param>, DMatrix<f64>, Mat10)> {
         let poses: Vec<Pose2> = self.frames.iter().map(|f| f.pose).collect();
         let landmarks: Vec<Vector3<f64>> = self.landmarks.iter().map(|l| l.position).collect();
-        let full = self.clone_with_estimated(all);
-        let mut sys = full.normal_equations(&self.camera, &poses, &landmarks);
+        // The normal equations over every parameter: the batch estimating `all` for this
+        // one system, then its own list again.
+        let reduced = core::mem::replace(&mut self.estimated, all.to_vec());
+        let mut sys = self.normal_equations(&self.camera, &poses, &landmarks);
+        self.estimated = reduced;
         let joint = sys.marginal_covariance()?;
         let at: Vec<usize> = held
             .iter()
@@ -661,13 +662,6 @@ impl Smoother {
             }
         }
         Some((all.to_vec(), covariance, camera_covariance))
-    }
-
-    /// This batch estimating `estimated` instead (for [`Self::considered_covariance`]).
-    fn clone_with_estimated(&self, estimated: &[Param]) -> Self {
-        let mut b = self.clone();
-        b.estimated = estimated.to_vec();
-        b
     }
 
     /// Which estimated parameters the data informed.
@@ -1125,8 +1119,6 @@ impl Smoother {
         for (l, p) in self.landmarks.iter_mut().zip(&landmarks) {
             l.position = *p;
         }
-        self.consistency = CONSISTENCY_SPANS_S
-            .map(|span| consistency::odometry_consistency(&self.frames, &camera.vehicle, span));
         let system = self.normal_equations(&camera, &poses, &landmarks);
         self.last_covariance = system.marginal_covariance();
         Some(SolveSummary {
