@@ -298,13 +298,13 @@ pub struct NavStats {
     pub significant_translation_m: f64,
     /// Rotation the odometry turned, the same way, radians.
     pub significant_rotation_rad: f64,
+    /// Changes of speed between frame intervals, summed, counting a change only once it
+    /// exceeds 0.05 m/s from the last counted speed (the clock offset's excitation), m/s.
+    pub significant_speed_change_mps: f64,
     /// The odometry's noise model widened because the batch's residuals showed the odometry
     /// worse or its errors longer-lived than the rig file states
     /// ([`selfcal::OdometryWidening`]).
     pub odometry_widened: Option<selfcal::OdometryWidening>,
-    /// Changes of speed between frame intervals, summed, counting a change only once it
-    /// exceeds 0.05 m/s from the last counted speed (the clock offset's excitation), m/s.
-    pub significant_speed_change_mps: f64,
 }
 
 /// A parameter estimated this many of its prior sigmas or more from its nominal value is named
