@@ -56,9 +56,10 @@ fn lamp_map_new(c: &mut Criterion) {
         .min(2.0 * support::pair_radius_m(&support::rig()));
     let map = LampMap::new(hall.map.clone(), radius).expect("a valid map");
     eprintln!(
-        "lamp_map_new_10k: {} lamps, {} pairs within {radius:.1} m",
+        "lamp_map_new_10k: {} lamps, {} triangles with sides up to {:.1} m",
         map.len(),
-        map.pair_count()
+        map.triangle_count(),
+        map.triangle_max_side_m()
     );
     let mut group = c.benchmark_group("map");
     group.sample_size(10);
@@ -84,6 +85,22 @@ fn push_frame_localized(c: &mut Criterion) {
         let step = drive.step();
         let r = push(&mut localizer, &step);
         frames += 1;
+        if std::env::var_os("RELOC_TRACE").is_some() {
+            let reloc = localizer.relocalizer();
+            let near = reloc
+                .hypotheses()
+                .iter()
+                .map(|h| pose_error(&h.pose(), &step.truth).0)
+                .fold(f64::INFINITY, f64::min);
+            eprintln!(
+                "frame {frames}: {:?}, {} observations, {} hypotheses (nearest the truth {near:.2} m), incomplete {}, last generation {:?}",
+                r.status,
+                r.observations,
+                reloc.hypotheses().len(),
+                reloc.incomplete(),
+                reloc.last_generation
+            );
+        }
         error = r.pose.map_or(error, |p| pose_error(&p, &step.truth));
         if r.status == Status::Localized {
             fix_s.get_or_insert(f64::from(frames - 1) * 0.05);

@@ -216,6 +216,11 @@ impl Localizer {
         }
     }
 
+    /// The relocaliser: its live hypotheses with their scores, its last generation.
+    pub fn relocalizer(&self) -> &Relocalizer {
+        &self.reloc
+    }
+
     /// The live relocalisation hypotheses' poses (while lost).
     pub fn hypotheses(&self) -> Vec<Pose2> {
         self.reloc.hypotheses().iter().map(|h| h.pose()).collect()

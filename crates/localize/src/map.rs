@@ -78,16 +78,26 @@ impl CommonError {
     }
 }
 
-/// Pairs of lamps by their horizontal distance, for relocalisation: every pair closer than the
-/// widest constellation one frame can see.
+/// A triangle of lamps for relocalisation, its vertices in canonical order: the side opposite
+/// vertex `k` is the `k`-th shortest (horizontal lengths).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct LampPair {
-    /// Horizontal distance, metres.
-    pub distance: f64,
-    /// The two lamps (indices into the map), `a < b`.
-    pub a: u32,
-    /// See `a`.
-    pub b: u32,
+pub(crate) struct LampTriangle {
+    /// The sorted side lengths' bins packed (`q2 << 20 | q1 << 10 | q0`), the index's sort key.
+    pub key: u32,
+    /// The three lamps (indices into the map), canonical order.
+    pub lamps: [u32; 3],
+    /// The sides opposite them, metres (ascending): the look-up's first, cheap test.
+    pub sides: [f32; 3],
+}
+
+/// A height level of the map: lamps hung at one height (high-bay lamps), or at another
+/// (sprinkler heads, beam corners). Relocalisation projects what a frame sees onto each level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Level {
+    /// Mean height of its lamps, metres.
+    pub z: f64,
+    /// Largest distance of one of its lamps from `z`, metres.
+    pub spread: f64,
 }
 
 /// The lamp map with its spatial index.
@@ -107,8 +117,14 @@ pub struct LampMap {
     /// Start of each cell's run in `cell_lamps` (`cols * rows + 1` entries).
     cell_start: Vec<u32>,
     cell_lamps: Vec<u32>,
-    pairs: Vec<LampPair>,
-    pair_radius_m: f64,
+    /// Every triangle of lamps with sides in `[TRIANGLE_MIN_SIDE_M, triangle_max_side_m]`,
+    /// sorted by key.
+    triangles: Vec<LampTriangle>,
+    triangle_max_side_m: f64,
+    footprint_m: f64,
+    levels: Vec<Level>,
+    /// Each lamp's level (index into `levels`).
+    lamp_level: Vec<u8>,
     common: Option<CommonError>,
 }
 
@@ -120,12 +136,31 @@ impl LampMap {
     /// cells (a 10,000-lamp hall of 250 m x 100 m has 6,250 of 2 m).
     const MAX_CELLS: usize = 1 << 20;
 
-    /// Indexes `lamps`. `pair_radius_m` is the largest horizontal distance of two lamps that
-    /// one frame can show (the relocalisation's pairs).
+    /// Shortest side of an indexed triangle, metres: shorter sides give poor headings (and
+    /// the four corners of an LED panel would fill the index with tiny triangles).
+    pub const TRIANGLE_MIN_SIDE_M: f64 = 1.0;
+
+    /// Bin of the triangles' side lengths in the index's key, metres.
+    pub const TRIANGLE_BIN_M: f64 = 0.1;
+
+    /// Lamps a triangle's longest side reaches on average: the longest side indexed is the
+    /// radius of a disc holding this many lamps at the map's mean density (about 240 triangles
+    /// a lamp; enough that the lamps in one frame's view form several), unless the footprint
+    /// is smaller.
+    pub const TRIANGLE_NEIGHBOURS: f64 = 16.0;
+
+    /// Lamps further apart in height than this are on different levels, metres.
+    pub const LEVEL_GAP_M: f64 = 0.15;
+
+    /// Most height levels: a map whose heights fall into more is one level with their spread.
+    pub const MAX_LEVELS: usize = 3;
+
+    /// Indexes `lamps`. `footprint_m` is the largest horizontal distance of two lamps that
+    /// one frame can show: no triangle of the relocalisation's index is wider.
     ///
     /// Errors: no lamps, a non-finite position or covariance, or a covariance that is not
     /// symmetric positive semi-definite on its diagonal.
-    pub fn new(lamps: Vec<MapLamp>, pair_radius_m: f64) -> Result<Self, Error> {
+    pub fn new(lamps: Vec<MapLamp>, footprint_m: f64) -> Result<Self, Error> {
         if lamps.is_empty() {
             return Err(Error::EmptyMap);
         }
@@ -167,12 +202,20 @@ impl LampMap {
             rows,
             cell_start: Vec::new(),
             cell_lamps: Vec::new(),
-            pairs: Vec::new(),
-            pair_radius_m: pair_radius_m.max(0.0),
+            triangles: Vec::new(),
+            triangle_max_side_m: 0.0,
+            footprint_m: if footprint_m.is_finite() {
+                footprint_m.max(0.0)
+            } else {
+                0.0
+            },
+            levels: Vec::new(),
+            lamp_level: Vec::new(),
             common: None,
         };
         map.build_cells();
-        map.build_pairs();
+        map.build_levels();
+        map.build_triangles((x1 - x0).max(1.0) * (y1 - y0).max(1.0));
         Ok(map)
     }
 
@@ -228,30 +271,98 @@ impl LampMap {
         self.cell_lamps = cell_lamps;
     }
 
-    fn build_pairs(&mut self) {
-        let mut pairs = Vec::new();
-        let r = self.pair_radius_m;
-        let mut near = Vec::new();
-        for (i, l) in self.lamps.iter().enumerate() {
-            self.within(l.position.x, l.position.y, r, &mut near);
-            for &j in &near {
-                if (j as usize) <= i {
-                    continue;
-                }
-                let Some(m) = self.lamps.get(j as usize) else {
-                    continue;
-                };
-                let d = libm::hypot(m.position.x - l.position.x, m.position.y - l.position.y);
-                #[allow(clippy::cast_possible_truncation)] // checked in new
-                pairs.push(LampPair {
-                    distance: d,
-                    a: i as u32,
-                    b: j,
-                });
+    /// Groups the lamps' heights into levels: sorted, split where two neighbours in height are
+    /// more than [`Self::LEVEL_GAP_M`] apart; more than [`Self::MAX_LEVELS`] groups make one
+    /// level with the whole spread.
+    fn build_levels(&mut self) {
+        let mut order: Vec<u32> = (0..self.lamps.len())
+            .map(|i| u32::try_from(i).unwrap_or(u32::MAX))
+            .collect();
+        let z = |i: u32| self.lamps.get(i as usize).map_or(0.0, |l| l.position.z);
+        order.sort_by(|&a, &b| z(a).total_cmp(&z(b)));
+        let mut groups: Vec<(usize, usize)> = Vec::new(); // [start, end) in `order`
+        let mut start = 0;
+        for k in 1..=order.len() {
+            let split = match (order.get(k - 1), order.get(k)) {
+                (Some(&a), Some(&b)) => z(b) - z(a) > Self::LEVEL_GAP_M,
+                _ => true,
+            };
+            if split {
+                groups.push((start, k));
+                start = k;
             }
         }
-        pairs.sort_by(|p, q| p.distance.total_cmp(&q.distance));
-        self.pairs = pairs;
+        if groups.len() > Self::MAX_LEVELS {
+            groups = alloc::vec![(0, order.len())];
+        }
+        let mut lamp_level = alloc::vec![0_u8; self.lamps.len()];
+        let mut levels = Vec::with_capacity(groups.len());
+        for (g, &(s, e)) in groups.iter().enumerate() {
+            let members = order.get(s..e).unwrap_or_default();
+            #[allow(clippy::cast_precision_loss)]
+            let mean = members.iter().map(|&i| z(i)).sum::<f64>() / members.len().max(1) as f64;
+            let spread = members
+                .iter()
+                .map(|&i| libm::fabs(z(i) - mean))
+                .fold(0.0, f64::max);
+            for &i in members {
+                if let Some(l) = lamp_level.get_mut(i as usize) {
+                    *l = u8::try_from(g).unwrap_or(0);
+                }
+            }
+            levels.push(Level { z: mean, spread });
+        }
+        self.levels = levels;
+        self.lamp_level = lamp_level;
+    }
+
+    /// Indexes every triangle of lamps whose sides are between [`Self::TRIANGLE_MIN_SIDE_M`]
+    /// and the longest side (see [`Self::TRIANGLE_NEIGHBOURS`]; `area` the lamps' bounding
+    /// box, m^2), sorted by the key of its sorted side lengths: a frame's triangle finds the
+    /// map's triangles of its shape by a few binary searches, whatever the map's size
+    /// (geometric hashing with a sorted table instead of a hash map: `no_std`, compact, and
+    /// ranges of one bin come out contiguous).
+    fn build_triangles(&mut self, area: f64) {
+        #[allow(clippy::cast_precision_loss)]
+        let density = self.lamps.len() as f64 / area;
+        let by_density = libm::sqrt(Self::TRIANGLE_NEIGHBOURS / (core::f64::consts::PI * density));
+        let max_side = by_density
+            .min(self.footprint_m)
+            .max(2.0 * Self::TRIANGLE_MIN_SIDE_M);
+        self.triangle_max_side_m = max_side;
+        let (lo, hi) = (Self::TRIANGLE_MIN_SIDE_M, max_side);
+        let mut triangles = Vec::new();
+        let mut near = Vec::new();
+        let mut later: Vec<(u32, Vector3<f64>)> = Vec::new();
+        for (i, l) in self.lamps.iter().enumerate() {
+            let Ok(i) = u32::try_from(i) else {
+                break;
+            };
+            self.within(l.position.x, l.position.y, hi, &mut near);
+            later.clear();
+            for &j in &near {
+                if j <= i {
+                    continue;
+                }
+                if let Some(m) = self.lamps.get(j as usize) {
+                    let d = horizontal(&l.position, &m.position);
+                    if d >= lo {
+                        later.push((j, m.position));
+                    }
+                }
+            }
+            for (a, &(j, pj)) in later.iter().enumerate() {
+                for &(k, pk) in later.get(a + 1..).unwrap_or_default() {
+                    let d = horizontal(&pj, &pk);
+                    if d < lo || d > hi {
+                        continue;
+                    }
+                    triangles.push(canonical([i, j, k], [l.position, pj, pk]));
+                }
+            }
+        }
+        triangles.sort_unstable_by_key(|t| t.key);
+        self.triangles = triangles;
     }
 
     /// Takes `common` as the error the lamps share ([`crate::Localizer`] adds it to the pose
@@ -346,16 +457,60 @@ impl LampMap {
             .min_by(|a, b| a.1.total_cmp(&b.1))
     }
 
-    /// The pairs of lamps whose horizontal distance is within `[lo, hi]`.
-    pub(crate) fn pairs_between(&self, lo: f64, hi: f64) -> &[LampPair] {
-        let s = self.pairs.partition_point(|p| p.distance < lo);
-        let e = self.pairs.partition_point(|p| p.distance <= hi);
-        self.pairs.get(s..e.max(s)).unwrap_or_default()
+    /// The indexed triangles whose sorted side lengths are each within `tol` of `sides`
+    /// (sorted ascending), into `out`; `false` (and `out` cut)
+    /// when there are more than `cap`: the shape is too common in this map to tell places
+    /// apart (a regular grid).
+    pub(crate) fn triangles_near(
+        &self,
+        sides: [f64; 3],
+        tol: f64,
+        out: &mut Vec<LampTriangle>,
+        cap: usize,
+    ) -> bool {
+        out.clear();
+        let range = |s: f64| (side_bin(s - tol), side_bin(s + tol));
+        let [s0, s1, s2] = sides;
+        let ((a0, b0), (a1, b1), (a2, b2)) = (range(s0), range(s1), range(s2));
+        for q2 in a2..=b2 {
+            for q1 in a1..=b1 {
+                let (lo, hi) = (pack(a0, q1, q2), pack(b0, q1, q2));
+                let s = self.triangles.partition_point(|t| t.key < lo);
+                let e = self.triangles.partition_point(|t| t.key <= hi);
+                let run = self.triangles.get(s..e.max(s)).unwrap_or_default();
+                if out.len() + run.len() > cap {
+                    return false;
+                }
+                let near = |t: &&LampTriangle| {
+                    t.sides
+                        .iter()
+                        .zip(sides.iter())
+                        .all(|(&a, &b)| libm::fabs(f64::from(a) - b) <= tol + 1e-4)
+                };
+                out.extend(run.iter().filter(near));
+            }
+        }
+        true
     }
 
-    /// Number of pairs held for relocalisation.
-    pub fn pair_count(&self) -> usize {
-        self.pairs.len()
+    /// Number of triangles held for relocalisation.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// The longest side of an indexed triangle, metres.
+    pub fn triangle_max_side_m(&self) -> f64 {
+        self.triangle_max_side_m
+    }
+
+    /// The map's height levels.
+    pub(crate) fn levels(&self) -> &[Level] {
+        &self.levels
+    }
+
+    /// The level of lamp `i`.
+    pub(crate) fn level_of(&self, i: u32) -> Option<usize> {
+        self.lamp_level.get(i as usize).map(|&l| usize::from(l))
     }
 
     /// Mean lamp height, metres.
@@ -371,6 +526,54 @@ impl LampMap {
             .iter()
             .map(|l| l.position.z)
             .fold(f64::MIN, f64::max)
+    }
+}
+
+/// Horizontal distance of two points.
+pub(crate) fn horizontal(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    libm::hypot(a.x - b.x, a.y - b.y)
+}
+
+/// The bin of a side length in the triangle index's key (clamped to the key's 10 bits).
+fn side_bin(s: f64) -> u32 {
+    let q = libm::floor(s / LampMap::TRIANGLE_BIN_M);
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // clamped
+    if q.is_finite() {
+        q.clamp(0.0, 1023.0) as u32
+    } else {
+        0
+    }
+}
+
+/// The key of sorted side bins.
+fn pack(q0: u32, q1: u32, q2: u32) -> u32 {
+    (q2 << 20) | (q1 << 10) | q0
+}
+
+/// The sides of the triangle `p` opposite each vertex: `[|p1 p2|, |p0 p2|, |p0 p1|]`.
+pub(crate) fn opposite_sides(p: &[Vector3<f64>; 3]) -> [f64; 3] {
+    let [a, b, c] = p;
+    [horizontal(b, c), horizontal(a, c), horizontal(a, b)]
+}
+
+/// The triangle of lamps `ids` at `p` in canonical order (ascending opposite sides), with its
+/// key.
+fn canonical(ids: [u32; 3], p: [Vector3<f64>; 3]) -> LampTriangle {
+    let sides = opposite_sides(&p);
+    let mut order = [0_usize, 1, 2];
+    order.sort_by(|&a, &b| {
+        let sa = sides.get(a).copied().unwrap_or(0.0);
+        let sb = sides.get(b).copied().unwrap_or(0.0);
+        sa.total_cmp(&sb)
+    });
+    let side = |k: usize| sides.get(k).copied().unwrap_or(0.0);
+    let id = |k: usize| ids.get(k).copied().unwrap_or(0);
+    let [o0, o1, o2] = order;
+    #[allow(clippy::cast_possible_truncation)] // a first test; the exact one is in f64
+    LampTriangle {
+        key: pack(side_bin(side(o0)), side_bin(side(o1)), side_bin(side(o2))),
+        lamps: [id(o0), id(o1), id(o2)],
+        sides: [side(o0) as f32, side(o1) as f32, side(o2) as f32],
     }
 }
 
@@ -418,21 +621,73 @@ mod tests {
     }
 
     #[test]
-    fn pairs_are_every_pair_within_the_radius_sorted_by_distance() {
-        let map = LampMap::new(grid(6, 5, 2.5), 5.1).unwrap();
-        let n = map.len();
+    fn the_triangles_are_every_triangle_within_the_sides_and_a_shape_finds_its_own() {
+        let mut lamps = grid(12, 9, 2.5);
+        // Jitter, so that the shapes differ.
+        for (k, l) in lamps.iter_mut().enumerate() {
+            let k = k as f64;
+            l.position.x += 0.3 * libm::sin(1.7 * k);
+            l.position.y += 0.3 * libm::cos(2.3 * k);
+        }
+        let map = LampMap::new(lamps, 8.0).unwrap();
+        let (lo, hi) = (LampMap::TRIANGLE_MIN_SIDE_M, map.triangle_max_side_m());
+        assert!(hi > 2.5 && hi <= 8.0, "{hi}");
+        let n = map.len() as u32;
+        let d = |i: u32, j: u32| {
+            horizontal(
+                &map.lamp(i).unwrap().position,
+                &map.lamp(j).unwrap().position,
+            )
+        };
+        let ok = |s: f64| s >= lo && s <= hi;
         let mut brute = 0;
         for i in 0..n {
             for j in i + 1..n {
-                let (a, b) = (map.lamps()[i].position, map.lamps()[j].position);
-                if libm::hypot(a.x - b.x, a.y - b.y) <= 5.1 {
-                    brute += 1;
+                for k in j + 1..n {
+                    if ok(d(i, j)) && ok(d(j, k)) && ok(d(i, k)) {
+                        brute += 1;
+                    }
                 }
             }
         }
-        assert_eq!(map.pair_count(), brute);
-        let p = map.pairs_between(3.5, 3.6);
-        assert!(!p.is_empty() && p.iter().all(|q| (q.distance - 3.5355).abs() < 1e-3));
+        assert_eq!(map.triangle_count(), brute);
+        // Lamps 13, 14 and 26: found by their own sides, in canonical order.
+        let p = [13_u32, 14, 26].map(|i| map.lamp(i).unwrap().position);
+        let mut sides = opposite_sides(&p);
+        sides.sort_by(f64::total_cmp);
+        let mut out = Vec::new();
+        assert!(map.triangles_near(sides, 0.02, &mut out, 1000));
+        let found = out
+            .iter()
+            .find(|t| {
+                let mut l = t.lamps;
+                l.sort_unstable();
+                l == [13, 14, 26]
+            })
+            .unwrap();
+        let q = found.lamps.map(|i| map.lamp(i).unwrap().position);
+        let s = opposite_sides(&q);
+        assert!(s[0] <= s[1] && s[1] <= s[2]);
+        // A cap smaller than the shape's matches says so.
+        assert!(!map.triangles_near(sides, 1.0, &mut out, 3));
+    }
+
+    #[test]
+    fn heights_fall_into_levels() {
+        let mut lamps = grid(6, 4, 3.0);
+        for (k, l) in lamps.iter_mut().enumerate() {
+            l.position.z = if k % 2 == 0 {
+                7.0 + 0.01 * (k % 5) as f64
+            } else {
+                6.6
+            };
+        }
+        let map = LampMap::new(lamps, 8.0).unwrap();
+        assert_eq!(map.levels().len(), 2);
+        assert!((map.levels()[0].z - 6.6).abs() < 1e-12);
+        assert!(map.levels()[1].spread <= 0.04 + 1e-12);
+        assert_eq!(map.level_of(1), Some(0));
+        assert_eq!(map.level_of(0), Some(1));
     }
 
     #[test]

@@ -30,9 +30,9 @@ use rig_model::camera::{Pose2, Vehicle, wrap_angle};
 use vslam_ekf::Increment;
 
 use crate::filter::PoseFilter;
-use crate::map::LampMap;
+use crate::map::{LampMap, LampTriangle, opposite_sides};
 use crate::settings::RelocSettings;
-use crate::view::{Observation, View};
+use crate::view::{Observation, Ray, View};
 
 /// One pose hypothesis.
 #[derive(Debug, Clone)]
@@ -86,6 +86,23 @@ pub enum Decision {
     Unique(usize),
 }
 
+/// What the last generation of hypotheses did (for traces and the viewer).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Generation {
+    /// Observations it drew triangles from.
+    pub observations: usize,
+    /// Triangles of observations it looked up.
+    pub triangles: usize,
+    /// Of those, the ones looked up whole (no look-up too common to try).
+    pub whole: usize,
+    /// Map triangles the look-ups returned.
+    pub map_triangles: usize,
+    /// Candidate poses that the frame's other observations supported.
+    pub candidates: usize,
+    /// New hypotheses (candidates not already held, associating enough lamps).
+    pub new: usize,
+}
+
 /// The set of hypotheses while lost.
 #[derive(Debug, Clone)]
 pub struct Relocalizer {
@@ -99,6 +116,8 @@ pub struct Relocalizer {
     incomplete: usize,
     /// Hypotheses generated over the relocaliser's life.
     pub generated: u64,
+    /// The last generation.
+    pub last_generation: Generation,
 }
 
 impl Relocalizer {
@@ -111,6 +130,7 @@ impl Relocalizer {
             scratch: Vec::new(),
             incomplete: 0,
             generated: 0,
+            last_generation: Generation::default(),
         }
     }
 
@@ -119,6 +139,11 @@ impl Relocalizer {
         self.hypotheses.clear();
         self.frames_since_generation = u32::MAX;
         self.incomplete = 0;
+    }
+
+    /// Whether decisions are held back because the set of hypotheses was cut.
+    pub fn incomplete(&self) -> bool {
+        self.incomplete > 0
     }
 
     /// The live hypotheses.
@@ -195,93 +220,149 @@ impl Relocalizer {
         let mut order: Vec<usize> = (0..observations.len()).collect();
         order.sort_by_key(|&i| core::cmp::Reverse(observations.get(i).map_or(0, |o| o.hits)));
         order.truncate(s.max_generation_observations);
-        let z_mean = map.mean_height();
-        let floor: Vec<Option<Vector3<f64>>> = order
+        let origin = view.camera().mount.translation();
+        let levels = map.levels();
+        // Each observation's ray once (the mount's rotation is not worked out per test).
+        let rays: Vec<Option<Ray>> = observations.iter().map(|o| view.ray(o)).collect();
+        // Each observation on each level's mean height, with how far off that puts it if its
+        // lamp hangs anywhere in the level (radially from the rig: r dz / (z - z_rig)), plus
+        // half the side tolerance.
+        let floor: Vec<Vec<Option<(Vector3<f64>, f64)>>> = levels
             .iter()
-            .map(|&i| observations.get(i).and_then(|o| view.on_height(o, z_mean)))
+            .map(|level| {
+                let above = (level.z - origin.z).max(0.5);
+                order
+                    .iter()
+                    .map(|&i| {
+                        let p = rays.get(i).copied().flatten()?.at_height(level.z)?;
+                        let r = libm::hypot(p.x - origin.x, p.y - origin.y);
+                        Some((p, 0.5 * s.pair_tolerance_m + r * level.spread / above))
+                    })
+                    .collect()
+            })
             .collect();
-        let mut candidates: Vec<Pose2> = Vec::new();
-        // Disjoint pairs first ((0, 1), (2, 3), ...), then the others: the true pose is among
-        // the candidates of any pair of two mapped lamps tried whole, and disjoint pairs do
-        // not all fall with one observation that is clutter or a new lamp.
+        let min_side = s.min_pair_distance_m.max(LampMap::TRIANGLE_MIN_SIDE_M);
+        let max_side = map.triangle_max_side_m();
         let n = order.len();
-        let mut pairs: Vec<(usize, usize)> = (0..n / 2).map(|k| (2 * k, 2 * k + 1)).collect();
+        // The triangles nearest the rig first (a point's error from its lamp's unknown height
+        // grows with its distance from the rig, and with it the look-up's tolerance and the
+        // map triangles it returns), each sharing at most one observation with those before
+        // it (so that one observation that is clutter or a new lamp does not spoil them all),
+        // then the others.
+        let reach = |k: usize| {
+            floor
+                .first()
+                .and_then(|f| f.get(k))
+                .copied()
+                .flatten()
+                .map_or(f64::INFINITY, |(p, _)| {
+                    libm::hypot(p.x - origin.x, p.y - origin.y)
+                })
+        };
+        let mut all: Vec<([usize; 3], f64)> = Vec::new();
         for a in 0..n {
             for b in a + 1..n {
-                if !(b == a + 1 && a % 2 == 0) {
-                    pairs.push((a, b));
+                for c in b + 1..n {
+                    all.push(([a, b, c], reach(a).max(reach(b)).max(reach(c))));
                 }
             }
         }
-        let mut disjoint_done = 0;
-        for (pi, &(a, b)) in pairs.iter().enumerate() {
-            {
-                let (Some(pa), Some(pb)) = (
-                    floor.get(a).copied().flatten(),
-                    floor.get(b).copied().flatten(),
-                ) else {
-                    continue;
-                };
-                let d = libm::hypot(pa.x - pb.x, pa.y - pb.y);
-                if d < s.min_pair_distance_m {
+        all.sort_by(|x, y| x.1.total_cmp(&y.1));
+        let mut triangles: Vec<[usize; 3]> = Vec::with_capacity(all.len());
+        let mut rest: Vec<[usize; 3]> = Vec::new();
+        for (t, _) in all {
+            let spread = triangles
+                .iter()
+                .all(|u| t.iter().filter(|v| u.contains(v)).count() <= 1);
+            if spread {
+                triangles.push(t);
+            } else {
+                rest.push(t);
+            }
+        }
+        triangles.extend(rest);
+        let n_levels = levels.len();
+        let combos = n_levels * n_levels * n_levels;
+        let mut candidates: Vec<Pose2> = Vec::new();
+        let mut found = Vec::new();
+        let mut whole = 0_usize;
+        let mut tried = 0_usize;
+        let mut stats = Generation {
+            observations: n,
+            ..Generation::default()
+        };
+        'triangles: for tri in triangles {
+            if tried >= s.max_query_triangles {
+                break;
+            }
+            let mut complete = true;
+            let mut used = false;
+            for combo in 0..combos {
+                let lv = [
+                    combo % n_levels,
+                    (combo / n_levels) % n_levels,
+                    combo / (n_levels * n_levels),
+                ];
+                let mut pts = [Vector3::zeros(); 3];
+                let mut err = [0.0; 3];
+                let mut ok = true;
+                for v in 0..3 {
+                    match (tri.get(v), lv.get(v)) {
+                        (Some(&k), Some(&l)) => {
+                            match floor.get(l).and_then(|f| f.get(k)).copied().flatten() {
+                                Some((p, e)) => {
+                                    if let (Some(pt), Some(er)) = (pts.get_mut(v), err.get_mut(v)) {
+                                        (*pt, *er) = (p, e);
+                                    }
+                                }
+                                None => ok = false,
+                            }
+                        }
+                        _ => ok = false,
+                    }
+                }
+                if !ok {
                     continue;
                 }
-                let tol = s.pair_tolerance_m + s.pair_tolerance_fraction * d;
-                let (Some(&oa), Some(&ob)) = (order.get(a), order.get(b)) else {
+                let sides = opposite_sides(&pts);
+                let [e0, e1, e2] = err;
+                let longest = sides.iter().copied().fold(0.0, f64::max);
+                let tol = (e0 + e1).max(e1 + e2).max(e0 + e2) + s.pair_tolerance_fraction * longest;
+                let mut sorted = sides;
+                sorted.sort_by(f64::total_cmp);
+                let [lo, _, hi] = sorted;
+                // Only a triangle the index surely holds, whatever its true sides within `tol`.
+                if lo - tol < min_side || hi + tol > max_side {
                     continue;
-                };
-                let (Some(obs_a), Some(obs_b)) = (observations.get(oa), observations.get(ob))
-                else {
+                }
+                used = true;
+                if !map.triangles_near(sorted, tol, &mut found, s.max_triangle_candidates) {
+                    // A shape this common tells no place from another (a regular grid).
+                    complete = false;
                     continue;
-                };
-                for pair in map.pairs_between(d - tol, d + tol) {
-                    for (i, j) in [(pair.a, pair.b), (pair.b, pair.a)] {
-                        let (Some(li), Some(lj)) = (map.lamp(i), map.lamp(j)) else {
-                            continue;
-                        };
-                        let (Some(qa), Some(qb)) = (
-                            view.on_height(obs_a, li.position.z),
-                            view.on_height(obs_b, lj.position.z),
-                        ) else {
-                            continue;
-                        };
-                        let dq = libm::hypot(qa.x - qb.x, qa.y - qb.y);
-                        if libm::fabs(dq - pair.distance) > s.pair_tolerance_m {
-                            continue;
-                        }
-                        let pose = align(&qa, &qb, &li.position, &lj.position);
-                        let support = order
-                            .iter()
-                            .enumerate()
-                            .filter(|&(k, _)| k != a && k != b)
-                            .filter(|&(_, &o)| {
-                                observations
-                                    .get(o)
-                                    .is_some_and(|obs| self.supports(map, view, obs, &pose, z_mean))
-                            })
-                            .count();
-                        let others = order.len() - 2;
-                        if support >= s.min_support.min(others)
-                            && support * 2 >= others
-                            && !candidates.iter().any(|c| same_pose(c, &pose, &s))
-                        {
-                            candidates.push(pose);
-                        }
+                }
+                stats.map_triangles += found.len();
+                for t in &found {
+                    self.try_triangle(map, &rays, &order, tri, lv, &sides, tol, t, &mut candidates);
+                    if candidates.len() > s.max_candidates {
+                        self.incomplete = s.window_frames;
+                        break 'triangles;
                     }
                 }
             }
-            if pi < n / 2 {
-                disjoint_done += 1;
-            }
-            if candidates.len() > s.max_candidates {
-                // The rest of the pairs are not tried. Unless three disjoint pairs were tried
-                // whole, the set may miss the true pose: no decision for a while.
-                if disjoint_done < 3.min(n / 2) {
-                    self.incomplete = s.window_frames;
-                }
-                break;
+            if used {
+                tried += 1;
+                whole += usize::from(complete);
             }
         }
+        // Unless three triangles were tried whole, the set may miss the true pose while it
+        // holds others: no decision for a while.
+        if whole < 3.min(tried.max(1)) {
+            self.incomplete = s.window_frames;
+        }
+        stats.triangles = tried;
+        stats.whole = whole;
+        stats.candidates = candidates.len();
         let sigma_xy = s.initial_sigma_m;
         let sigma_th = s.initial_sigma_rad;
         let cov = Matrix3::from_diagonal(&Vector3::new(
@@ -321,35 +402,153 @@ impl Relocalizer {
             h.distinct = scored.matched.iter().map(|(l, _)| *l).collect();
             self.hypotheses.push(h);
             self.generated += 1;
+            stats.new += 1;
+        }
+        self.last_generation = stats;
+    }
+
+    /// One map triangle `t` against the frame's triangle `tri` (indices into `order`, on the
+    /// levels `lv`, opposite sides `sides` within `tol`): every correspondence of vertices the
+    /// sides allow, on the right levels, the frame's points put at their lamps' own heights,
+    /// the same shape and handedness; the pose that carries the three onto the lamps, kept in
+    /// `candidates` when the frame's other observations land on map lamps under it.
+    #[allow(clippy::too_many_arguments)]
+    fn try_triangle(
+        &mut self,
+        map: &LampMap,
+        rays: &[Option<Ray>],
+        order: &[usize],
+        tri: [usize; 3],
+        lv: [usize; 3],
+        sides: &[f64; 3],
+        tol: f64,
+        t: &LampTriangle,
+        candidates: &mut Vec<Pose2>,
+    ) {
+        let s = self.settings;
+        let [a, b, c] = t.lamps;
+        let (Some(m0), Some(m1), Some(m2)) = (map.lamp(a), map.lamp(b), map.lamp(c)) else {
+            return;
+        };
+        let mp = [m0.position, m1.position, m2.position];
+        let msides = opposite_sides(&mp);
+        let hand = |p: &[Vector3<f64>; 3]| {
+            let [a, b, c] = p;
+            (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x)
+        };
+        let mhand = hand(&mp);
+        for perm in PERMUTATIONS {
+            // Map vertex k is the frame's vertex perm[k].
+            let fits =
+                (0..3).all(
+                    |k| match (msides.get(k), perm.get(k).and_then(|&v| sides.get(v))) {
+                        (Some(a), Some(b)) => libm::fabs(a - b) <= tol,
+                        _ => false,
+                    },
+                );
+            let levels_fit = (0..3).all(|k| {
+                let lamp = t.lamps.get(k).copied().unwrap_or(u32::MAX);
+                perm.get(k).and_then(|&v| lv.get(v)).copied() == map.level_of(lamp)
+            });
+            if !(fits && levels_fit) {
+                continue;
+            }
+            // The frame's points at their lamps' own heights.
+            let mut q = [Vector3::zeros(); 3];
+            let mut ok = true;
+            for k in 0..3 {
+                let ray = perm
+                    .get(k)
+                    .and_then(|&v| tri.get(v))
+                    .and_then(|&i| order.get(i))
+                    .and_then(|&o| rays.get(o).copied().flatten());
+                let z = mp.get(k).map_or(0.0, |p| p.z);
+                match (ray.and_then(|r| r.at_height(z)), q.get_mut(k)) {
+                    (Some(p), Some(slot)) => *slot = p,
+                    _ => ok = false,
+                }
+            }
+            if !ok {
+                continue;
+            }
+            let qsides = opposite_sides(&q);
+            let same_shape = (0..3).all(|k| match (qsides.get(k), msides.get(k)) {
+                (Some(a), Some(b)) => {
+                    libm::fabs(a - b) <= s.pair_tolerance_m + s.pair_tolerance_fraction * b
+                }
+                _ => false,
+            });
+            // A mirror image is not the place (the camera sees the ceiling from one side).
+            if !same_shape || hand(&q) * mhand <= 0.0 {
+                continue;
+            }
+            let pose = align(&q, &mp);
+            let on_lamps = q.iter().zip(mp.iter()).all(|(p, l)| {
+                let w = pose.point_in_world(p);
+                libm::hypot(w.x - l.x, w.y - l.y) <= s.support_radius_m
+            });
+            if !on_lamps {
+                continue;
+            }
+            // Every other observation of the frame, not only the steadiest: a wrong pose that
+            // puts a few on lamps by chance (a jittered grid repeats itself within its jitter)
+            // rarely puts a third of twenty there. Stops as soon as the count cannot be met.
+            let skip: [Option<usize>; 3] = tri.map(|k| order.get(k).copied());
+            let others = rays.len().saturating_sub(3);
+            #[allow(
+                clippy::cast_precision_loss,
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss
+            )]
+            let need = s
+                .min_support
+                .min(others)
+                .max(libm::ceil(s.min_support_fraction * others as f64) as usize);
+            let (mut support, mut missed) = (0, 0);
+            for (o, ray) in rays.iter().enumerate() {
+                if skip.contains(&Some(o)) {
+                    continue;
+                }
+                if ray.is_some_and(|r| self.supports(map, &r, &pose)) {
+                    support += 1;
+                } else {
+                    missed += 1;
+                    if others - missed < need {
+                        break;
+                    }
+                }
+            }
+            if support >= need && !candidates.iter().any(|c| same_pose(c, &pose, &s)) {
+                candidates.push(pose);
+            }
         }
     }
 
-    /// Whether observation `obs` lands on a map lamp under `pose`.
-    fn supports(
-        &mut self,
-        map: &LampMap,
-        view: &View,
-        obs: &Observation,
-        pose: &Pose2,
-        z_mean: f64,
-    ) -> bool {
+    /// Whether the observation along `ray` lands on a map lamp under `pose` (on any of the
+    /// map's levels).
+    fn supports(&mut self, map: &LampMap, ray: &Ray, pose: &Pose2) -> bool {
         let s = self.settings;
-        let Some(p) = view.on_height(obs, z_mean) else {
-            return false;
-        };
-        let w = pose.point_in_world(&p);
-        let Some((i, _)) = map.nearest(w.x, w.y, s.support_radius_m * 2.0, &mut self.scratch)
-        else {
-            return false;
-        };
-        let Some(lamp) = map.lamp(i) else {
-            return false;
-        };
-        let Some(p) = view.on_height(obs, lamp.position.z) else {
-            return false;
-        };
-        let w = pose.point_in_world(&p);
-        libm::hypot(w.x - lamp.position.x, w.y - lamp.position.y) <= s.support_radius_m
+        for level in map.levels() {
+            let Some(p) = ray.at_height(level.z) else {
+                continue;
+            };
+            let w = pose.point_in_world(&p);
+            let reach = s.support_radius_m * 2.0 + level.spread;
+            let Some((i, _)) = map.nearest(w.x, w.y, reach, &mut self.scratch) else {
+                continue;
+            };
+            let Some(lamp) = map.lamp(i) else {
+                continue;
+            };
+            let Some(p) = ray.at_height(lamp.position.z) else {
+                continue;
+            };
+            let w = pose.point_in_world(&p);
+            if libm::hypot(w.x - lamp.position.x, w.y - lamp.position.y) <= s.support_radius_m {
+                return true;
+            }
+        }
+        false
     }
 
     /// Drops hypotheses far behind the best over their common frames, merges duplicates, and
@@ -428,16 +627,38 @@ fn same_pose(a: &Pose2, b: &Pose2, s: &RelocSettings) -> bool {
         && libm::fabs(wrap_angle(a.theta - b.theta)) <= s.merge_angle_rad
 }
 
-/// The planar pose that carries the robot-frame points `qa`, `qb` onto the map points `ma`,
-/// `mb` (horizontally): the heading from the two directions, the position from the midpoints.
-fn align(qa: &Vector3<f64>, qb: &Vector3<f64>, ma: &Vector3<f64>, mb: &Vector3<f64>) -> Pose2 {
-    let th = libm::atan2(mb.y - ma.y, mb.x - ma.x) - libm::atan2(qb.y - qa.y, qb.x - qa.x);
-    let (s, c) = (libm::sin(th), libm::cos(th));
-    let (qx, qy) = (0.5 * (qa.x + qb.x), 0.5 * (qa.y + qb.y));
-    let (mx, my) = (0.5 * (ma.x + mb.x), 0.5 * (ma.y + mb.y));
+/// The six orders of a triangle's vertices.
+const PERMUTATIONS: [[usize; 3]; 6] = [
+    [0, 1, 2],
+    [0, 2, 1],
+    [1, 0, 2],
+    [1, 2, 0],
+    [2, 0, 1],
+    [2, 1, 0],
+];
+
+/// The planar pose that carries the robot-frame points `q` onto the map points `m`
+/// (horizontally) in the least-squares sense: the rotation from the centred points' summed
+/// dot and cross products, the translation from the centroids (2-D Procrustes).
+fn align(q: &[Vector3<f64>; 3], m: &[Vector3<f64>; 3]) -> Pose2 {
+    let c = |p: &[Vector3<f64>; 3]| {
+        (
+            (p[0].x + p[1].x + p[2].x) / 3.0,
+            (p[0].y + p[1].y + p[2].y) / 3.0,
+        )
+    };
+    let ((qx, qy), (mx, my)) = (c(q), c(m));
+    let (mut dot, mut cross) = (0.0, 0.0);
+    for (a, b) in q.iter().zip(m.iter()) {
+        let (ax, ay, bx, by) = (a.x - qx, a.y - qy, b.x - mx, b.y - my);
+        dot += ax * bx + ay * by;
+        cross += ax * by - ay * bx;
+    }
+    let th = libm::atan2(cross, dot);
+    let (s, co) = (libm::sin(th), libm::cos(th));
     Pose2::new(
-        mx - (c * qx - s * qy),
-        my - (s * qx + c * qy),
+        mx - (co * qx - s * qy),
+        my - (s * qx + co * qy),
         wrap_angle(th),
     )
 }
@@ -453,7 +674,9 @@ mod tests {
         let qa = Vector3::new(1.0, 0.5, 7.0);
         let qb = Vector3::new(-2.0, 1.5, 6.8);
         let (ma, mb) = (pose.point_in_world(&qa), pose.point_in_world(&qb));
-        let got = align(&qa, &qb, &ma, &mb);
+        let qc = Vector3::new(0.3, -2.5, 7.1);
+        let mc = pose.point_in_world(&qc);
+        let got = align(&[qa, qb, qc], &[ma, mb, mc]);
         assert!((got.x - pose.x).abs() < 1e-12 && (got.y - pose.y).abs() < 1e-12);
         assert!((got.theta - pose.theta).abs() < 1e-12);
     }

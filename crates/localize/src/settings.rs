@@ -13,20 +13,30 @@ pub struct RelocSettings {
     pub min_observations: usize,
     /// Most observations a generation pairs (the longest tracks).
     pub max_generation_observations: usize,
-    /// Shortest horizontal distance of an observation pair, metres (short baselines give
-    /// poor headings).
+    /// Shortest side of a frame's triangle of observations, metres (short sides give poor
+    /// headings); the map's index holds no shorter ([`crate::LampMap::TRIANGLE_MIN_SIDE_M`]).
     pub min_pair_distance_m: f64,
-    /// Tolerance of a pair's distance against a map pair's, metres, plus
-    /// [`Self::pair_tolerance_fraction`] of the distance.
+    /// Tolerance of a frame triangle's side against a map triangle's once the frame's points
+    /// are put at their lamps' heights, metres, plus [`Self::pair_tolerance_fraction`] of the
+    /// side (the map's errors, the pixel noise); the look-up adds how far a lamp's level's
+    /// spread of heights can put a point.
     pub pair_tolerance_m: f64,
     /// See [`Self::pair_tolerance_m`].
     pub pair_tolerance_fraction: f64,
     /// An observation supports a pose when it lands this close to a map lamp, metres.
     pub support_radius_m: f64,
-    /// Other observations that must support a pose (or all of them, if fewer).
+    /// Other observations that must support a pose (or all of them, if fewer)...
     pub min_support: usize,
+    /// ...and at least this fraction of them (the rest: clutter, lamps not in the map, a
+    /// plan's missing sprinkler heads).
+    pub min_support_fraction: f64,
     /// Most candidate poses one generation tries.
     pub max_candidates: usize,
+    /// Most triangles of observations one generation looks up.
+    pub max_query_triangles: usize,
+    /// Most map triangles one look-up may return: a shape found more often than this tells
+    /// no place from another (a regular grid), and the look-up is not tried.
+    pub max_triangle_candidates: usize,
     /// Initial standard deviation of a new hypothesis's position, metres.
     pub initial_sigma_m: f64,
     /// Initial standard deviation of a new hypothesis's heading, radians.
@@ -60,13 +70,16 @@ impl Default for RelocSettings {
         Self {
             generate_every_frames: 4,
             min_observations: 3,
-            max_generation_observations: 8,
+            max_generation_observations: 10,
             min_pair_distance_m: 1.0,
-            pair_tolerance_m: 0.15,
-            pair_tolerance_fraction: 0.05,
-            support_radius_m: 0.2,
+            pair_tolerance_m: 0.05,
+            pair_tolerance_fraction: 0.01,
+            support_radius_m: 0.1,
             min_support: 3,
+            min_support_fraction: 0.3,
             max_candidates: 4000,
+            max_query_triangles: 6,
+            max_triangle_candidates: 100_000,
             initial_sigma_m: 0.15,
             initial_sigma_rad: 0.05,
             merge_distance_m: 0.3,
@@ -239,7 +252,7 @@ impl LocalizerSettings {
             (
                 "reloc.min_observations",
                 r.min_observations as f64,
-                r.min_observations >= 2,
+                r.min_observations >= 3,
             ),
             (
                 "reloc.max_generation_observations",
@@ -255,6 +268,21 @@ impl LocalizerSettings {
                 "reloc.max_hypotheses",
                 r.max_hypotheses as f64,
                 r.max_hypotheses >= 1,
+            ),
+            (
+                "reloc.min_support_fraction",
+                r.min_support_fraction,
+                (0.0..=1.0).contains(&r.min_support_fraction),
+            ),
+            (
+                "reloc.max_query_triangles",
+                r.max_query_triangles as f64,
+                r.max_query_triangles >= 1,
+            ),
+            (
+                "reloc.max_triangle_candidates",
+                r.max_triangle_candidates as f64,
+                r.max_triangle_candidates >= 1,
             ),
             (
                 "reloc.min_matched",

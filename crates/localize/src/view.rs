@@ -25,6 +25,23 @@ pub struct Observation {
     pub confirmed: bool,
 }
 
+/// A ray from the rig into the ceiling, in the robot frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    /// Where it starts (the rig's centre), metres.
+    pub origin: Vector3<f64>,
+    /// Its direction (`z > 0`), not normalised.
+    pub direction: Vector3<f64>,
+}
+
+impl Ray {
+    /// Where it meets the height `z`; `None` below its origin.
+    pub fn at_height(&self, z: f64) -> Option<Vector3<f64>> {
+        let s = (z - self.origin.z) / self.direction.z;
+        (s > 0.0).then(|| self.origin + self.direction * s)
+    }
+}
+
 /// A frame scored under one pose.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Scored {
@@ -126,21 +143,24 @@ impl View {
         self.reach_m
     }
 
-    /// Where the ray of observation `o` (from the rig's centre through the mean of its two
-    /// pixels) meets the height `z` (world, which is the robot frame's), in the robot frame;
-    /// `None` when the ray does not rise to it.
-    pub fn on_height(&self, o: &Observation, z: f64) -> Option<Vector3<f64>> {
+    /// The ray of observation `o`: from the rig's centre through the mean of its two pixels,
+    /// in the robot frame; `None` when it does not rise.
+    pub fn ray(&self, o: &Observation) -> Option<Ray> {
         let c = &self.camera;
         let u = 0.5 * (o.z[0] + o.z[2]);
         let v = 0.5 * (o.z[1] + o.z[3]);
         let d_rig = Vector3::new((u - c.cx) / c.f, (v - c.cy) / c.f, 1.0);
         let d = c.mount.robot_from_rig_rotation() * d_rig;
-        let origin = c.mount.translation();
-        if d.z <= 1e-6 {
-            return None;
-        }
-        let s = (z - origin.z) / d.z;
-        (s > 0.0).then(|| origin + d * s)
+        (d.z > 1e-6 && d.iter().all(|v| v.is_finite())).then(|| Ray {
+            origin: c.mount.translation(),
+            direction: d,
+        })
+    }
+
+    /// Where the ray of observation `o` meets the height `z` (world, which is the robot
+    /// frame's), in the robot frame; `None` when the ray does not rise to it.
+    pub fn on_height(&self, o: &Observation, z: f64) -> Option<Vector3<f64>> {
+        self.ray(o)?.at_height(z)
     }
 
     /// Whether a predicted measurement lies well inside both images at a plausible depth.
