@@ -1,8 +1,9 @@
 //! Seeded Monte Carlo of global relocalisation on a saved map (issue 20):
-//! `cargo run --release -p localize --example reloc_mc -- [RUNS] [FIRST_SEED] [--trace] [--exact-map]`
+//! `cargo run --release -p localize --example reloc_mc -- [RUNS] [FIRST_SEED] [--trace] [--exact-map] [--grid=NXxNY] [--jittered-only]`
 //! (defaults 100 runs from seed 0; `--trace` prints every frame of every run; `--exact-map`
 //! saves the true lamp positions in the map, still with their 5 mm covariance: a diagnosis of
-//! what the map's errors do, not the issue's scenario).
+//! what the map's errors do, not the issue's scenario; `--grid=125x80` runs on a hall of that
+//! many lamps, the 10,000-lamp map of issue 37; `--jittered-only` leaves out the regular grid).
 //!
 //! For a regular and a jittered grid of 16 x 10 lamps at 2.5 m, 7 m up, and for each seed:
 //! the hall (its jitter), the map (each lamp off by its 5 mm sigma), a start pose anywhere on
@@ -199,6 +200,22 @@ fn main() -> ExitCode {
         exact_map: args.iter().any(|a| a == "--exact-map"),
     };
     let numbers: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
+    let jittered_only = args.iter().any(|a| a == "--jittered-only");
+    let grid = match args.iter().find_map(|a| a.strip_prefix("--grid=")) {
+        None => Ok(GRID),
+        Some(g) => g
+            .split_once('x')
+            .and_then(|(a, b)| Some((a.parse().ok()?, b.parse().ok()?)))
+            .filter(|&(a, b): &(usize, usize)| a >= 2 && b >= 2)
+            .ok_or_else(|| format!("--grid={g}: give it as NXxNY, e.g. --grid=125x80")),
+    };
+    let grid = match grid {
+        Ok(g) => g,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::FAILURE;
+        }
+    };
     let parse = |k: usize, default: u64| -> Result<u64, String> {
         numbers.get(k).map_or(Ok(default), |s| {
             s.parse().map_err(|_| {
@@ -215,7 +232,7 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let (nx, ny) = GRID;
+    let (nx, ny) = grid;
     println!(
         "reloc_mc: {count} runs per grid and variant, seeds {first}..{}, grid {nx} x {ny} lamps at {} m, {} m up{}",
         first + count,
@@ -234,6 +251,9 @@ fn main() -> ExitCode {
         ("regular", Grid::regular(nx, ny)),
         ("jittered", Grid::jittered(nx, ny)),
     ] {
+        if jittered_only && name == "regular" {
+            continue;
+        }
         for variant in [Variant::Start, Variant::Kidnap] {
             let t = Instant::now();
             let results = match runs(grid, first..first + count, variant, options) {

@@ -478,16 +478,19 @@ impl LampMap {
                 let s = self.triangles.partition_point(|t| t.key < lo);
                 let e = self.triangles.partition_point(|t| t.key <= hi);
                 let run = self.triangles.get(s..e.max(s)).unwrap_or_default();
-                if out.len() + run.len() > cap {
-                    return false;
-                }
-                let near = |t: &&LampTriangle| {
-                    t.sides
+                for t in run {
+                    let near = t
+                        .sides
                         .iter()
                         .zip(sides.iter())
-                        .all(|(&a, &b)| libm::fabs(f64::from(a) - b) <= tol + 1e-4)
-                };
-                out.extend(run.iter().filter(near));
+                        .all(|(&a, &b)| libm::fabs(f64::from(a) - b) <= tol + 1e-4);
+                    if near {
+                        if out.len() >= cap {
+                            return false;
+                        }
+                        out.push(*t);
+                    }
+                }
             }
         }
         true

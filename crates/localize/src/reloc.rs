@@ -342,8 +342,29 @@ impl Relocalizer {
                     continue;
                 }
                 stats.map_triangles += found.len();
+                let mut poses = 0;
+                let before = candidates.len();
                 for t in &found {
-                    self.try_triangle(map, &rays, &order, tri, lv, &sides, tol, t, &mut candidates);
+                    poses += self.try_triangle(
+                        map,
+                        &rays,
+                        &order,
+                        tri,
+                        lv,
+                        &sides,
+                        tol,
+                        t,
+                        &mut candidates,
+                    );
+                    if poses > s.max_poses_per_triangle {
+                        // The frame's triangle fits too many places (a regular grid, or a
+                        // stretch of one): it tells them apart no better than a guess, and
+                        // its poses are not kept (scoring hundreds of equal hypotheses every
+                        // frame would cost the time and could never decide).
+                        complete = false;
+                        candidates.truncate(before);
+                        break;
+                    }
                     if candidates.len() > s.max_candidates {
                         self.incomplete = s.window_frames;
                         break 'triangles;
@@ -411,7 +432,8 @@ impl Relocalizer {
     /// levels `lv`, opposite sides `sides` within `tol`): every correspondence of vertices the
     /// sides allow, on the right levels, the frame's points put at their lamps' own heights,
     /// the same shape and handedness; the pose that carries the three onto the lamps, kept in
-    /// `candidates` when the frame's other observations land on map lamps under it.
+    /// `candidates` when the frame's other observations land on map lamps under it. Returns
+    /// the poses so supported (kept or already held).
     #[allow(clippy::too_many_arguments)]
     fn try_triangle(
         &mut self,
@@ -424,11 +446,12 @@ impl Relocalizer {
         tol: f64,
         t: &LampTriangle,
         candidates: &mut Vec<Pose2>,
-    ) {
+    ) -> usize {
         let s = self.settings;
+        let mut supported = 0;
         let [a, b, c] = t.lamps;
         let (Some(m0), Some(m1), Some(m2)) = (map.lamp(a), map.lamp(b), map.lamp(c)) else {
-            return;
+            return 0;
         };
         let mp = [m0.position, m1.position, m2.position];
         let msides = opposite_sides(&mp);
@@ -518,10 +541,14 @@ impl Relocalizer {
                     }
                 }
             }
-            if support >= need && !candidates.iter().any(|c| same_pose(c, &pose, &s)) {
-                candidates.push(pose);
+            if support >= need {
+                supported += 1;
+                if !candidates.iter().any(|c| same_pose(c, &pose, &s)) {
+                    candidates.push(pose);
+                }
             }
         }
+        supported
     }
 
     /// Whether the observation along `ray` lands on a map lamp under `pose` (on any of the
@@ -584,6 +611,45 @@ impl Relocalizer {
 
     /// The decision (module docs, step 3).
     fn decide(&self) -> Decision {
+        match self.verdict() {
+            Ok(i) => Decision::Unique(i),
+            Err(_) => Decision::Undecided,
+        }
+    }
+
+    /// What holds the decision back while lost (`None` when the best hypothesis is unique):
+    /// why a fix is taking the time it takes.
+    pub fn waiting(&self) -> Option<Waiting> {
+        self.verdict().err()
+    }
+
+    /// The live hypotheses, best first, each with how far behind the best it is over their
+    /// common frames (nats; 0 for the best).
+    pub fn weighed(&self) -> Vec<Weighed> {
+        let w = self.settings.window_frames;
+        let mut out: Vec<Weighed> = Vec::with_capacity(self.hypotheses.len());
+        let Some(best) = self
+            .hypotheses
+            .iter()
+            .max_by(|a, b| a.recent(w).total_cmp(&b.recent(w)))
+        else {
+            return out;
+        };
+        for h in &self.hypotheses {
+            let k = common(best, h, w);
+            out.push(Weighed {
+                pose: h.pose(),
+                behind_nats: best.recent(k) - h.recent(k),
+                age: h.age,
+                matched: h.matched,
+            });
+        }
+        out.sort_by(|a, b| a.behind_nats.total_cmp(&b.behind_nats));
+        out
+    }
+
+    /// The best hypothesis's index when it is unique, else what holds it back.
+    fn verdict(&self) -> Result<usize, Waiting> {
         let s = self.settings;
         let w = s.window_frames;
         let Some((bi, best)) = self
@@ -592,28 +658,86 @@ impl Relocalizer {
             .enumerate()
             .max_by(|a, b| a.1.recent(w).total_cmp(&b.1.recent(w)))
         else {
-            return Decision::Undecided;
+            return Err(Waiting::NoHypothesis);
         };
-        if self.incomplete > 0
-            || best.age < s.min_frames
-            || best.matched < s.min_matched
-            || best.distinct.len() < s.min_distinct_lamps
-            || best.mean_nis > s.max_mean_nis
-        {
-            return Decision::Undecided;
+        if self.incomplete > 0 {
+            return Err(Waiting::Incomplete);
         }
-        let unique = self.hypotheses.iter().enumerate().all(|(i, h)| {
-            i == bi || {
+        if best.age < s.min_frames {
+            return Err(Waiting::Young { frames: best.age });
+        }
+        if best.matched < s.min_matched || best.distinct.len() < s.min_distinct_lamps {
+            return Err(Waiting::FewLamps {
+                matched: best.matched,
+                distinct: best.distinct.len(),
+            });
+        }
+        if best.mean_nis > s.max_mean_nis {
+            return Err(Waiting::PoorFit {
+                mean_nis: best.mean_nis,
+            });
+        }
+        let ahead = self
+            .hypotheses
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| i != bi)
+            .map(|(_, h)| {
                 let k = common(best, h, w);
-                best.recent(k) - h.recent(k) >= s.decision_margin
-            }
-        });
-        if unique {
-            Decision::Unique(bi)
+                best.recent(k) - h.recent(k)
+            })
+            .fold(f64::INFINITY, f64::min);
+        if ahead >= s.decision_margin {
+            Ok(bi)
         } else {
-            Decision::Undecided
+            Err(Waiting::Margin { ahead_nats: ahead })
         }
     }
+}
+
+/// What holds a fix back while lost ([`Relocalizer::waiting`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Waiting {
+    /// No hypothesis: too few observations, or none of the map's places fits them.
+    NoHypothesis,
+    /// A generation was cut (too many candidates, or a triangle of the frame fits too many
+    /// places: a regular grid): a hypothesis unique among those kept proves nothing.
+    Incomplete,
+    /// The best has lived this few frames.
+    Young {
+        /// Frames it has lived.
+        frames: u32,
+    },
+    /// The best associates too few lamps (now, or distinct over its life).
+    FewLamps {
+        /// Lamps it associated at its last frame.
+        matched: usize,
+        /// Distinct lamps over its life.
+        distinct: usize,
+    },
+    /// The best's associations fit poorly.
+    PoorFit {
+        /// Their mean NIS.
+        mean_nis: f64,
+    },
+    /// The best is not far enough ahead of the next.
+    Margin {
+        /// Its lead over the nearest rival, nats.
+        ahead_nats: f64,
+    },
+}
+
+/// A live hypothesis as [`Relocalizer::weighed`] reports it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weighed {
+    /// Its pose.
+    pub pose: Pose2,
+    /// How far behind the best it is over their common frames, nats (0 for the best).
+    pub behind_nats: f64,
+    /// Frames it has lived.
+    pub age: u32,
+    /// Lamps it associated at its last frame.
+    pub matched: usize,
 }
 
 /// Frames two hypotheses have both lived, at most `w`.

@@ -34,9 +34,13 @@ pub struct RelocSettings {
     pub max_candidates: usize,
     /// Most triangles of observations one generation looks up.
     pub max_query_triangles: usize,
-    /// Most map triangles one look-up may return: a shape found more often than this tells
-    /// no place from another (a regular grid), and the look-up is not tried.
+    /// Most map triangles one look-up may return (a bound on the work; the look-up is not
+    /// tried beyond it).
     pub max_triangle_candidates: usize,
+    /// Most poses one triangle of observations may give that the frame's other observations
+    /// support: a triangle that fits more places tells them apart no better than a guess
+    /// (a regular grid), and the generation is not complete.
+    pub max_poses_per_triangle: usize,
     /// Initial standard deviation of a new hypothesis's position, metres.
     pub initial_sigma_m: f64,
     /// Initial standard deviation of a new hypothesis's heading, radians.
@@ -79,7 +83,8 @@ impl Default for RelocSettings {
             min_support_fraction: 0.3,
             max_candidates: 4000,
             max_query_triangles: 6,
-            max_triangle_candidates: 100_000,
+            max_triangle_candidates: 200_000,
+            max_poses_per_triangle: 16,
             initial_sigma_m: 0.15,
             initial_sigma_rad: 0.05,
             merge_distance_m: 0.3,
@@ -278,6 +283,11 @@ impl LocalizerSettings {
                 "reloc.max_query_triangles",
                 r.max_query_triangles as f64,
                 r.max_query_triangles >= 1,
+            ),
+            (
+                "reloc.max_poses_per_triangle",
+                r.max_poses_per_triangle as f64,
+                r.max_poses_per_triangle >= 1,
             ),
             (
                 "reloc.max_triangle_candidates",
