@@ -177,3 +177,26 @@ fn the_sparse_hall_s_trajectory_error_is_within_20_mm() {
     let j = localized(&map, &hall, "hall-localize.toml", 71);
     assert!(j.ate_rms_m <= 0.020, "{j:?}");
 }
+
+/// Issue 37's next day in issue 35's whole hall (`hall-radtan.toml`: 187 lamps and 160
+/// sprinkler heads, a radtan lens, five aisles mapped in one drive with no flags):
+/// `hall-radtan-localize.toml` starts where the stack does not know, is carried 29.5 m while
+/// blind, passes under 7 dark lamps and 3 new ones. The bounds of issue 37 but the 20 mm
+/// (below).
+#[test]
+fn the_radtan_hall_is_localised_the_next_day() {
+    let (map, hall) = mapped("hall-radtan.toml");
+    let j = localized(&map, &hall, "hall-radtan-localize.toml", 3701);
+    assert_meets_the_issue(&j);
+}
+
+/// Issue 37's 20 mm on the whole hall: the localiser is a few mm from its map, the map itself
+/// (one drive through the hall) about 57 mm RMS from the truth, mostly its scale (issue 35's
+/// remainder).
+#[test]
+#[ignore = "the radtan hall's map is about 57 mm RMS off the truth (its scale): unfinished"]
+fn the_radtan_hall_s_trajectory_error_is_within_20_mm() {
+    let (map, hall) = mapped("hall-radtan.toml");
+    let j = localized(&map, &hall, "hall-radtan-localize.toml", 3701);
+    assert!(j.ate_rms_m <= 0.020, "{j:?}");
+}
