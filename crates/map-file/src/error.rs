@@ -78,4 +78,21 @@ pub enum Error {
         /// What is wrong.
         detail: String,
     },
+    /// A lighting plan (`stereonav map import`) that cannot make a map: the line and what is
+    /// wrong on it.
+    #[error("{source_name}:{line}: {problem}")]
+    Plan {
+        /// The plan, as named in messages.
+        source_name: String,
+        /// The line (1-based; for a problem of the whole file, where the text was expected).
+        line: usize,
+        /// What is wrong.
+        problem: crate::PlanProblem,
+    },
+    /// The sigma given for the lamps whose row has none is not a positive number of metres.
+    #[error("the default lamp sigma {value} m is not a positive, finite number")]
+    BadDefaultSigma {
+        /// The sigma given.
+        value: f64,
+    },
 }

@@ -15,12 +15,18 @@
 //! The header says what the file is before anything is parsed: another format is refused by
 //! its first bytes, a newer version by its number, a cut or damaged file by the body's length
 //! and CRC-32 (IEEE, over the body's bytes). The body is plain JSON so that other tools read it.
+//!
+//! A map made from a hall's lighting plan (`stereonav map import`, [`Map::from_plan`]) has
+//! its lamps only: no calibration, no log, and a rig only when one was given. A map without a
+//! rig is written as version 2, which builds that read only version 1 refuse by its number;
+//! every other map is written as version 1, which they read ([`Map::format_version`]).
 //! Hand-written rather than a serde derive: the messages must name the key that is wrong, and
 //! the rig goes in its own JSON form, checked by the rig file's reader.
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
 mod error;
+mod plan;
 
 use std::path::Path;
 
@@ -29,11 +35,16 @@ use rig_model::config::Rig;
 use serde_json::{Map as JsonMap, Value, json};
 
 pub use error::Error;
+pub use plan::{DEFAULT_LAMP_SIGMA_M, PlanLamp, PlanProblem, parse_plan};
 
 /// The first word of every map file.
 pub const MAGIC: &str = "stereonav-map";
-/// The format version this build writes, and the newest it reads.
-pub const VERSION: u32 = 1;
+/// The newest format version this build reads. It writes the oldest version that holds the
+/// map ([`Map::format_version`]): 2 for a map without a rig, else 1.
+pub const VERSION: u32 = 2;
+
+/// The version of a map with a rig: what every build reads.
+const VERSION_WITH_RIG: u32 = 1;
 
 /// One landmark (lamp) of a map, in the map's world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -79,12 +90,18 @@ pub struct CommonError {
 pub struct Map {
     /// The landmarks.
     pub landmarks: Vec<MapLandmark>,
-    /// The calibrated camera and vehicle parameters (every one of [`Param::ALL`]).
+    /// The calibrated camera and vehicle parameters (every one of [`Param::ALL`]; none in a
+    /// map imported from a lighting plan, which has no calibration).
     pub parameters: Vec<MapParam>,
-    /// The rig the map was made with.
-    pub rig: Rig,
-    /// The log the map was made from (as given to the replay).
+    /// The rig the map was made with (key `rig`; `None` only in a map imported from a
+    /// lighting plan without one, written as version 2).
+    pub rig: Option<Rig>,
+    /// The log the map was made from (as given to the replay); empty for a map imported from
+    /// a lighting plan.
     pub source_log: String,
+    /// The lighting plan or survey the lamps were imported from (`stereonav map import`), as
+    /// given (key `source_plan`, optional: `None` in maps made by a replay).
+    pub source_plan: Option<String>,
     /// When the map was written, seconds since the Unix epoch.
     pub created_unix_s: u64,
     /// The error the landmarks share (key `common_error`, optional: `None` in maps written
@@ -93,6 +110,17 @@ pub struct Map {
 }
 
 impl Map {
+    /// The format version this map is written as: the oldest that holds it, 2 for a map
+    /// without a rig (which builds reading up to version 1 could not use), else 1.
+    #[must_use]
+    pub fn format_version(&self) -> u32 {
+        if self.rig.is_some() {
+            VERSION_WITH_RIG
+        } else {
+            VERSION
+        }
+    }
+
     /// The file's bytes: the header line, then the JSON body. Refuses non-finite values.
     pub fn to_bytes(&self) -> Result<Vec<u8>, Error> {
         let body = self.body()?;
@@ -100,8 +128,9 @@ impl Map {
             detail: e.to_string(),
         })?;
         let crc = crc32fast::hash(&body);
+        let version = self.format_version();
         let mut out =
-            format!("{MAGIC} {VERSION} len={} crc32={crc:08x}\n", body.len()).into_bytes();
+            format!("{MAGIC} {version} len={} crc32={crc:08x}\n", body.len()).into_bytes();
         out.extend_from_slice(&body);
         Ok(out)
     }
@@ -188,7 +217,7 @@ impl Map {
             source_name: name(),
             detail: format!("the body is not JSON: {e}"),
         })?;
-        parse_body(&value, source_name)
+        parse_body(&value, version, source_name)
     }
 
     /// The JSON body (docs/maps.md: the object under the header line) that [`Map::to_bytes`]
@@ -198,10 +227,15 @@ impl Map {
     }
 
     /// A map from a body already parsed, checked as [`Map::from_bytes`] checks a file's body
-    /// (a missing key or a wrong type is refused naming the key); `source_name` names it in
-    /// errors.
+    /// (a missing key or a wrong type is refused naming the key; the version is the body's
+    /// `version`, the newest read when it has none); `source_name` names it in errors.
     pub fn from_json(body: &Value, source_name: &str) -> Result<Self, Error> {
-        parse_body(body, source_name)
+        let version = body
+            .get("version")
+            .and_then(Value::as_u64)
+            .and_then(|v| u32::try_from(v).ok())
+            .unwrap_or(VERSION);
+        parse_body(body, version, source_name)
     }
 
     fn body(&self) -> Result<Value, Error> {
@@ -231,15 +265,11 @@ impl Map {
                 detail: "the common error is not finite".to_string(),
             });
         }
-        let rig: Value = serde_json::from_str(&self.rig.to_json()).map_err(|e| Error::Invalid {
-            detail: format!("the rig's JSON form: {e}"),
-        })?;
         let mut body = json!({
             "format": MAGIC,
-            "version": VERSION,
+            "version": self.format_version(),
             "created_unix_s": self.created_unix_s,
             "source_log": self.source_log,
-            "rig": rig,
             "parameters": self.parameters.iter().map(|p| json!({
                 "name": p.param.name(),
                 "value": p.value,
@@ -252,7 +282,21 @@ impl Map {
                 "observations": l.observations,
             })).collect::<Vec<_>>(),
         });
-        if let (Some(c), Some(obj)) = (&self.common_error, body.as_object_mut()) {
+        let Some(obj) = body.as_object_mut() else {
+            return Err(Error::Invalid {
+                detail: "the body is not a JSON object".to_string(),
+            });
+        };
+        if let Some(rig) = &self.rig {
+            let rig: Value = serde_json::from_str(&rig.to_json()).map_err(|e| Error::Invalid {
+                detail: format!("the rig's JSON form: {e}"),
+            })?;
+            obj.insert("rig".to_string(), rig);
+        }
+        if let Some(plan) = &self.source_plan {
+            obj.insert("source_plan".to_string(), Value::from(plan.as_str()));
+        }
+        if let Some(c) = &self.common_error {
             obj.insert(
                 "common_error".to_string(),
                 json!({"origin": c.origin, "covariance": c.covariance}),
@@ -269,7 +313,8 @@ fn bad_header(source_name: &str, detail: &str) -> Error {
     }
 }
 
-fn parse_body(value: &Value, source_name: &str) -> Result<Map, Error> {
+/// The map of a body of format version `version` (a map without a rig is version 2 or newer).
+fn parse_body(value: &Value, version: u32, source_name: &str) -> Result<Map, Error> {
     let content = |detail: String| Error::Content {
         source_name: source_name.to_string(),
         detail,
@@ -305,11 +350,25 @@ fn parse_body(value: &Value, source_name: &str) -> Result<Map, Error> {
         .as_str()
         .ok_or_else(|| content("'source_log' is not a string".to_string()))?
         .to_string();
-    let rig = Rig::from_json_str(
-        &key(top, "", "rig")?.to_string(),
-        &format!("{source_name} rig"),
-    )
-    .map_err(|e| content(format!("the map's rig: {e}")))?;
+    let rig = match top.get("rig") {
+        // Only a map without a rig is written as version 2: one of version 1 must have it.
+        None | Some(Value::Null) if version >= 2 => None,
+        _ => Some(
+            Rig::from_json_str(
+                &key(top, "", "rig")?.to_string(),
+                &format!("{source_name} rig"),
+            )
+            .map_err(|e| content(format!("the map's rig: {e}")))?,
+        ),
+    };
+    let source_plan = match top.get("source_plan") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(
+            v.as_str()
+                .ok_or_else(|| content("'source_plan' is not a string".to_string()))?
+                .to_string(),
+        ),
+    };
 
     let mut parameters = Vec::new();
     for (i, p) in array_of(key(top, "", "parameters")?, "'parameters'")?
@@ -416,6 +475,7 @@ fn parse_body(value: &Value, source_name: &str) -> Result<Map, Error> {
         parameters,
         rig,
         source_log,
+        source_plan,
         created_unix_s,
     })
 }

@@ -28,8 +28,9 @@ fn map() -> Map {
                 sigma: 1e-4,
             })
             .collect(),
-        rig,
+        rig: Some(rig),
         source_log: "fixtures/logs/paper-experiment.mcap".to_string(),
+        source_plan: None,
         created_unix_s: 1_796_000_000,
         common_error: Some(CommonError {
             origin: [0.2, -1.0 / 3.0],
@@ -110,20 +111,20 @@ fn a_foreign_file_is_not_a_map() {
 #[test]
 fn a_newer_version_is_refused_by_its_number() {
     let bytes = map().to_bytes().unwrap();
-    let newer = [b"stereonav-map 2".as_slice(), &bytes[15..]].concat();
+    let newer = [b"stereonav-map 3".as_slice(), &bytes[15..]].concat();
     let e = refused(&newer);
     assert!(
         matches!(
             e,
             Error::NewerVersion {
-                found: 2,
-                supported: 1,
+                found: 3,
+                supported: 2,
                 ..
             }
         ),
         "{e:?}"
     );
-    assert!(e.to_string().contains("version 2 is newer"), "{e}");
+    assert!(e.to_string().contains("version 3 is newer"), "{e}");
 }
 
 #[test]
@@ -185,4 +186,62 @@ fn non_finite_values_are_not_written() {
     m.landmarks[1].covariance[0][0] = f64::NAN;
     let e = m.to_bytes().expect_err("NaN refused");
     assert!(e.to_string().contains("landmark 11"), "{e}");
+}
+
+/// A map imported from a lighting plan without a rig: written as version 2 (builds that read
+/// up to version 1 refuse it by its number), read back as written; with a rig, or with the
+/// plan's name alone (a key older builds skip), a map stays version 1.
+#[test]
+fn a_map_without_a_rig_is_version_2_and_reads_back() {
+    let plan = Map::from_plan(
+        b"id,x,y,z,sigma\n4,1.5,-2,7,0.01\n9,5.5,-2,7.1,0.03\n",
+        "hall.csv",
+        0.02,
+        None,
+    )
+    .unwrap();
+    assert_eq!(plan.format_version(), 2);
+    let bytes = plan.to_bytes().unwrap();
+    assert!(bytes.starts_with(b"stereonav-map 2 len="));
+    let back = Map::from_bytes(&bytes, "hall.map").unwrap();
+    assert_eq!(back, plan);
+    let body = back.to_json().unwrap();
+    assert_eq!(body["version"], 2);
+    assert_eq!(body["source_plan"], "hall.csv");
+    assert_eq!(body["source_log"], "");
+    assert!(body.get("rig").is_none());
+    assert_eq!(Map::from_json(&body, "m").unwrap(), plan);
+
+    // With a rig: version 1, and `source_plan` kept.
+    let with_rig = Map {
+        rig: map().rig,
+        ..plan.clone()
+    };
+    let bytes = with_rig.to_bytes().unwrap();
+    assert!(bytes.starts_with(b"stereonav-map 1 len="));
+    assert_eq!(Map::from_bytes(&bytes, "m.map").unwrap(), with_rig);
+    let replayed = Map {
+        source_plan: Some("plan.csv".to_string()),
+        ..map()
+    };
+    assert_eq!(replayed.format_version(), 1);
+    assert_eq!(
+        Map::from_bytes(&replayed.to_bytes().unwrap(), "m.map").unwrap(),
+        replayed
+    );
+}
+
+/// A map of version 1 must have its rig: only version 2 may leave it out.
+#[test]
+fn a_version_1_map_without_a_rig_is_refused() {
+    let mut body = map().to_json().unwrap();
+    body.as_object_mut().unwrap().remove("rig");
+    let e = refused(&with_body(&body.to_string()));
+    assert_eq!(e.to_string(), "m.map: missing key 'rig'");
+    let e = Map::from_json(&body, "m").expect_err("version 1 without a rig");
+    assert_eq!(e.to_string(), "m: missing key 'rig'");
+    body["source_plan"] = serde_json::json!(3);
+    body["version"] = serde_json::json!(2);
+    let e = Map::from_json(&body, "m").expect_err("a bad source_plan");
+    assert_eq!(e.to_string(), "m: 'source_plan' is not a string");
 }

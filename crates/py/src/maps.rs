@@ -40,7 +40,8 @@ pub(crate) fn read_map(py: Python<'_>, path: PathBuf) -> PyResult<String> {
 
 /// Writes the map whose JSON body is `body` to `path`, as `stereonav replay --save-map` writes
 /// one. The body is checked first, as a file's body is (`map_file::Map::from_json`), and must
-/// have this format's `version` and no key the format does not have (it would be lost).
+/// have the `version` the map is written as (`map_file::Map::format_version`: 1, or 2 for a
+/// map without a rig) and no key the format does not have (it would be lost).
 /// Raises `stereonav.InputError` naming the key, or the file when it cannot be written. The
 /// GIL is released while the file is written.
 #[pyfunction]
@@ -55,12 +56,19 @@ fn map_from_body(body: &str) -> Result<Map, String> {
     let given: Value = serde_json::from_str(body)
         .map_err(|e| format!("{GIVEN_MAP}: the body is not JSON: {e}"))?;
     let map = Map::from_json(&given, GIVEN_MAP).map_err(|e| e.to_string())?;
+    // The version the map is written as (1, or 2 without a rig): a dict that says another
+    // would not be saved as it says.
+    let version = map.format_version();
     match given.get("version") {
         None => return Err(format!("{GIVEN_MAP}: missing key 'version'")),
-        Some(v) if v.as_u64() != Some(u64::from(map_file::VERSION)) => {
+        Some(v) if v.as_u64() != Some(u64::from(version)) => {
             return Err(format!(
-                "{GIVEN_MAP}: 'version' is {v}, this stereonav writes map format version {}",
-                map_file::VERSION
+                "{GIVEN_MAP}: 'version' is {v}, this stereonav writes {} as map format version {version}",
+                if map.rig.is_some() {
+                    "a map with a rig"
+                } else {
+                    "a map without a rig"
+                }
             ));
         }
         Some(_) => {}
@@ -88,6 +96,8 @@ fn unknown_key(given: &Value, kept: &Value, at: &str) -> Option<String> {
     match (given, kept) {
         (Value::Object(given), Value::Object(kept)) => {
             given.iter().find_map(|(k, v)| match kept.get(k) {
+                // An optional key given as None (`rig`, `common_error`): absent, as read.
+                None if v.is_null() => None,
                 None if at.is_empty() => Some(format!("unknown key '{k}'")),
                 None => Some(format!("{at}: unknown key '{k}'")),
                 Some(_) if at.is_empty() && k == "rig" => None,
@@ -122,8 +132,9 @@ mod tests {
                 observations: 7,
             }],
             parameters: vec![],
-            rig,
+            rig: Some(rig),
             source_log: "a.mcap".to_string(),
+            source_plan: None,
             created_unix_s: 1,
             common_error: Some(map_file::CommonError {
                 origin: [0.5, 0.25],
@@ -170,7 +181,14 @@ mod tests {
         );
         assert_eq!(
             refused(&|b| b["version"] = Value::from(2)),
-            "map: 'version' is 2, this stereonav writes map format version 1"
+            "map: 'version' is 2, this stereonav writes a map with a rig as map format version 1"
+        );
+        // Without a rig, version 1 is refused by the reader (its rig is required).
+        assert_eq!(
+            refused(&|b| {
+                b.as_object_mut().map(|o| o.remove("rig"));
+            }),
+            "map: missing key 'rig'"
         );
         assert_eq!(
             refused(&|b| b["notes"] = Value::from("x")),

@@ -76,7 +76,8 @@ def test_the_replay_saves_its_map(saved_map: pathlib.Path) -> None:
     r = replay(EXPERIMENT_LOG, EXPERIMENT_RIG, skip_phase1=True)
     m = read_map(saved_map)
     assert set(m) == MAP_KEYS
-    assert m["format"] == "stereonav-map" and m["version"] == MAP_VERSION == 1
+    # Version 1, which every build reads: only a map without a rig is written as 2.
+    assert m["format"] == "stereonav-map" and m["version"] == 1 and MAP_VERSION == 2
     assert m["source_log"] == str(EXPERIMENT_LOG)
     assert isinstance(m["created_unix_s"], int) and abs(m["created_unix_s"] - time.time()) < 3600
     assert m["rig"] == json.loads(json.dumps(m["rig"])) and "camera" in m["rig"]
@@ -339,7 +340,8 @@ def test_a_map_reads_and_writes_back_byte_for_byte(saved_map: pathlib.Path, tmp_
         (lambda m: m.update(source_log=3), "map: 'source_log' is not a string"),
         (lambda m: m.update(format="other"), "map: 'format' is not \"stereonav-map\""),
         (lambda m: m.pop("version"), "map: missing key 'version'"),
-        (lambda m: m.update(version=2), "map: 'version' is 2, this stereonav writes map format version 1"),
+        (lambda m: m.update(version=2), "map: 'version' is 2, this stereonav writes a map with a rig as map format version 1"),
+        (lambda m: m.pop("rig"), "map: missing key 'rig'"),
         (lambda m: m.update(notes="x"), "map: unknown key 'notes': the map format has no such key"),
         (lambda m: m["landmarks"][3].update(colour="red"), "map: landmarks[3]: unknown key 'colour'"),
         (lambda m: m["rig"].pop("camera"), "map: the map's rig: map rig: "),
@@ -387,7 +389,7 @@ def bad_maps(saved_map: pathlib.Path, directory: pathlib.Path) -> list[tuple[pat
         "cut.map": (data[: len(data) // 2], "the file is cut or damaged"),
         "foreign.map": (EXPERIMENT_LOG.read_bytes(), "not a stereonav map (no 'stereonav-map' header line)"),
         "empty.map": (b"", "not a stereonav map"),
-        "newer.map": (b"stereonav-map 2" + data[len(b"stereonav-map 1"):], "map format version 2 is newer than this stereonav reads (up to 1)"),
+        "newer.map": (b"stereonav-map 3" + data[len(b"stereonav-map 1"):], "map format version 3 is newer than this stereonav reads (up to 2)"),
         "no-landmarks.map": (map_file(m), "missing key 'landmarks'"),
         "no-lamps.map": (map_file(no_lamps), "localiser: "),
     }

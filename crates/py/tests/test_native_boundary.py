@@ -101,4 +101,4 @@ def test_localisation_results_are_frozen_native_objects(tmp_path: pathlib.Path) 
         frames.t_us = frames.t_us  # type: ignore[misc]
     with pytest.raises(AttributeError):
         native.warnings = []  # type: ignore[misc]
-    assert isinstance(_native.read_map(str(saved)), str) and _native.MAP_VERSION == 1
+    assert isinstance(_native.read_map(str(saved)), str) and _native.MAP_VERSION == 2

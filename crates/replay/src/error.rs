@@ -51,6 +51,15 @@ pub enum Error {
     /// The localiser refused the map or its settings.
     #[error("localiser: {0}")]
     Localize(String),
+    /// The map has no rig (imported from a lighting plan without one) and none was given.
+    #[error(
+        "the map has no rig{}: give the vehicle's rig file (--rig RIG.toml)",
+        plan.as_ref().map_or(String::new(), |p| format!(" (it was imported from the lighting plan {p} without one)"))
+    )]
+    MapWithoutRig {
+        /// The plan the map was imported from, when it says.
+        plan: Option<String>,
+    },
     /// An output file (`EST.mcap`, `SUMMARY.json`, `TRAJ.csv`) could not be created or
     /// written.
     #[error("cannot write {file}: {}: {source}", path.display())]

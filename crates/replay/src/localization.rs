@@ -3,7 +3,9 @@
 //! The log is read as for a replay (decoded, in data-time order); each frame goes through the
 //! [`localize::Localizer`] built from the map: its lamps, its calibrated `C` and `V`, and the
 //! rig (the one given, or else the map's own; the lens, image size and noise come from it).
-//! The log's `/rig` is not needed: the map carries the rig it was made with.
+//! The log's `/rig` is not needed: the map carries the rig it was made with. A map imported
+//! from a lighting plan has no calibration (and a rig only when one was given to the import):
+//! the rig's nominal `C` and `V` are used, with its priors as their sigmas.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -113,23 +115,51 @@ pub struct LocalizeEnd {
 /// A map landmark known worse than this (standard deviation on any axis, metres) is not used.
 pub const MAX_LAMP_SIGMA_M: f64 = 0.25;
 
-/// The localiser for a map: its lamps indexed, the camera from the map's parameters.
+/// The rig a run on `map` uses: `rig` (given), else the map's own.
 ///
-/// Errors: a map without lamps or with a bad one, settings out of range.
-pub fn localizer_for(
-    map: &Map,
-    rig: Option<Rig>,
-    settings: LocalizerSettings,
-) -> Result<Localizer, Error> {
-    let rig = rig.unwrap_or_else(|| map.rig.clone());
-    let mut camera: CameraParams = map.rig.nominal;
+/// Errors: neither (a map imported from a lighting plan without a rig).
+fn rig_for(map: &Map, rig: Option<Rig>) -> Result<Rig, Error> {
+    rig.or_else(|| map.rig.clone())
+        .ok_or_else(|| Error::MapWithoutRig {
+            plan: map.source_plan.clone(),
+        })
+}
+
+/// The camera `C` and `V` a run on `map` with `rig` (the one [`rig_for`] gives) uses, and the
+/// sigma of each parameter ([`Param::ALL`] order): the map's calibration, over the nominal
+/// values of the map's rig (else `rig`'s) for a parameter it lacks; a map without calibration
+/// (imported from a lighting plan) gives `rig`'s nominal values with its priors (0 for a
+/// parameter it holds).
+fn map_camera(map: &Map, rig: &Rig) -> (CameraParams, [f64; rig_model::N_PARAMS]) {
     let mut sigma = [0.0; rig_model::N_PARAMS];
+    if map.parameters.is_empty() {
+        for (s, p) in sigma.iter_mut().zip(rig.prior) {
+            *s = p.unwrap_or(0.0);
+        }
+        return (rig.nominal, sigma);
+    }
+    let mut camera: CameraParams = map.rig.as_ref().unwrap_or(rig).nominal;
     for p in &map.parameters {
         camera.set(p.param, p.value);
         if let Some(s) = sigma.get_mut(p.param.index()) {
             *s = p.sigma;
         }
     }
+    (camera, sigma)
+}
+
+/// The localiser for a map: its lamps indexed, the camera from the map's parameters (or, for
+/// a map without calibration, the rig's nominal values and priors).
+///
+/// Errors: a map without lamps or with a bad one, a map without a rig when none is given,
+/// settings out of range.
+pub fn localizer_for(
+    map: &Map,
+    rig: Option<Rig>,
+    settings: LocalizerSettings,
+) -> Result<Localizer, Error> {
+    let rig = rig_for(map, rig)?;
+    let (camera, sigma) = map_camera(map, &rig);
     // A landmark the mapping run barely knew (seen twice, its depth unknown to metres) would
     // only mislead the association and the relocalisation's pairs: left out.
     let lamps: Vec<MapLamp> = map
@@ -178,7 +208,9 @@ pub fn localize_log(
     trajectory: &mut dyn FnMut(&LocalizedFrame) -> Result<(), Error>,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<LocalizeEnd, Error> {
-    let mut localizer = localizer_for(map, rig, settings)?;
+    let rig = rig_for(map, rig)?;
+    let (camera, camera_sigma) = map_camera(map, &rig);
+    let mut localizer = localizer_for(map, Some(rig), settings)?;
     let mut stream = LogStream::open(path)?;
     stream.preamble(false)?;
     let mut refused: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
@@ -248,13 +280,10 @@ pub fn localize_log(
     let (v, v_sigma) = localizer.vehicle();
     let mut parameters: Vec<ParamEstimate> = Param::ALL
         .iter()
-        .map(|&param| {
-            let from_map = map.parameters.iter().find(|p| p.param == param);
-            ParamEstimate {
-                param,
-                value: from_map.map_or(map.rig.nominal.get(param), |p| p.value),
-                sigma: from_map.map_or(0.0, |p| p.sigma),
-            }
+        .map(|&param| ParamEstimate {
+            param,
+            value: camera.get(param),
+            sigma: camera_sigma.get(param.index()).copied().unwrap_or(0.0),
         })
         .collect();
     for (k, p) in Param::VEHICLE.iter().enumerate() {

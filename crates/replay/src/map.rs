@@ -34,8 +34,9 @@ pub fn saved_map(end: &ReplayEnd, rig: &Rig, log: &Path) -> Map {
         common_error: end
             .map_common_error
             .map(|(origin, covariance)| CommonError { origin, covariance }),
-        rig: rig.clone(),
+        rig: Some(rig.clone()),
         source_log: log.display().to_string(),
+        source_plan: None,
         created_unix_s: SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_secs()),

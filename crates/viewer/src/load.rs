@@ -134,7 +134,14 @@ fn localize(
 ) -> Result<Model, Error> {
     let features = decode_features(records);
     let (truth, _) = truth_of(records);
-    let rig = options.rig.clone().unwrap_or_else(|| map.rig.clone());
+    // A map imported from a lighting plan may have no rig: then one must be given.
+    let rig = options
+        .rig
+        .clone()
+        .or_else(|| map.rig.clone())
+        .ok_or_else(|| replay::Error::MapWithoutRig {
+            plan: map.source_plan.clone(),
+        })?;
     let nominal = (rig.nominal, [f64::from(rig.width), f64::from(rig.height)]);
     let mut frames = Vec::new();
     let end = replay::localize_log(

@@ -9,6 +9,7 @@ mod calibrate_log;
 mod estimates_reader;
 mod hall;
 mod lens;
+mod lighting_plan;
 mod mapped_once;
 mod navigate;
 mod output;
