@@ -28,11 +28,13 @@ pub(crate) struct Args {
     /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
-    /// The saved map (`stereonav replay --save-map`, docs/maps.md).
+    /// The saved map (`stereonav replay --save-map` or `stereonav map import`, docs/maps.md).
     #[arg(long, value_name = "MAP")]
     map: PathBuf,
     /// The rig file (its lens, image size and noise); without it, the rig the map was made
-    /// with. The camera's calibration always comes from the map.
+    /// with. The camera's calibration comes from the map; a map imported from a lighting plan
+    /// has none and takes this rig's nominal camera and priors (required when such a map
+    /// carries no rig).
     #[arg(long, value_name = "RIG.toml")]
     rig: Option<PathBuf>,
     /// Write the summary as JSON (the replay's keys plus `localized_t_us` and `lamps_missing`).
@@ -57,6 +59,14 @@ pub(crate) struct Args {
 pub(crate) fn run(args: &Args) -> Result<()> {
     let map = map_file::Map::load(&args.map)?;
     let rig = args.rig.as_deref().map(Rig::load).transpose()?;
+    // A map imported from a lighting plan without a rig needs one: said, naming the map,
+    // before any output is made.
+    if rig.is_none() && map.rig.is_none() {
+        let e = replay::Error::MapWithoutRig {
+            plan: map.source_plan.clone(),
+        };
+        return Err(anyhow::Error::new(e).context(args.map.display().to_string()));
+    }
     let mut traj = args
         .trajectory
         .as_deref()

@@ -12,6 +12,7 @@ mod fpga;
 mod harris;
 mod localize;
 mod log;
+mod map_import;
 mod progress;
 mod replay;
 mod rig_import;
@@ -44,15 +45,18 @@ enum Command {
     /// SLAM; prints a short summary and writes the estimates (MCAP), the summary (JSON) and the
     /// trajectory (CSV) on request.
     Replay(replay::Args),
-    /// A vehicle log on a saved map (`replay --save-map`): the vehicle may start anywhere in
-    /// it and be moved while blind; prints whether and where it localised, the lamps missing
-    /// and new, and writes the summary (JSON) and trajectory (CSV) on request.
+    /// A vehicle log on a saved map (`replay --save-map`, `map import`): the vehicle may start
+    /// anywhere in it and be moved while blind; prints whether and where it localised, the
+    /// lamps missing and new, and writes the summary (JSON) and trajectory (CSV) on request.
     Localize(localize::Args),
     /// Vehicle logs: `log check` says what is damaged and what a replay will use (exit 0 only
     /// for an undamaged log); `log recover` writes every readable record to a clean log.
     Log(log::Args),
     /// Rig files: `rig import` writes one from a stereo calibration by Kalibr, ROS or OpenCV.
     Rig(rig_import::Args),
+    /// Saved maps: `map import` makes one from a hall's lighting plan or survey (a CSV of the
+    /// lamps' positions), to localise on without a mapping drive.
+    Map(map_import::Args),
     /// The viewer: a vehicle log (replayed on the fly) or an estimates file, with the image
     /// planes, the map, the camera parameters and the NIS over time and a timeline;
     /// `--map MAP` localises the log on a saved map instead and shows where it was localised
@@ -103,6 +107,7 @@ fn main() -> ExitCode {
         // `log check` exits 1 for a damaged log, without an error line.
         Command::Log(args) => log::run(&args),
         Command::Rig(args) => done(rig_import::run(&args)),
+        Command::Map(args) => done(map_import::run(&args)),
         Command::View(args) => done(view::run(&args)),
     };
     match result {

@@ -11,6 +11,7 @@ mod fpga_cli;
 mod harris_cli;
 mod localize_cli;
 mod log_cli;
+mod map_import_cli;
 mod replay_cli;
 mod rig_import_cli;
 mod simulate_cli;
