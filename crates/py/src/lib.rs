@@ -270,6 +270,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ODOMETRY_LOOKAHEAD_US", nav::ODOMETRY_LOOKAHEAD_US)?;
     m.add_function(wrap_pyfunction!(maps::read_map, m)?)?;
     m.add_function(wrap_pyfunction!(maps::write_map, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::import_map, m)?)?;
+    m.add("DEFAULT_LAMP_SIGMA_M", map_file::DEFAULT_LAMP_SIGMA_M)?;
     m.add_class::<localization::LocalizeResult>()?;
     m.add_class::<localization::LocalizedFrames>()?;
     m.add_function(wrap_pyfunction!(localization::localize_log, m)?)?;

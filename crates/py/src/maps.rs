@@ -8,6 +8,11 @@
 //! representation back to the same float, so a map read and written again is the same file,
 //! byte for byte.
 //!
+//! `import_map` is `stereonav map import`: a map from a hall's lighting plan (a CSV file), read
+//! by the same code as the command line (`map_file::Map::import_plan`), written as it writes
+//! it; a plan that cannot make a map raises `stereonav.InputError` with the command line's
+//! one-line message (the file, the line and the problem).
+//!
 //! A body that cannot make a map (a missing key, a wrong type, a key the format does not have,
 //! another version) raises `stereonav.InputError` naming the key; a file that cannot be read or
 //! written raises it naming the file, with the `OSError` as its `__cause__`. The file is read
@@ -21,6 +26,7 @@ use serde_json::Value;
 
 use crate::calibration::file_error;
 use crate::input_error;
+use crate::rig::PyRig;
 
 /// How a body given by the caller is named in messages (`map: missing key 'landmarks'`).
 const GIVEN_MAP: &str = "map";
@@ -33,6 +39,31 @@ const GIVEN_MAP: &str = "map";
 pub(crate) fn read_map(py: Python<'_>, path: PathBuf) -> PyResult<String> {
     py.detach(|| -> Result<String, map_file::Error> {
         let map = Map::load(&path)?;
+        Ok(map.to_json()?.to_string())
+    })
+    .map_err(|e| file_error(py, &e))
+}
+
+/// The map of the lighting plan (CSV) at `csv_path`, as `stereonav map import` makes it:
+/// `sigma` the 1-sigma position of a lamp whose row gives none (metres), `rig` carried in the
+/// map when given. Written to `out_path` unless None; returns the map's JSON body. Raises
+/// `stereonav.InputError` naming the file, the line and the problem (the `OSError` as
+/// `__cause__` when the system refused a file). The GIL is released.
+#[pyfunction]
+#[pyo3(signature = (csv_path, out_path, sigma, rig))]
+pub(crate) fn import_map(
+    py: Python<'_>,
+    csv_path: PathBuf,
+    out_path: Option<PathBuf>,
+    sigma: f64,
+    rig: Option<PyRef<'_, PyRig>>,
+) -> PyResult<String> {
+    let rig = rig.map(|r| r.rig.clone());
+    py.detach(|| -> Result<String, map_file::Error> {
+        let map = Map::import_plan(&csv_path, sigma, rig)?;
+        if let Some(path) = &out_path {
+            map.save(path)?;
+        }
         Ok(map.to_json()?.to_string())
     })
     .map_err(|e| file_error(py, &e))

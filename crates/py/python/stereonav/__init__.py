@@ -46,6 +46,9 @@ map (:data:`NEW_LAMP_DTYPE`). :func:`read_map` reads a map file into a dict (its
 ``format``, ``version``, ``created_unix_s``, ``source_log``, ``rig``, ``parameters``,
 ``landmarks``) and :func:`write_map` writes such a dict as a map file, both through the Rust
 reader and writer of ``stereonav localize`` (the same checks; floats bit for bit).
+:func:`import_map` makes a map from a hall's lighting plan or survey (a CSV of the lamps'
+positions), as ``stereonav map import`` does: localised on in the hall's frame with the
+vehicle's rig, without a mapping drive.
 
 Vehicle logs for analysis (:mod:`stereonav.logs`): :func:`read_log` reads a log whole and
 returns a :class:`VehicleLog` with what was logged -- the board's byte stream and its decoded
@@ -114,10 +117,12 @@ from .navigation import (
     replay,
 )
 from .localization import (
+    DEFAULT_LAMP_SIGMA_M,
     LOCALIZED_TRAJECTORY_DTYPE,
     MAP_VERSION,
     NEW_LAMP_DTYPE,
     Localization,
+    import_map,
     localize,
     read_map,
     write_map,
@@ -143,10 +148,12 @@ from .rig import (
 )
 
 __all__ = [
+    "DEFAULT_LAMP_SIGMA_M",
     "LOCALIZED_TRAJECTORY_DTYPE",
     "MAP_VERSION",
     "NEW_LAMP_DTYPE",
     "Localization",
+    "import_map",
     "localize",
     "read_map",
     "write_map",

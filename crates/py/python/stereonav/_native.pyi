@@ -14,6 +14,8 @@ __all__ = [
     "ODOMETRY_LOOKAHEAD_US",
     "read_map",
     "write_map",
+    "import_map",
+    "DEFAULT_LAMP_SIGMA_M",
     "LocalizeResult",
     "LocalizedFrames",
     "localize",
@@ -824,8 +826,10 @@ def replay(
     """The whole stack on a vehicle log, the map it built written to ``save_map`` (unless
     None); raises ``stereonav.InputError`` naming the file or the setting."""
 
-#: The map format version written, and the newest read (docs/maps.md).
+#: The newest map format version read (docs/maps.md); a map is written as 1, or 2 without a rig.
 MAP_VERSION: Final[int]
+#: The 1-sigma position of a lamp whose row of a lighting plan gives none, metres.
+DEFAULT_LAMP_SIGMA_M: Final[float]
 ODOMETRY_LOOKAHEAD_US: Final[int]
 
 def read_map(path: str) -> str:
@@ -836,6 +840,11 @@ def read_map(path: str) -> str:
 def write_map(body: str, path: str) -> None:
     """Write the map whose JSON body is ``body``, checked as a file's body (and for the
     version and unknown keys); raises ``stereonav.InputError`` naming the key or the file."""
+
+def import_map(csv_path: str, out_path: str | None, sigma: float, rig: Rig | None) -> str:
+    """The map of the lighting plan at ``csv_path`` (``stereonav map import``), written to
+    ``out_path`` unless None, as its JSON body; raises ``stereonav.InputError`` naming the
+    file, the line and the problem."""
 
 @final
 class LocalizedFrames:

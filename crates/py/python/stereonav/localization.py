@@ -14,6 +14,9 @@ anywhere in the map, unknown to the stack, and be moved while the stack is blind
   key and type); :func:`write_map` writes such a dict back as a map file, checked the same
   way. Both go through the Rust crate ``map-file``; floats read back bit for bit, so a map
   read and written again is the same file.
+- :func:`import_map` makes a map from a hall's lighting plan or survey (a CSV file of the
+  lamps' positions), as ``stereonav map import`` does: no mapping drive; :func:`localize`
+  runs on it in the hall's frame, with the vehicle's rig.
 
 Everything runs in Rust with the GIL released; arrays come back as copies.
 """
@@ -41,14 +44,21 @@ __all__ = [
     "LOCALIZED_TRAJECTORY_DTYPE",
     "MAP_VERSION",
     "NEW_LAMP_DTYPE",
+    "DEFAULT_LAMP_SIGMA_M",
     "Localization",
+    "import_map",
     "localize",
     "read_map",
     "write_map",
 ]
 
-#: The map format version this build writes, and the newest it reads (``docs/maps.md``).
+#: The newest map format version this build reads (``docs/maps.md``). A map is written as the
+#: oldest version that holds it: 2 for a map without a rig (imported from a lighting plan
+#: without one), else 1.
 MAP_VERSION: Final[int] = _native.MAP_VERSION
+#: The 1-sigma position uncertainty, in metres, of a lamp whose row of a lighting plan gives
+#: none (:func:`import_map`'s ``sigma``, ``stereonav map import --sigma``'s default).
+DEFAULT_LAMP_SIGMA_M: Final[float] = _native.DEFAULT_LAMP_SIGMA_M
 
 _F64 = npt.NDArray[np.float64]
 _PathLike = Union[str, "os.PathLike[str]"]
@@ -233,8 +243,10 @@ def localize(
         The saved map (``docs/maps.md``).
     rig_path : path or RigConfig, optional
         The rig file (or :func:`stereonav.load_rig`'s result) for its lens, image size and
-        noise; default: the rig the map was made with. The camera's calibration always comes
-        from the map.
+        noise; default: the rig the map was made with. The camera's calibration comes from the
+        map; a map imported from a lighting plan (:func:`import_map`) has none, and its runs
+        take this rig's nominal camera and vehicle with their priors. Required for such a map
+        without a rig of its own.
     save_map : str or os.PathLike, keyword-only
         Write a new version of the map, with the lamps this run found that are not in it and
         the vehicle parameters it refined, as ``stereonav localize --save-map`` does. Written
@@ -251,7 +263,8 @@ def localize(
     InputError
         (a ``ValueError``) the map cannot be read (missing or unreadable: the ``OSError`` is
         the ``__cause__``), is not a stereonav map, is of a newer format version, is cut or
-        damaged, or has a missing key or a wrong type; it cannot localise (no lamps); the log
+        damaged, or has a missing key or a wrong type; it has no rig and none is given; it
+        cannot localise (no lamps); the log
         cannot be read or is not a vehicle log; the rig is not valid; ``save_map`` cannot be
         written. Each message is one line naming the file and the problem. A log cut short is
         not an error: it is run as far as it goes, and :attr:`Localization.warnings` says so.
@@ -291,12 +304,14 @@ def read_map(path: _PathLike) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``format`` (``"stereonav-map"``), ``version`` (int, :data:`MAP_VERSION`),
+        ``format`` (``"stereonav-map"``), ``version`` (int: 1, or 2 for a map without a rig),
         ``created_unix_s`` (int), ``source_log`` (str), ``rig`` (dict: the rig in the rig
-        file's JSON form, ``vehicle-interfaces.md`` section 3), ``parameters`` (list of
-        ``{name, value, sigma}``, every parameter of C and V) and ``landmarks`` (list of
-        ``{id, position: [x, y, z], covariance: [[3], [3], [3]], observations}``, metres and
-        square metres in the map's frame).
+        file's JSON form, ``vehicle-interfaces.md`` section 3; absent in a map imported from a
+        lighting plan without one), ``parameters`` (list of ``{name, value, sigma}``, every
+        parameter of C and V; empty in a map imported from a lighting plan) and ``landmarks``
+        (list of ``{id, position: [x, y, z], covariance: [[3], [3], [3]], observations}``,
+        metres and square metres in the map's frame); ``common_error`` when the map has it,
+        ``source_plan`` (str, the plan's file) when it was imported from a lighting plan.
 
     Raises
     ------
@@ -324,8 +339,8 @@ def write_map(map_dict: Mapping[str, Any], path: _PathLike) -> None:
     Parameters
     ----------
     map_dict : dict
-        ``format``, ``version`` (:data:`MAP_VERSION`), ``created_unix_s``, ``source_log``,
-        ``rig``, ``parameters``, ``landmarks`` as :func:`read_map` returns them.
+        ``format``, ``version`` (1, or 2 for a map without a rig), ``created_unix_s``,
+        ``source_log``, ``rig``, ``parameters``, ``landmarks`` as :func:`read_map` returns them.
     path : str or os.PathLike
         The file to write (replaced if it exists).
 
@@ -335,7 +350,8 @@ def write_map(map_dict: Mapping[str, Any], path: _PathLike) -> None:
         ``map_dict`` is not a dict, or ``path`` is not a path.
     InputError
         A key is missing, has a value of the wrong type or one that is not finite, or is not
-        part of the map format (it would be lost); ``version`` is not :data:`MAP_VERSION`; the
+        part of the map format (it would be lost); ``version`` is not the one the map is
+        written as; the
         rig is not valid. The message is one line naming the key
         (``map: landmarks[2]: 'id' is not a non-negative integer``). Or the file cannot be
         written (the message names it; the ``OSError`` is the ``__cause__``). Nothing is
@@ -380,3 +396,69 @@ def _json_value(value: object, at: str) -> Any:
         f"{_GIVEN_MAP}: {where} is of type {type(value).__qualname__}, not a JSON value "
         "(dict, list, str, int, float, bool or None)"
     )
+
+
+def import_map(
+    csv_path: _PathLike,
+    out_path: Optional[_PathLike] = None,
+    sigma: float = DEFAULT_LAMP_SIGMA_M,
+    *,
+    rig_path: Optional[RigLike] = None,
+) -> dict[str, Any]:
+    """Make a map from a hall's lighting plan or survey, as ``stereonav map import`` does.
+
+    The plan is a CSV file (``docs/maps.md``, "A map from a lighting plan"): a header naming
+    the columns ``x``, ``y``, ``z`` (metres, the hall's frame, z up) and optionally ``id`` (a
+    non-negative integer; default: the row's index from 0) and ``sigma`` (the lamp's 1-sigma
+    position uncertainty in metres, covariance ``sigma**2 I``; default: ``sigma``), in any
+    order, then a row per lamp; blank lines and lines starting with ``#`` are skipped. It is
+    read by the same Rust code as the command line, with the GIL released.
+
+    The map has the lamps only: no calibration, no log (``source_log`` empty), the plan's file
+    as ``source_plan``, and the rig only when ``rig_path`` is given (then the map is format
+    version 1; without, version 2 and :func:`localize` needs a rig).
+
+    Parameters
+    ----------
+    csv_path : str or os.PathLike
+        The lighting plan (CSV).
+    out_path : str or os.PathLike, optional
+        Write the map there (replaced if it exists), the same file as ``stereonav map import
+        --out`` writes (but for its ``created_unix_s``).
+    sigma : float
+        The 1-sigma position uncertainty of a lamp whose row gives none, metres (> 0).
+        Default :data:`DEFAULT_LAMP_SIGMA_M` (0.02).
+    rig_path : path or RigConfig, keyword-only, optional
+        A rig to carry in the map, so that :func:`localize` needs none.
+
+    Returns
+    -------
+    dict
+        The map's body, as :func:`read_map` returns it.
+
+    Raises
+    ------
+    InputTypeError
+        (a ``TypeError``) an argument has the wrong type.
+    InputError
+        (a ``ValueError``) the plan cannot make a map: one line naming the file, the line and
+        the problem (``hall.csv:1: the header has no 'z' column ...``, ``hall.csv:7: id 3 is
+        given twice (first on line 4)``); ``sigma`` is not positive; the rig is not valid; a
+        file cannot be read or written (the ``OSError`` is the ``__cause__``).
+
+    Examples
+    --------
+    >>> m = stereonav.import_map("hall.csv", "hall.map", sigma=0.01)   # doctest: +SKIP
+    >>> run = stereonav.localize("drive.mcap", "hall.map", "forklift.rig.toml")  # doctest: +SKIP
+    """
+    if isinstance(sigma, (bool, np.bool_)) or not isinstance(sigma, (int, float, np.integer, np.floating)):
+        raise InputTypeError(f"sigma must be a float (metres), got {_describe(sigma)} {sigma!r}")
+    body: dict[str, Any] = json.loads(
+        _native.import_map(
+            _path("csv_path", csv_path),
+            None if out_path is None else _path("out_path", out_path),
+            float(sigma),
+            None if rig_path is None else _rig("rig_path", rig_path),
+        )
+    )
+    return body
