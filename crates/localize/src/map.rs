@@ -117,9 +117,10 @@ pub struct LampMap {
     /// Start of each cell's run in `cell_lamps` (`cols * rows + 1` entries).
     cell_start: Vec<u32>,
     cell_lamps: Vec<u32>,
-    /// Every triangle of lamps with sides in `[TRIANGLE_MIN_SIDE_M, triangle_max_side_m]`,
+    /// Every triangle of lamps with sides in `[triangle_min_side_m, triangle_max_side_m]`,
     /// sorted by key.
     triangles: Vec<LampTriangle>,
+    triangle_min_side_m: f64,
     triangle_max_side_m: f64,
     footprint_m: f64,
     levels: Vec<Level>,
@@ -136,17 +137,22 @@ impl LampMap {
     /// cells (a 10,000-lamp hall of 250 m x 100 m has 6,250 of 2 m).
     const MAX_CELLS: usize = 1 << 20;
 
-    /// Shortest side of an indexed triangle, metres: shorter sides give poor headings (and
-    /// the four corners of an LED panel would fill the index with tiny triangles).
+    /// Shortest side of an indexed triangle at most, metres: shorter sides give poor
+    /// headings (and the four corners of an LED panel would fill the index with tiny
+    /// triangles). A map whose lamps are closer (the paper's five LEDs, 0.65 m apart) gets
+    /// half its median nearest-neighbour distance, at least [`Self::TRIANGLE_MIN_SIDE_FLOOR_M`].
     pub const TRIANGLE_MIN_SIDE_M: f64 = 1.0;
+
+    /// See [`Self::TRIANGLE_MIN_SIDE_M`].
+    pub const TRIANGLE_MIN_SIDE_FLOOR_M: f64 = 0.25;
 
     /// Bin of the triangles' side lengths in the index's key, metres.
     pub const TRIANGLE_BIN_M: f64 = 0.1;
 
     /// Lamps a triangle's longest side reaches on average: the longest side indexed is the
-    /// radius of a disc holding this many lamps at the map's mean density (about 240 triangles
+    /// radius of a disc holding this many lamps at the map's mean density (about 20 triangles
     /// a lamp; enough that the lamps in one frame's view form several), unless the footprint
-    /// is smaller.
+    /// is smaller or the map has fewer than four times this many lamps (then the footprint).
     pub const TRIANGLE_NEIGHBOURS: f64 = 16.0;
 
     /// Lamps further apart in height than this are on different levels, metres.
@@ -203,6 +209,7 @@ impl LampMap {
             cell_start: Vec::new(),
             cell_lamps: Vec::new(),
             triangles: Vec::new(),
+            triangle_min_side_m: Self::TRIANGLE_MIN_SIDE_M,
             triangle_max_side_m: 0.0,
             footprint_m: if footprint_m.is_finite() {
                 footprint_m.max(0.0)
@@ -316,7 +323,35 @@ impl LampMap {
         self.lamp_level = lamp_level;
     }
 
-    /// Indexes every triangle of lamps whose sides are between [`Self::TRIANGLE_MIN_SIDE_M`]
+    /// The median over the lamps (at most 1,000 of them, evenly picked) of the horizontal
+    /// distance to the nearest other lamp, metres (searched out to 16 m; `INFINITY` for a
+    /// single lamp).
+    fn median_spacing(&self) -> f64 {
+        let step = (self.lamps.len() / 1000).max(1);
+        let mut near = Vec::new();
+        let mut d: Vec<f64> = Vec::new();
+        for (i, l) in self.lamps.iter().enumerate().step_by(step) {
+            let mut r = 1.0;
+            while r <= 16.0 {
+                self.within(l.position.x, l.position.y, r, &mut near);
+                let nearest = near
+                    .iter()
+                    .filter(|&&j| j as usize != i)
+                    .filter_map(|&j| self.lamps.get(j as usize))
+                    .map(|m| horizontal(&l.position, &m.position))
+                    .fold(f64::INFINITY, f64::min);
+                if nearest.is_finite() {
+                    d.push(nearest);
+                    break;
+                }
+                r *= 2.0;
+            }
+        }
+        d.sort_by(f64::total_cmp);
+        d.get(d.len() / 2).copied().unwrap_or(f64::INFINITY)
+    }
+
+    /// Indexes every triangle of lamps whose sides are between the shortest side ([`Self::TRIANGLE_MIN_SIDE_M`])
     /// and the longest side (see [`Self::TRIANGLE_NEIGHBOURS`]; `area` the lamps' bounding
     /// box, m^2), sorted by the key of its sorted side lengths: a frame's triangle finds the
     /// map's triangles of its shape by a few binary searches, whatever the map's size
@@ -326,11 +361,21 @@ impl LampMap {
         #[allow(clippy::cast_precision_loss)]
         let density = self.lamps.len() as f64 / area;
         let by_density = libm::sqrt(Self::TRIANGLE_NEIGHBOURS / (core::f64::consts::PI * density));
-        let max_side = by_density
-            .min(self.footprint_m)
-            .max(2.0 * Self::TRIANGLE_MIN_SIDE_M);
+        let min_side = (0.5 * self.median_spacing())
+            .clamp(Self::TRIANGLE_MIN_SIDE_FLOOR_M, Self::TRIANGLE_MIN_SIDE_M);
+        // A small map (a few dozen lamps) is indexed out to the footprint: its triangles are
+        // few whatever their size, and its lamps' spread says little about a density.
+        #[allow(clippy::cast_precision_loss)]
+        let small = (self.lamps.len() as f64) < 4.0 * Self::TRIANGLE_NEIGHBOURS;
+        let max_side = if small {
+            self.footprint_m
+        } else {
+            by_density.min(self.footprint_m)
+        }
+        .max(2.0 * min_side);
+        self.triangle_min_side_m = min_side;
         self.triangle_max_side_m = max_side;
-        let (lo, hi) = (Self::TRIANGLE_MIN_SIDE_M, max_side);
+        let (lo, hi) = (min_side, max_side);
         let mut triangles = Vec::new();
         let mut near = Vec::new();
         let mut later: Vec<(u32, Vector3<f64>)> = Vec::new();
@@ -501,6 +546,11 @@ impl LampMap {
         self.triangles.len()
     }
 
+    /// The shortest side of an indexed triangle, metres ([`Self::TRIANGLE_MIN_SIDE_M`]).
+    pub fn triangle_min_side_m(&self) -> f64 {
+        self.triangle_min_side_m
+    }
+
     /// The longest side of an indexed triangle, metres.
     pub fn triangle_max_side_m(&self) -> f64 {
         self.triangle_max_side_m
@@ -633,7 +683,7 @@ mod tests {
             l.position.y += 0.3 * libm::cos(2.3 * k);
         }
         let map = LampMap::new(lamps, 8.0).unwrap();
-        let (lo, hi) = (LampMap::TRIANGLE_MIN_SIDE_M, map.triangle_max_side_m());
+        let (lo, hi) = (map.triangle_min_side_m(), map.triangle_max_side_m());
         assert!(hi > 2.5 && hi <= 8.0, "{hi}");
         let n = map.len() as u32;
         let d = |i: u32, j: u32| {

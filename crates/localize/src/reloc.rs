@@ -227,7 +227,7 @@ impl Relocalizer {
         // Each observation on each level's mean height, with how far off that puts it if its
         // lamp hangs anywhere in the level (radially from the rig: r dz / (z - z_rig)), plus
         // half the side tolerance.
-        let floor: Vec<Vec<Option<(Vector3<f64>, f64)>>> = levels
+        let floor: Vec<Vec<Option<OnLevel>>> = levels
             .iter()
             .map(|level| {
                 let above = (level.z - origin.z).max(0.5);
@@ -241,7 +241,7 @@ impl Relocalizer {
                     .collect()
             })
             .collect();
-        let min_side = s.min_pair_distance_m.max(LampMap::TRIANGLE_MIN_SIDE_M);
+        let min_side = map.triangle_min_side_m();
         let max_side = map.triangle_max_side_m();
         let n = order.len();
         // The triangles nearest the rig first (a point's error from its lamp's unknown height
@@ -331,8 +331,8 @@ impl Relocalizer {
                 let mut sorted = sides;
                 sorted.sort_by(f64::total_cmp);
                 let [lo, _, hi] = sorted;
-                // Only a triangle the index surely holds, whatever its true sides within `tol`.
-                if lo - tol < min_side || hi + tol > max_side {
+                // Only a triangle the index can hold (its sides may be a tolerance off).
+                if lo + tol < min_side || hi - tol > max_side {
                     continue;
                 }
                 used = true;
@@ -376,9 +376,9 @@ impl Relocalizer {
                 whole += usize::from(complete);
             }
         }
-        // Unless three triangles were tried whole, the set may miss the true pose while it
-        // holds others: no decision for a while.
-        if whole < 3.min(tried.max(1)) {
+        // When a look-up was cut, unless three triangles were tried whole, the set may miss
+        // the true pose while it holds others: no decision for a while.
+        if whole < tried && whole < 3 {
             self.incomplete = s.window_frames;
         }
         stats.triangles = tried;
@@ -501,8 +501,12 @@ impl Relocalizer {
                 }
                 _ => false,
             });
-            // A mirror image is not the place (the camera sees the ceiling from one side).
-            if !same_shape || hand(&q) * mhand <= 0.0 {
+            // A mirror image is not the place (the camera sees the ceiling from one side);
+            // a triangle with almost no area (three lamps nearly in a row) has no handedness
+            // to tell.
+            let longest = msides.iter().copied().fold(0.0, f64::max);
+            let flat = libm::fabs(mhand) < 0.05 * longest * longest;
+            if !same_shape || (!flat && hand(&q) * mhand <= 0.0) {
                 continue;
             }
             let pose = align(&q, &mp);
@@ -750,6 +754,9 @@ fn same_pose(a: &Pose2, b: &Pose2, s: &RelocSettings) -> bool {
     libm::hypot(a.x - b.x, a.y - b.y) <= s.merge_distance_m
         && libm::fabs(wrap_angle(a.theta - b.theta)) <= s.merge_angle_rad
 }
+
+/// An observation on a level's mean height: the point (robot frame) and how far off it can be.
+type OnLevel = (Vector3<f64>, f64);
 
 /// The six orders of a triangle's vertices.
 const PERMUTATIONS: [[usize; 3]; 6] = [

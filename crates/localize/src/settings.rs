@@ -13,9 +13,6 @@ pub struct RelocSettings {
     pub min_observations: usize,
     /// Most observations a generation pairs (the longest tracks).
     pub max_generation_observations: usize,
-    /// Shortest side of a frame's triangle of observations, metres (short sides give poor
-    /// headings); the map's index holds no shorter ([`crate::LampMap::TRIANGLE_MIN_SIDE_M`]).
-    pub min_pair_distance_m: f64,
     /// Tolerance of a frame triangle's side against a map triangle's once the frame's points
     /// are put at their lamps' heights, metres, plus [`Self::pair_tolerance_fraction`] of the
     /// side (the map's errors, the pixel noise); the look-up adds how far a lamp's level's
@@ -75,7 +72,6 @@ impl Default for RelocSettings {
             generate_every_frames: 4,
             min_observations: 3,
             max_generation_observations: 10,
-            min_pair_distance_m: 1.0,
             pair_tolerance_m: 0.05,
             pair_tolerance_fraction: 0.01,
             support_radius_m: 0.1,

@@ -68,8 +68,10 @@ pub use estimates_log::{
 };
 pub use localization::{
     LocalizeEnd, LocalizeTruth, LocalizedFrame, LocalizedTrajectoryWriter, MAX_LAMP_SIGMA_M,
-    WRONG_FIX_M, localize_log, localize_summary_json, localizer_for, map_with_new_lamps,
+    WEIGHED_SHOWN, WRONG_FIX_M, localize_log, localize_summary_json, localizer_for,
+    map_with_new_lamps,
 };
+pub use localize::reloc::{Generation, Waiting, Weighed};
 pub use localize::{LocalizerSettings, RelocSettings};
 pub use map::saved_map;
 pub use nav::{FramePairSettings, NavMode, NavSettings, Navigator};

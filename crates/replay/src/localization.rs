@@ -10,6 +10,7 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
+use localize::reloc::{Generation, Waiting, Weighed};
 use localize::{
     CommonError, FrameResult, LampMap, Localizer, LocalizerSettings, MapLamp, NewLamp, Status,
 };
@@ -41,7 +42,20 @@ pub struct LocalizedFrame {
     /// The log's true pose at this frame's time, when it has one (simulator logs): what the
     /// errors against the truth compare the pose to.
     pub truth: Option<[f64; 3]>,
+    /// While lost: what holds a fix back (no hypothesis, an incomplete generation, the best
+    /// too young, too few lamps, a poor fit, or its margin over the next); `None` when
+    /// localised.
+    pub waiting: Option<Waiting>,
+    /// While lost: the best hypotheses, best first (at most [`WEIGHED_SHOWN`]), each with how
+    /// far behind the best it is: the hypotheses being weighed.
+    pub weighed: [Option<Weighed>; WEIGHED_SHOWN],
+    /// While lost: the relocaliser's last generation of hypotheses (how many triangles of the
+    /// frame it looked up, how many map triangles they returned, the candidates).
+    pub generation: Option<Generation>,
 }
+
+/// Hypotheses a [`LocalizedFrame`] keeps of those being weighed.
+pub const WEIGHED_SHOWN: usize = 6;
 
 impl LocalizedFrame {
     /// The pose the localiser stands behind: `Some` for a localised frame, `None` for a lost
@@ -235,7 +249,7 @@ pub fn localize_log(
                 };
                 frames += 1;
                 first_t.get_or_insert(f.t_us);
-                let mut row = frame_row(&result);
+                let mut row = frame_row(&result, &localizer);
                 if let Some(t) = stream.truth.pose_at(f.t_us) {
                     let pose = [t.x, t.y, t.theta];
                     row.truth = Some(pose);
@@ -317,8 +331,16 @@ pub fn localize_log(
     })
 }
 
-fn frame_row(r: &FrameResult) -> LocalizedFrame {
+fn frame_row(r: &FrameResult, localizer: &Localizer) -> LocalizedFrame {
     let c = &r.pose_covariance;
+    let lost = r.status != Status::Localized;
+    let reloc = localizer.relocalizer();
+    let mut weighed = [None; WEIGHED_SHOWN];
+    if lost {
+        for (slot, w) in weighed.iter_mut().zip(reloc.weighed()) {
+            *slot = Some(w);
+        }
+    }
     let sd = |v: f64| if v >= 0.0 { v.sqrt() } else { f64::NAN };
     LocalizedFrame {
         t_us: r.t_us,
@@ -332,6 +354,9 @@ fn frame_row(r: &FrameResult) -> LocalizedFrame {
         matched: u32::try_from(r.matched.len()).unwrap_or(u32::MAX),
         hypotheses: u32::try_from(r.hypotheses).unwrap_or(u32::MAX),
         truth: None,
+        waiting: if lost { reloc.waiting() } else { None },
+        generation: lost.then_some(reloc.last_generation),
+        weighed,
     }
 }
 

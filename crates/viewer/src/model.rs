@@ -1259,6 +1259,9 @@ mod tests {
             matched: u32::from(localized) * 3,
             hypotheses: u32::from(!localized) * 2,
             truth: None,
+            waiting: None,
+            weighed: [None; replay::WEIGHED_SHOWN],
+            generation: None,
         }
     }
 
