@@ -731,6 +731,26 @@ pub enum Waiting {
     },
 }
 
+impl core::fmt::Display for Waiting {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::NoHypothesis => write!(f, "no hypothesis fits the lamps in view"),
+            Self::Incomplete => write!(f, "a generation was cut (the view fits too many places)"),
+            Self::Young { frames } => write!(f, "the best has lived {frames} frames"),
+            Self::FewLamps { matched, distinct } => write!(
+                f,
+                "the best matches {matched} lamps ({distinct} distinct so far)"
+            ),
+            Self::PoorFit { mean_nis } => {
+                write!(f, "the best fits poorly (mean NIS {mean_nis:.1})")
+            }
+            Self::Margin { ahead_nats } => {
+                write!(f, "the best is only {ahead_nats:.1} nats ahead of the next")
+            }
+        }
+    }
+}
+
 /// A live hypothesis as [`Relocalizer::weighed`] reports it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Weighed {

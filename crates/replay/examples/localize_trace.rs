@@ -11,17 +11,7 @@ use std::process::ExitCode;
 use replay::{LocalizerSettings, Waiting};
 
 fn waiting(w: Option<Waiting>) -> String {
-    match w {
-        None => "-".into(),
-        Some(Waiting::NoHypothesis) => "no hypothesis".into(),
-        Some(Waiting::Incomplete) => "generation incomplete".into(),
-        Some(Waiting::Young { frames }) => format!("best lived {frames} frames"),
-        Some(Waiting::FewLamps { matched, distinct }) => {
-            format!("best matched {matched} lamps ({distinct} distinct)")
-        }
-        Some(Waiting::PoorFit { mean_nis }) => format!("best's mean NIS {mean_nis:.1}"),
-        Some(Waiting::Margin { ahead_nats }) => format!("best only {ahead_nats:.1} nats ahead"),
-    }
+    w.map_or_else(|| "-".into(), |w| w.to_string())
 }
 
 fn main() -> ExitCode {

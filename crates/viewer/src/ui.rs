@@ -999,6 +999,40 @@ impl Viewer {
             }
         }
 
+        // While lost: the hypotheses being weighed, each a hollow arrow at its pose with how
+        // far behind the best it is (nats), so that one sees why no fix is declared yet.
+        if let (Some(loc), Some(i)) = (&m.localization, frame)
+            && let Some(f) = loc.frame(i)
+            && !f.localized
+        {
+            for w in f.weighed.iter().flatten() {
+                let at = to_screen([w.pose.x, w.pose.y]);
+                let (s, c) = (w.pose.theta.sin() as f32, w.pose.theta.cos() as f32);
+                let ahead = vec2(c, -s);
+                let side = vec2(s, c);
+                painter.add(Shape::closed_line(
+                    vec![
+                        at + ahead * 10.0,
+                        at - ahead * 5.0 + side * 5.0,
+                        at - ahead * 5.0 - side * 5.0,
+                    ],
+                    Stroke::new(1.5, LOST),
+                ));
+                let label = if w.behind_nats <= 0.0 {
+                    format!("best, {} frames", w.age)
+                } else {
+                    format!("-{:.0} nats", w.behind_nats)
+                };
+                painter.text(
+                    at + vec2(8.0, 8.0),
+                    Align2::LEFT_TOP,
+                    label,
+                    FontId::proportional(10.0),
+                    LOST,
+                );
+            }
+        }
+
         // The robot: its pose, heading and pose ellipse (a localisation run's in the colour of
         // its status).
         let robot = match (&m.localization, frame) {
@@ -1586,10 +1620,12 @@ fn localization_status(frame: Option<&replay::LocalizedFrame>) -> (String, Color
         ),
         Some(f) => (
             format!(
-                "lost: {} hypothes{}{}",
+                "lost: {} hypothes{}{}{}",
                 f.hypotheses,
                 if f.hypotheses == 1 { "is" } else { "es" },
-                if f.pose.is_some() { "" } else { ", no pose" }
+                if f.pose.is_some() { "" } else { ", no pose" },
+                f.waiting
+                    .map_or(String::new(), |w| format!("; waiting: {w}"))
             ),
             LOST,
         ),
@@ -1633,6 +1669,36 @@ mod tests {
             bounds: (lo, hi),
             base_step_size: base,
         })
+    }
+
+    #[test]
+    fn a_lost_frame_says_what_holds_the_fix_back() {
+        let frame = replay::LocalizedFrame {
+            t_us: 1,
+            pose: Some([1.0, 2.0, 0.3]),
+            sigma: [0.1; 3],
+            localized: false,
+            matched: 0,
+            hypotheses: 2,
+            truth: None,
+            waiting: Some(replay::Waiting::Margin { ahead_nats: 12.5 }),
+            weighed: [None; replay::WEIGHED_SHOWN],
+            generation: None,
+        };
+        let (text, colour) = localization_status(Some(&frame));
+        assert_eq!(colour, LOST);
+        assert!(text.starts_with("lost: 2 hypotheses"), "{text}");
+        assert!(text.contains("12.5 nats ahead"), "{text}");
+        let localized = replay::LocalizedFrame {
+            localized: true,
+            matched: 7,
+            waiting: None,
+            ..frame
+        };
+        assert_eq!(
+            localization_status(Some(&localized)).0,
+            "localised: 7 map lamps matched"
+        );
     }
 
     #[test]
