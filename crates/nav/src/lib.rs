@@ -51,6 +51,7 @@ extern crate std;
 mod error;
 mod frame_pairs;
 pub mod loops;
+pub mod sequencer;
 
 use alloc::collections::{BTreeMap, BTreeSet};
 use alloc::vec::Vec;

@@ -11,32 +11,18 @@
 //! replayed, in arrival order; the navigator then refuses it if it is older than the frame
 //! before, and the replay counts it.
 
-use std::cmp::Reverse;
-use std::collections::{BTreeMap, BinaryHeap, VecDeque};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use fpga_link::{Decoder, Event};
+use nav::sequencer::{Sequenced, Sequencer};
 use rig_model::odometry::OdomSample;
 use track::Pixel;
 use vehicle_log::{LogReader, Record, TruthCamera, TruthLandmark, TruthPose};
 
 use crate::{Counts, DecodedFrame, Error};
 
-/// The reorder window, microseconds of data time: a frame reaching the log up to this much
-/// after a later frame is still put in its place. The board's latency (exposure, read-out,
-/// the detector, the link) is tens of milliseconds.
-pub const REORDER_US: u64 = 2_000_000;
-
-/// A frame waits at most this long (data time of later frames) for the odometry to pass its
-/// look-ahead: a log whose odometry ends early, or has none, still streams.
-const ODOMETRY_WAIT_US: u64 = 10_000_000;
-
-/// Most frames held in the window (a log of frames far out of order still streams).
-const MAX_HELD_FRAMES: usize = 2_000;
-
-/// Most odometry samples held waiting for a frame (an hour at 100 Hz: a log with no frames
-/// for that long still streams, its odometry then let out ahead of the next frame's).
-const MAX_HELD_ODOMETRY: usize = 360_000;
+pub use nav::sequencer::REORDER_US;
 
 /// Most untimed bytes of input read before the log's `/rig` when no rig was given.
 const MAX_BYTES_BEFORE_RIG: u64 = 64 << 20;
@@ -48,31 +34,6 @@ pub(crate) enum Input {
     Odometry(OdomSample),
     /// A decoded stereo frame.
     Frame(DecodedFrame),
-}
-
-/// Something held in the window, ordered by `(t_us, arrival)`.
-#[derive(Debug, Clone)]
-struct Held<T> {
-    t_us: u64,
-    arrival: u64,
-    item: T,
-}
-
-impl<T> PartialEq for Held<T> {
-    fn eq(&self, other: &Self) -> bool {
-        (self.t_us, self.arrival) == (other.t_us, other.arrival)
-    }
-}
-impl<T> Eq for Held<T> {}
-impl<T> PartialOrd for Held<T> {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl<T> Ord for Held<T> {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        (self.t_us, self.arrival).cmp(&(other.t_us, other.arrival))
-    }
 }
 
 /// The simulator's truth as it streams by: the landmarks and camera (once), and the poses of
@@ -103,14 +64,8 @@ pub(crate) struct LogStream {
     path: PathBuf,
     reader: LogReader,
     decoder: Decoder,
-    frames: BinaryHeap<Reverse<Held<DecodedFrame>>>,
-    odometry: BinaryHeap<Reverse<Held<OdomSample>>>,
-    arrivals: u64,
-    latest_frame_t: Option<u64>,
-    latest_odometry_t: Option<u64>,
-    /// The stamp of the last frame decoded, in stream order (out-of-order count).
-    last_decoded_t: Option<u64>,
-    ready: VecDeque<Input>,
+    /// The window that puts frames and odometry in data-time order (`nav::sequencer`).
+    window: Sequencer<DecodedFrame>,
     ended: bool,
     /// The first `/rig` message's text.
     pub(crate) rig_text: Option<String>,
@@ -126,8 +81,7 @@ impl std::fmt::Debug for LogStream {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LogStream")
             .field("path", &self.path)
-            .field("held_frames", &self.frames.len())
-            .field("held_odometry", &self.odometry.len())
+            .field("held", &self.window.held())
             .field("ended", &self.ended)
             .finish_non_exhaustive()
     }
@@ -141,13 +95,7 @@ impl LogStream {
             path: path.to_path_buf(),
             reader,
             decoder: Decoder::new(),
-            frames: BinaryHeap::new(),
-            odometry: BinaryHeap::new(),
-            arrivals: 0,
-            latest_frame_t: None,
-            latest_odometry_t: None,
-            last_decoded_t: None,
-            ready: VecDeque::new(),
+            window: Sequencer::new(),
             ended: false,
             rig_text: None,
             truth: TruthStream::default(),
@@ -202,62 +150,17 @@ impl LogStream {
     /// The next input in data-time order; `None` at the end of the log.
     pub(crate) fn next_input(&mut self) -> Result<Option<Input>, Error> {
         loop {
-            if let Some(input) = self.ready.pop_front() {
-                return Ok(Some(input));
-            }
-            if self.release() {
-                continue;
+            if let Some(input) = self.window.pop() {
+                return Ok(Some(match input {
+                    Sequenced::Odometry(s) => Input::Odometry(s),
+                    Sequenced::Frame(_, f) => Input::Frame(f),
+                }));
             }
             if self.ended {
                 return Ok(None);
             }
             self.pump()?;
         }
-    }
-
-    /// Moves what the window can let out to `ready`; whether it moved anything.
-    fn release(&mut self) -> bool {
-        let Some(Reverse(first)) = self.frames.peek() else {
-            return self.release_odometry_overflow();
-        };
-        let t = first.t_us;
-        let look_ahead = t.saturating_add(nav::ODOMETRY_LOOKAHEAD_US);
-        let later_frame = |wait: u64| {
-            self.latest_frame_t
-                .is_some_and(|latest| latest >= t.saturating_add(wait))
-        };
-        let odometry_past = self.latest_odometry_t.is_some_and(|o| o >= look_ahead);
-        let due = self.ended
-            || self.frames.len() > MAX_HELD_FRAMES
-            || (later_frame(REORDER_US) && odometry_past)
-            || later_frame(ODOMETRY_WAIT_US);
-        if !due {
-            return self.release_odometry_overflow();
-        }
-        while self
-            .odometry
-            .peek()
-            .is_some_and(|Reverse(s)| s.t_us <= look_ahead)
-        {
-            if let Some(Reverse(s)) = self.odometry.pop() {
-                self.ready.push_back(Input::Odometry(s.item));
-            }
-        }
-        if let Some(Reverse(frame)) = self.frames.pop() {
-            self.ready.push_back(Input::Frame(frame.item));
-        }
-        true
-    }
-
-    /// Lets out the oldest odometry when more than [`MAX_HELD_ODOMETRY`] samples wait.
-    fn release_odometry_overflow(&mut self) -> bool {
-        if self.odometry.len() <= MAX_HELD_ODOMETRY {
-            return false;
-        }
-        if let Some(Reverse(s)) = self.odometry.pop() {
-            self.ready.push_back(Input::Odometry(s.item));
-        }
-        true
     }
 
     /// Reads one record of the log (or notes its end).
@@ -268,6 +171,7 @@ impl LogStream {
                 let mut frames = Vec::new();
                 decode_end(&mut self.decoder, &mut frames);
                 self.hold_frames(frames);
+                self.window.end();
                 let stats = self.decoder.stats();
                 self.counts.frames = stats.packets;
                 self.counts.corrupt = stats.corrupt;
@@ -290,18 +194,12 @@ impl LogStream {
             }
             Record::Odom(s) => {
                 self.counts.odometry += 1;
-                self.latest_odometry_t = self.latest_odometry_t.max(Some(s.t_us));
-                self.arrivals += 1;
-                self.odometry.push(Reverse(Held {
+                self.window.push_odometry(OdomSample {
                     t_us: s.t_us,
-                    arrival: self.arrivals,
-                    item: OdomSample {
-                        t_us: s.t_us,
-                        vx: s.vx,
-                        vy: s.vy,
-                        vtheta: s.vtheta,
-                    },
-                }));
+                    vx: s.vx,
+                    vy: s.vy,
+                    vtheta: s.vtheta,
+                });
             }
             // The first /rig counts (the rig is logged once, at the start).
             Record::Rig(text) if self.rig_text.is_none() => self.rig_text = Some(text),
@@ -332,18 +230,9 @@ impl LogStream {
 
     fn hold_frames(&mut self, frames: Vec<DecodedFrame>) {
         for frame in frames {
-            if self.last_decoded_t.is_some_and(|last| frame.t_us < last) {
-                self.counts.frames_out_of_order += 1;
-            }
-            self.last_decoded_t = Some(frame.t_us);
-            self.latest_frame_t = self.latest_frame_t.max(Some(frame.t_us));
-            self.arrivals += 1;
-            self.frames.push(Reverse(Held {
-                t_us: frame.t_us,
-                arrival: self.arrivals,
-                item: frame,
-            }));
+            self.window.push_frame(frame.t_us, frame);
         }
+        self.counts.frames_out_of_order = self.window.frames_out_of_order();
     }
 }
 
