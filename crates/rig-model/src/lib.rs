@@ -6,7 +6,7 @@
 //!   analytic Jacobians with respect to the pose, the landmark and every camera parameter, and
 //!   stereo triangulation with covariance propagation.
 //! * [`config`] (feature `alloc`): the rig configuration: nominal `C`, what to estimate, priors,
-//!   noise; [`rig_file`] (feature `std`) reads and writes it as TOML (section 3) and JSON.
+//!   noise; [`rig_file`] (feature `rig-file`, on with `std`) reads and writes it as TOML (section 3) and JSON.
 //! * [`lens`]: real lenses (section 1.1); [`stereo_rectify`]: a raw stereo calibration
 //!   rectified as OpenCV's `stereoRectify` does (section 5, `stereonav rig import`);
 //!   [`import`] (feature `std`): rig files from Kalibr, ROS and OpenCV calibrations, for the
@@ -36,7 +36,7 @@ pub mod import;
 pub mod lens;
 pub mod odometry;
 pub mod rig;
-#[cfg(feature = "std")]
+#[cfg(feature = "rig-file")]
 pub mod rig_file;
 pub mod stereo_rectify;
 
@@ -47,5 +47,5 @@ pub use rig::{
     Measurement, ProjectionJacobians, RigError, Triangulation, point_in_rig, project,
     project_with_jacobians, triangulate,
 };
-#[cfg(feature = "std")]
+#[cfg(feature = "rig-file")]
 pub use rig_file::{RIG_FILE_KEYS, RigFileError};

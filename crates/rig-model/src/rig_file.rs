@@ -2,10 +2,11 @@
 //! estimate, their priors, and the noise model. Read from TOML files, or from the JSON of a
 //! log's `/rig` message; written back as JSON.
 
-use std::format;
+use alloc::format;
+use alloc::string::{String, ToString};
+use alloc::vec::Vec;
+#[cfg(feature = "std")]
 use std::path::Path;
-use std::string::{String, ToString};
-use std::vec::Vec;
 
 use toml::{Table, Value};
 
@@ -436,6 +437,7 @@ fn describe(v: &Value) -> String {
 
 impl Rig {
     /// Reads a rig file (TOML). Errors name the file, the key and what was wrong.
+    #[cfg(feature = "std")]
     pub fn load(path: &Path) -> Result<Self, RigFileError> {
         let name = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| RigFileError::Io {
