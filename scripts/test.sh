@@ -137,10 +137,10 @@ if [ "$tier" = fast ]; then
     rust_tests fast
     cargo test --workspace --locked --profile "$PROFILE" --doc
 
-    step "no_std proof: firmware crates linked into a #![no_std] staticlib with its own panic handler, run from C"
+    step "no_std proof: firmware crates and the C interface's firmware build linked into a #![no_std] staticlib, run from C through stereonav.h"
     cargo build --locked --manifest-path ci/nostd-proof/Cargo.toml --target-dir target/nostd-proof
-    cc -Wall -Wextra -Werror ci/nostd-proof/main.c target/nostd-proof/debug/libnostd_proof.a \
-        -o target/nostd-proof/run
+    cc -std=c99 -Wall -Wextra -Werror -I crates/capi/include ci/nostd-proof/main.c \
+        target/nostd-proof/debug/libnostd_proof.a -o target/nostd-proof/run
     target/nostd-proof/run
 else
     step "Rust tests of the slow tier"

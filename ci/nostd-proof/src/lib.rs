@@ -1,14 +1,13 @@
 //! Links the firmware crates, and `rig-model`, `selfcal`, `track`, `vslam-ekf` and `nav` with
-//! `alloc` only, into a `#![no_std]` static library (see Cargo.toml). The rig configuration
-//! needs a heap, so the library brings its own global allocator: a bump allocator over a
-//! static buffer.
+//! `alloc` only, and the C interface's firmware build (`stereonav-capi` without `std`), into
+//! a `#![no_std]` static library (see Cargo.toml). The heap is the C program's: the C
+//! interface's global allocator calls its `sn_firmware_alloc` and `sn_firmware_free`.
 #![no_std]
 
 extern crate alloc;
 
-use core::alloc::{GlobalAlloc, Layout};
-use core::cell::UnsafeCell;
-use core::sync::atomic::{AtomicUsize, Ordering};
+// The C interface's symbols (sn_*) go into this library with it.
+pub use stereonav;
 
 use alloc::vec::Vec;
 use fpga_link::{Decoder, Event, Header, MAX_PACKET_LEN, encode_packet};
@@ -92,58 +91,6 @@ pub extern "C" fn stereonav_nostd_stream_round_trip() -> i32 {
     }
     i32::try_from(features).unwrap_or(-1)
 }
-
-/// Size of the bump allocator's heap: ample for the small vectors made here, which a bump
-/// allocator never frees (a phase-1 solve allocates scratch space on every iteration).
-const HEAP_BYTES: usize = 4 * 1024 * 1024;
-
-/// The heap's bytes, aligned for any ordinary type.
-#[repr(C, align(16))]
-struct Heap(UnsafeCell<[u8; HEAP_BYTES]>);
-
-/// A bump allocator: hands out successive slices of a static buffer and never frees. Enough
-/// for a proof that links `alloc`; firmware would bring its own allocator (or none).
-struct BumpAllocator {
-    heap: Heap,
-    /// Offset of the first free byte.
-    next: AtomicUsize,
-}
-
-// SAFETY: the buffer is only reached through the disjoint ranges that `alloc` reserves, each
-// exactly once, by an atomic update of `next`.
-unsafe impl Sync for BumpAllocator {}
-
-// SAFETY: `alloc` returns either null or a pointer to `layout.size()` bytes inside `heap`,
-// aligned to `layout.align()` and never handed out again; `dealloc` does nothing.
-unsafe impl GlobalAlloc for BumpAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let base = self.heap.0.get().cast::<u8>();
-        let mut start = 0;
-        let reserved = self
-            .next
-            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |next| {
-                // Padding to the next aligned address (alignments are powers of two).
-                let addr = base.addr().checked_add(next)?;
-                let pad = addr.wrapping_neg() & (layout.align() - 1);
-                start = next.checked_add(pad)?;
-                let end = start.checked_add(layout.size())?;
-                (end <= HEAP_BYTES).then_some(end)
-            });
-        match reserved {
-            // SAFETY: `start + size <= HEAP_BYTES`, so the pointer stays inside the buffer.
-            Ok(_) => unsafe { base.add(start) },
-            Err(_) => core::ptr::null_mut(),
-        }
-    }
-
-    unsafe fn dealloc(&self, _ptr: *mut u8, _layout: Layout) {}
-}
-
-#[global_allocator]
-static ALLOCATOR: BumpAllocator = BumpAllocator {
-    heap: Heap(UnsafeCell::new([0; HEAP_BYTES])),
-    next: AtomicUsize::new(0),
-};
 
 /// The rig configuration of vehicle-interfaces.md section 3 (its estimate list on the heap),
 /// with a tilted mount so that f is observable.
@@ -384,7 +331,87 @@ pub extern "C" fn stereonav_nostd_navigator() -> i32 {
         .map_or(-1, |e| i32::try_from(e.landmark_count()).unwrap_or(-1))
 }
 
-#[panic_handler]
-fn panic(_info: &core::panic::PanicInfo<'_>) -> ! {
-    loop {}
+/// The rig of these probes as the text of a rig file's JSON form (vehicle-interfaces.md
+/// section 4) into `buf` (at most `cap` bytes); returns its length, or -1 when it does not
+/// fit. What a C program hands `sn_navigator_new`.
+#[unsafe(no_mangle)]
+pub extern "C" fn stereonav_nostd_rig_json(buf: *mut u8, cap: usize) -> i32 {
+    let text = rig().to_json();
+    if buf.is_null() || text.len() > cap {
+        return -1;
+    }
+    // SAFETY: `buf` has `cap >= text.len()` writable bytes (the caller's contract).
+    unsafe { core::ptr::copy_nonoverlapping(text.as_ptr(), buf, text.len()) };
+    i32::try_from(text.len()).unwrap_or(-1)
+}
+
+/// Step `k` (10 ms each) of the navigator probe's drive, as a vehicle would deliver it: the
+/// odometry sample into `t_us`, `vx`, `vy`, `vtheta`, and on every fifth step the board's
+/// packet of the stereo frame into `packet` (at most `cap` bytes; its length into
+/// `packet_len`, 0 on the other steps). Returns 0, or -1 on an error.
+#[unsafe(no_mangle)]
+pub extern "C" fn stereonav_nostd_drive_step(
+    k: u32,
+    t_us: *mut u64,
+    velocity: *mut f64,
+    packet: *mut u8,
+    cap: usize,
+    packet_len: *mut usize,
+) -> i32 {
+    if t_us.is_null() || velocity.is_null() || packet.is_null() || packet_len.is_null() {
+        return -1;
+    }
+    let rig = rig();
+    let t = u64::from(k) * 10_000;
+    // SAFETY: non-NULL outputs (the caller's contract: `velocity` has three doubles).
+    unsafe {
+        *t_us = t;
+        *velocity = 0.1;
+        *velocity.add(1) = 0.0;
+        *velocity.add(2) = 0.0;
+        *packet_len = 0;
+    }
+    if k % 5 != 0 {
+        return 0;
+    }
+    let lamps =
+        [(0.5, 0.0), (1.5, 0.5), (1.0, -0.8), (2.0, 0.2)].map(|(x, y)| Vector3::new(x, y, 4.0));
+    let pose = Pose2::new(0.1 * t as f64 * 1e-6, 0.0, 0.0);
+    let (mut left, mut right) = (Vec::new(), Vec::new());
+    for lamp in &lamps {
+        let Ok(z) = project(&rig.nominal, &pose, lamp) else {
+            return -1;
+        };
+        let q4 = |v: f64| libm::round(v * 16.0) as u16;
+        left.push(fpga_link::Feature {
+            x_q4: q4(z[0]),
+            y_q4: q4(z[1]),
+            r: 1 << 20,
+        });
+        right.push(fpga_link::Feature {
+            x_q4: q4(z[2]),
+            y_q4: q4(z[3]),
+            r: 1 << 20,
+        });
+    }
+    let mut buf = [0u8; MAX_PACKET_LEN];
+    let header = Header {
+        frame: k / 5,
+        t_us: t,
+        n_left: 4,
+        n_right: 4,
+        ..Header::default()
+    };
+    let Ok(n) = encode_packet(&header, &left, &right, &mut buf) else {
+        return -1;
+    };
+    if n > cap {
+        return -1;
+    }
+    // SAFETY: `packet` has `cap >= n` writable bytes.
+    unsafe {
+        core::ptr::copy_nonoverlapping(buf.as_ptr(), packet, n);
+        *packet_len = n;
+    }
+    0
 }

@@ -14,9 +14,8 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use stereonav::{
-    sn_navigator, sn_navigator_finish, sn_navigator_free, sn_navigator_landmarks,
-    sn_navigator_new, sn_navigator_parameter, sn_navigator_push_odometry,
-    sn_navigator_push_stream,
+    sn_navigator, sn_navigator_finish, sn_navigator_free, sn_navigator_landmarks, sn_navigator_new,
+    sn_navigator_parameter, sn_navigator_push_odometry, sn_navigator_push_stream,
 };
 
 /// The system allocator with the live bytes, their peak and the allocations counted.

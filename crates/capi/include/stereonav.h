@@ -263,6 +263,22 @@ int sn_localizer_push_stream(sn_localizer *loc, const uint8_t *bytes, size_t len
 // `loc` is NULL or a live handle; `out` is NULL or writable.
 int sn_localizer_pose(const sn_localizer *loc, sn_pose *out);
 
+// Firmware without an operating system (the library built with `cargo build
+// --release -p stereonav-capi --no-default-features --features firmware` and
+// `panic = "abort"`, as ci/nostd-proof builds it) takes its memory from the firmware,
+// which defines this and the next two (the hosted build never calls them): `size`
+// bytes aligned to `align` (a power of two), or NULL when there is no memory.
+extern void *sn_firmware_alloc(size_t size, size_t align);
+
+// Frees what `sn_firmware_alloc` returned, with its size and alignment (firmware
+// builds only).
+extern void sn_firmware_free(void *ptr, size_t size, size_t align);
+
+// A bug in the library: `len` bytes of message, not NUL-terminated; should not
+// return (reset the stack). Firmware builds only; without `std` the localiser's
+// functions answer `SN_E_REFUSED` and the last error is one for the program.
+extern void sn_firmware_panic(const char *message, size_t len);
+
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

@@ -19,14 +19,24 @@
 //! (`examples/c/firmware.c`).
 // The C boundary is `unsafe` by nature: raw pointers from C, `#[no_mangle]` symbols. Each
 // `unsafe` block says what it relies on.
+//!
+//! Without `std` (`--no-default-features --features firmware`, for firmware without an
+//! operating system) the navigator's functions are the same, the memory comes from the
+//! firmware's `sn_firmware_alloc` / `sn_firmware_free`, a panic (a bug) ends in its
+//! `sn_firmware_panic`, the last error is one for the whole program, and the localiser's
+//! functions answer `SN_E_REFUSED` (reading a map needs `std`).
 #![allow(unsafe_code, non_camel_case_types)]
+#![cfg_attr(not(feature = "std"), no_std)]
 
+extern crate alloc;
+
+use alloc::boxed::Box;
+use alloc::format;
+use alloc::string::{String, ToString};
+use alloc::vec::Vec;
 use core::ffi::{c_char, c_int};
-use std::cell::RefCell;
-use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use fpga_link::{Decoder, Event};
-use localize::{LocalizerSettings, Status};
 use nav::sequencer::{Sequenced, Sequencer};
 use nav::{NavSettings, Navigator, Phase};
 use rig_model::odometry::OdomSample;
@@ -249,12 +259,37 @@ impl sn_navigator {
 /// The localiser on a saved map behind an opaque handle.
 #[derive(Debug)]
 pub struct sn_localizer {
+    #[cfg_attr(not(feature = "std"), allow(dead_code))]
+    inner: LocalizerInner,
+}
+
+/// The localiser's state (with `std`).
+#[cfg(feature = "std")]
+#[derive(Debug)]
+struct LocalizerInner {
     loc: localize::Localizer,
     inputs: Inputs,
     last: Option<localize::FrameResult>,
 }
 
-impl sn_localizer {
+/// Without `std` there is no localiser: no handle is ever made.
+#[cfg(not(feature = "std"))]
+#[derive(Debug)]
+struct LocalizerInner {
+    _never: core::convert::Infallible,
+}
+
+/// The localiser's refusal without `std`.
+#[cfg(not(feature = "std"))]
+fn no_localizer() -> Failure {
+    Failure::new(
+        SN_E_REFUSED,
+        "this library was built without std: the localiser (which reads map files) is not in it",
+    )
+}
+
+#[cfg(feature = "std")]
+impl LocalizerInner {
     /// Runs what the window lets out through the localiser; the first error it gave.
     fn run(&mut self) -> Result<(), Failure> {
         let mut first = None;
@@ -273,9 +308,59 @@ impl sn_localizer {
     }
 }
 
-thread_local! {
+#[cfg(feature = "std")]
+std::thread_local! {
     /// The last failed call's message, per thread.
-    static LAST_ERROR: RefCell<String> = const { RefCell::new(String::new()) };
+    static LAST_ERROR: core::cell::RefCell<String> = const { core::cell::RefCell::new(String::new()) };
+}
+
+/// Without `std`: the last failed call's message, one for the program (firmware runs the
+/// stack from one task), behind a flag that keeps two writers apart.
+#[cfg(not(feature = "std"))]
+struct LastError {
+    busy: core::sync::atomic::AtomicBool,
+    text: core::cell::UnsafeCell<String>,
+}
+
+// SAFETY: `text` is only reached inside `with`, which holds `busy` for the access.
+#[cfg(not(feature = "std"))]
+unsafe impl Sync for LastError {}
+
+#[cfg(not(feature = "std"))]
+impl LastError {
+    /// Runs `f` on the message, waiting while another caller holds it.
+    fn with<R>(&self, f: impl FnOnce(&mut String) -> R) -> R {
+        use core::sync::atomic::Ordering;
+        while self
+            .busy
+            .compare_exchange_weak(false, true, Ordering::Acquire, Ordering::Relaxed)
+            .is_err()
+        {
+            core::hint::spin_loop();
+        }
+        // SAFETY: `busy` is held: no other reference to `text` exists.
+        let r = f(unsafe { &mut *self.text.get() });
+        self.busy.store(false, Ordering::Release);
+        r
+    }
+}
+
+#[cfg(not(feature = "std"))]
+static LAST_ERROR: LastError = LastError {
+    busy: core::sync::atomic::AtomicBool::new(false),
+    text: core::cell::UnsafeCell::new(String::new()),
+};
+
+/// Runs `f` on the last error's text.
+fn last_error<R>(f: impl FnOnce(&mut String) -> R) -> R {
+    #[cfg(feature = "std")]
+    {
+        LAST_ERROR.with(|e| f(&mut e.borrow_mut()))
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        LAST_ERROR.with(f)
+    }
 }
 
 /// An error: its code and one-line message.
@@ -289,28 +374,42 @@ impl Failure {
 
 /// Runs `body` at the boundary: its error, or a panic, becomes a code and the last message.
 fn boundary(what: &str, body: impl FnOnce() -> Result<(), Failure>) -> c_int {
-    match catch_unwind(AssertUnwindSafe(body)) {
+    match caught(body) {
         Ok(Ok(())) => SN_OK,
         Ok(Err(Failure(code, message))) => {
             set_error(format!("{what}: {message}"));
             code
         }
-        Err(panic) => {
-            let text = panic
-                .downcast_ref::<&str>()
-                .map(|s| (*s).to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".to_string());
+        Err(text) => {
             set_error(format!("{what}: internal error (a bug): {text}"));
             SN_E_INTERNAL
         }
     }
 }
 
+/// `body`'s result, or a panic's message (with `std`; without it a panic ends in the
+/// firmware's `sn_firmware_panic`).
+fn caught<T>(body: impl FnOnce() -> T) -> Result<T, String> {
+    #[cfg(feature = "std")]
+    {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)).map_err(|panic| {
+            panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".to_string())
+        })
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        Ok(body())
+    }
+}
+
 fn set_error(message: String) {
     // One line, whatever the inner errors held.
     let line = message.replace(['\n', '\r'], " ");
-    LAST_ERROR.with(|e| *e.borrow_mut() = line);
+    last_error(|e| *e = line);
 }
 
 /// `ptr` as a reference, or `SN_E_NULL` naming `what`.
@@ -394,6 +493,7 @@ fn nav_code(e: &nav::Error) -> c_int {
 }
 
 /// The code of a localiser error.
+#[cfg(feature = "std")]
 fn loc_code(e: &localize::Error) -> c_int {
     match e {
         localize::Error::OdometryOutOfOrder { .. } | localize::Error::FrameOutOfOrder { .. } => {
@@ -419,8 +519,7 @@ pub extern "C" fn sn_abi_version() -> u32 {
 /// `buf` is NULL or points to `len` writable bytes.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn sn_last_error(buf: *mut c_char, len: usize) -> usize {
-    LAST_ERROR.with(|e| {
-        let message = e.borrow();
+    last_error(|message| {
         let bytes = message.as_bytes();
         if !buf.is_null() && len > 0 {
             let n = bytes.len().min(len - 1);
@@ -670,7 +769,7 @@ pub unsafe extern "C" fn sn_navigator_landmarks(
         let mut all: Vec<sn_landmark> = ekf
             .landmarks()
             .map(|l| {
-                let sd = |v: f64| if v >= 0.0 { v.sqrt() } else { f64::NAN };
+                let sd = |v: f64| if v >= 0.0 { libm::sqrt(v) } else { f64::NAN };
                 sn_landmark {
                     id: u32::try_from(l.id.0).unwrap_or(u32::MAX),
                     x: l.position.x,
@@ -741,7 +840,7 @@ pub unsafe extern "C" fn sn_navigator_parameter(
             .copied()
             .unwrap_or(0.0);
         *value = camera.get(param);
-        *sigma = if v >= 0.0 { v.sqrt() } else { f64::NAN };
+        *sigma = if v >= 0.0 { libm::sqrt(v) } else { f64::NAN };
         Ok(())
     })
 }
@@ -783,16 +882,27 @@ pub unsafe extern "C" fn sn_localizer_new(
             )
         };
         let rig = parse_rig(text)?;
-        let map = map_file::Map::from_bytes(bytes, "map")
-            .map_err(|e| Failure::new(SN_E_MAP, e.to_string()))?;
-        let loc = replay::localizer_for(&map, Some(rig), LocalizerSettings::default())
-            .map_err(|e| Failure::new(SN_E_MAP, e.to_string()))?;
-        *out = Box::into_raw(Box::new(sn_localizer {
-            loc,
-            inputs: Inputs::default(),
-            last: None,
-        }));
-        Ok(())
+        #[cfg(feature = "std")]
+        {
+            let map = map_file::Map::from_bytes(bytes, "map")
+                .map_err(|e| Failure::new(SN_E_MAP, e.to_string()))?;
+            let settings = localize::LocalizerSettings::default();
+            let loc = replay::localizer_for(&map, Some(rig), settings)
+                .map_err(|e| Failure::new(SN_E_MAP, e.to_string()))?;
+            *out = Box::into_raw(Box::new(sn_localizer {
+                inner: LocalizerInner {
+                    loc,
+                    inputs: Inputs::default(),
+                    last: None,
+                },
+            }));
+            Ok(())
+        }
+        #[cfg(not(feature = "std"))]
+        {
+            let _ = (rig, bytes);
+            Err(no_localizer())
+        }
     })
 }
 
@@ -825,8 +935,16 @@ pub unsafe extern "C" fn sn_localizer_push_odometry(
     boundary("sn_localizer_push_odometry", || {
         // SAFETY: NULL or a live handle.
         let loc = unsafe { non_null_mut(loc, "loc") }?;
-        loc.inputs.odometry(t_us, vx, vy, vtheta)?;
-        loc.run()
+        #[cfg(feature = "std")]
+        {
+            loc.inner.inputs.odometry(t_us, vx, vy, vtheta)?;
+            loc.inner.run()
+        }
+        #[cfg(not(feature = "std"))]
+        {
+            let _ = (loc, t_us, vx, vy, vtheta);
+            Err(no_localizer())
+        }
     })
 }
 
@@ -844,15 +962,24 @@ pub unsafe extern "C" fn sn_localizer_push_stream(
     len: usize,
     frames_done: *mut usize,
 ) -> c_int {
+    #[cfg_attr(not(feature = "std"), allow(unused_mut))]
     let mut done = 0;
     let code = boundary("sn_localizer_push_stream", || {
         // SAFETY: NULL or a live handle.
         let loc = unsafe { non_null_mut(loc, "loc") }?;
         // SAFETY: `len` readable bytes.
         let bytes = unsafe { slice(bytes, len, "bytes") }?;
-        let taken = loc.inputs.stream(bytes, &mut done);
-        let ran = loc.run();
-        taken.and(ran)
+        #[cfg(feature = "std")]
+        {
+            let taken = loc.inner.inputs.stream(bytes, &mut done);
+            let ran = loc.inner.run();
+            taken.and(ran)
+        }
+        #[cfg(not(feature = "std"))]
+        {
+            let _ = (loc, bytes);
+            Err(no_localizer())
+        }
     });
     // SAFETY: NULL or writable.
     if let Some(out) = unsafe { frames_done.as_mut() } {
@@ -890,24 +1017,113 @@ pub unsafe extern "C" fn sn_localizer_pose(loc: *const sn_localizer, out: *mut s
             phase: 1,
             ..sn_pose::default()
         };
-        *out = match &loc.last {
-            None => none,
-            Some(r) => match r.pose {
-                None => sn_pose {
-                    t_us: r.t_us,
-                    ..none
+        #[cfg(not(feature = "std"))]
+        {
+            let _ = (loc, none, out);
+            return Err(no_localizer());
+        }
+        #[cfg(feature = "std")]
+        let last = &loc.inner.last;
+        #[cfg(feature = "std")]
+        {
+            *out = match last {
+                None => none,
+                Some(r) => match r.pose {
+                    None => sn_pose {
+                        t_us: r.t_us,
+                        ..none
+                    },
+                    Some(p) => sn_pose {
+                        t_us: r.t_us,
+                        x: p.x,
+                        y: p.y,
+                        theta: p.theta,
+                        cov: row_major(&r.pose_covariance),
+                        phase: 1,
+                        localized: i32::from(r.status == localize::Status::Localized),
+                    },
                 },
-                Some(p) => sn_pose {
-                    t_us: r.t_us,
-                    x: p.x,
-                    y: p.y,
-                    theta: p.theta,
-                    cov: row_major(&r.pose_covariance),
-                    phase: 1,
-                    localized: i32::from(r.status == Status::Localized),
-                },
-            },
-        };
-        Ok(())
+            };
+            Ok(())
+        }
     })
+}
+
+/// Firmware without an operating system (`--no-default-features --features firmware`): the
+/// heap is the firmware's (`sn_firmware_alloc`, `sn_firmware_free`) and a panic, which only a
+/// bug can raise, ends in the firmware's `sn_firmware_panic` with its message (the library is
+/// built with `panic = "abort"`: nothing unwinds into C). The three are declared at the end
+/// of the header.
+#[cfg(all(not(feature = "std"), feature = "firmware"))]
+mod firmware {
+    use core::alloc::{GlobalAlloc, Layout};
+    use core::ffi::{c_char, c_void};
+
+    unsafe extern "C" {
+        /// Firmware without an operating system (the library built with `cargo build
+        /// --release -p stereonav-capi --no-default-features --features firmware` and
+        /// `panic = "abort"`, as ci/nostd-proof builds it) takes its memory from the firmware,
+        /// which defines this and the next two (the hosted build never calls them): `size`
+        /// bytes aligned to `align` (a power of two), or NULL when there is no memory.
+        fn sn_firmware_alloc(size: usize, align: usize) -> *mut c_void;
+        /// Frees what `sn_firmware_alloc` returned, with its size and alignment (firmware
+        /// builds only).
+        fn sn_firmware_free(ptr: *mut c_void, size: usize, align: usize);
+        /// A bug in the library: `len` bytes of message, not NUL-terminated; should not
+        /// return (reset the stack). Firmware builds only; without `std` the localiser's
+        /// functions answer `SN_E_REFUSED` and the last error is one for the program.
+        fn sn_firmware_panic(message: *const c_char, len: usize);
+    }
+
+    /// The firmware's allocation functions as Rust's global allocator.
+    struct Firmware;
+
+    // SAFETY: the firmware's functions return NULL or `size` bytes aligned to `align` that
+    // stay valid until freed (the header's contract for them).
+    unsafe impl GlobalAlloc for Firmware {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            // SAFETY: the firmware's function, with the layout's size and alignment.
+            unsafe { sn_firmware_alloc(layout.size(), layout.align()).cast() }
+        }
+
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            // SAFETY: `ptr` came from `alloc` with this layout.
+            unsafe { sn_firmware_free(ptr.cast(), layout.size(), layout.align()) }
+        }
+    }
+
+    #[global_allocator]
+    static ALLOCATOR: Firmware = Firmware;
+
+    /// A panic's message into a fixed buffer (no heap: the heap may be what failed).
+    struct Message {
+        buf: [u8; 256],
+        len: usize,
+    }
+
+    impl core::fmt::Write for Message {
+        fn write_str(&mut self, s: &str) -> core::fmt::Result {
+            for &b in s.as_bytes() {
+                if let Some(slot) = self.buf.get_mut(self.len) {
+                    *slot = b;
+                    self.len += 1;
+                }
+            }
+            Ok(())
+        }
+    }
+
+    #[panic_handler]
+    fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
+        let mut m = Message {
+            buf: [0; 256],
+            len: 0,
+        };
+        let _ = core::fmt::write(&mut m, format_args!("{info}"));
+        // SAFETY: the firmware's function, with `len` readable bytes.
+        unsafe { sn_firmware_panic(m.buf.as_ptr().cast(), m.len) };
+        loop {
+            core::hint::spin_loop();
+        }
+    }
 }
