@@ -10,6 +10,12 @@ use crate::LandmarkId;
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
+    /// The map holds [`crate::Settings::max_landmarks`] landmarks: no more are added.
+    #[error("the map holds its most landmarks ({cap}): no more are added")]
+    LandmarkCap {
+        /// The cap.
+        cap: usize,
+    },
     /// A number that came in is NaN or infinite.
     #[error("{what} is not finite ({value})")]
     NonFinite {

@@ -148,6 +148,11 @@ pub struct Settings {
     /// way; it moves cost between the updates (larger: more active states) and the settles
     /// (smaller: more often). 0 keeps every update dense.
     pub local_margin_m: f64,
+    /// Landmarks the map holds at most (`usize::MAX`: no cap). A firmware's memory bound: the
+    /// covariance is `(3 + 3 N + cameras)^2` doubles for `N` landmarks, so the most memory the
+    /// filter can take follows from this (docs/c-api.md). Once full, new landmarks are
+    /// refused ([`crate::Error::LandmarkCap`]): lamps beyond it are not mapped.
+    pub max_landmarks: usize,
 }
 
 impl Default for Settings {
@@ -165,6 +170,7 @@ impl Default for Settings {
             far_min_snr: 2.0,
             far_updates_per_frame: 8,
             local_margin_m: 1.0,
+            max_landmarks: usize::MAX,
         }
     }
 }

@@ -391,6 +391,11 @@ impl Ekf {
         q: usize,
         noise: &Matrix3<f64>,
     ) -> Result<LandmarkId, Error> {
+        if self.landmark_count() >= self.settings.max_landmarks {
+            return Err(Error::LandmarkCap {
+                cap: self.settings.max_landmarks,
+            });
+        }
         let n = self.x.len();
         let c0 = self.camera_offset();
         let m = self.estimated.len();

@@ -184,6 +184,11 @@ impl Ekf {
         let mut ekf = Self::new(rig, &start, settings)?;
         let m = ekf.estimated.len();
         let nl = handover.landmarks.len();
+        if nl > settings.max_landmarks {
+            return Err(Error::LandmarkCap {
+                cap: settings.max_landmarks,
+            });
+        }
         let layout = StateLayout {
             landmarks: nl,
             camera: m,
