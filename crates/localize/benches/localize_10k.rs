@@ -16,6 +16,10 @@
 //!   (`scoring`: the hypotheses the first left, predicted and scored), and its fifth
 //!   (`generating`: generation again, as every 4th frame while lost, and the live ones
 //!   scored).
+//!
+//! `RELOC_TRACE=1` prints every frame of the setup's drive until the fix: the status, the
+//! hypotheses (and the one nearest the truth), whether decisions wait on an incomplete
+//! generation, and the last generation's look-ups.
 #![allow(clippy::print_stderr, clippy::expect_used)] // a benchmark: its setup failing is a bug
 
 #[path = "../tests/support/mod.rs"]
