@@ -7,17 +7,12 @@
 //! their sigmas).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)]
 
-use std::io::Write as _;
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use replay::{NavSettings, Replayer};
-use rig_model::Rig;
-use vehicle_log::Record;
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+use support::{Paper, root};
 
 /// A directory of its own for each test (they run in parallel in one process).
 fn scratch(name: &str) -> PathBuf {
@@ -83,32 +78,18 @@ fn compile(sources: &[PathBuf], out: &Path) {
     );
 }
 
-/// The paper experiment's log: its rig file, the board's byte stream, and the inputs of the
-/// firmware example (odometry and each frame's packet, in the order the replay feeds them).
+/// The files the C programs read: the paper experiment's board stream, and the inputs of the
+/// firmware example (odometry and each frame's packet, in arrival order).
 struct Inputs {
-    rig: PathBuf,
     stream: PathBuf,
     firmware: PathBuf,
-    log: PathBuf,
 }
 
-fn inputs(dir: &Path) -> Inputs {
-    let log = root().join("fixtures/logs/paper-experiment.mcap");
-    let rig = root().join("fixtures/logs/paper-experiment.rig.toml");
-    let read = vehicle_log::read_log(&log).unwrap();
-    let mut stream = Vec::new();
-    let mut odometry = Vec::new();
-    for r in &read.records {
-        match r {
-            Record::Features { bytes, .. } => stream.extend_from_slice(bytes),
-            Record::Odom(s) => odometry.push(*s),
-            _ => {}
-        }
-    }
+fn inputs(paper: &Paper, dir: &Path) -> Inputs {
     // Each frame's packet again (the board's encoder), with its stamp.
     let mut frames: Vec<(u64, Vec<u8>)> = Vec::new();
     let mut decoder = fpga_link::Decoder::new();
-    let mut rest: &[u8] = &stream;
+    let mut rest: &[u8] = &paper.stream;
     loop {
         let (used, event) = decoder.decode(rest);
         rest = &rest[used..];
@@ -128,15 +109,19 @@ fn inputs(dir: &Path) -> Inputs {
     assert!(frames.len() > 900, "{} frames", frames.len());
     // The wheel encoders' samples and the frames in arrival order: each frame after the
     // samples up to its stamp (a live vehicle's order).
+    let odometry = &paper.odometry;
+    let sample = |file: &mut Vec<u8>, s: &rig_model::odometry::OdomSample| {
+        file.push(0_u8);
+        file.extend_from_slice(&s.t_us.to_le_bytes());
+        for v in [s.vx, s.vy, s.vtheta] {
+            file.extend_from_slice(&v.to_le_bytes());
+        }
+    };
     let mut file = Vec::new();
     let mut k = 0;
     for (t, packet) in &frames {
         while let Some(s) = odometry.get(k).filter(|s| s.t_us <= *t) {
-            file.push(0_u8);
-            file.extend_from_slice(&s.t_us.to_le_bytes());
-            for v in [s.vx, s.vy, s.vtheta] {
-                file.extend_from_slice(&v.to_le_bytes());
-            }
+            sample(&mut file, s);
             k += 1;
         }
         file.push(1_u8);
@@ -145,32 +130,12 @@ fn inputs(dir: &Path) -> Inputs {
         file.extend_from_slice(packet);
     }
     for s in &odometry[k..] {
-        file.push(0_u8);
-        file.extend_from_slice(&s.t_us.to_le_bytes());
-        for v in [s.vx, s.vy, s.vtheta] {
-            file.extend_from_slice(&v.to_le_bytes());
-        }
+        sample(&mut file, s);
     }
-    let (stream_path, firmware_path) = (dir.join("stream.bin"), dir.join("inputs.bin"));
-    std::fs::File::create(&stream_path)
-        .unwrap()
-        .write_all(&stream)
-        .unwrap();
-    std::fs::write(&firmware_path, &file).unwrap();
-    Inputs {
-        rig,
-        stream: stream_path,
-        firmware: firmware_path,
-        log,
-    }
-}
-
-/// `stereonav replay LOG --rig RIG` in process.
-fn replayed(inputs: &Inputs) -> (replay::ReplayEnd, Rig) {
-    let rig = Rig::load(&inputs.rig).unwrap();
-    let replayer = Replayer::open(&inputs.log, Some(rig.clone()), &NavSettings::default()).unwrap();
-    let mut sink = replay::ReplayCollector::default();
-    (replayer.run(&mut sink, &mut |_, _| {}).unwrap(), rig)
+    let (stream, firmware) = (dir.join("stream.bin"), dir.join("inputs.bin"));
+    std::fs::write(&stream, &paper.stream).unwrap();
+    std::fs::write(&firmware, &file).unwrap();
+    Inputs { stream, firmware }
 }
 
 fn valgrind() -> bool {
@@ -183,14 +148,13 @@ fn valgrind() -> bool {
 #[test]
 fn the_api_test_in_c_holds_every_check_without_an_invalid_access_or_a_leak() {
     let dir = scratch("api");
-    let inputs = inputs(&dir);
-    let (end, rig) = replayed(&inputs);
-    let map = replay::saved_map(&end, &rig, &inputs.log);
+    let paper = support::paper();
+    let inputs = inputs(&paper, &dir);
     let map_path = dir.join("paper.map");
-    std::fs::write(&map_path, map.to_bytes().unwrap()).unwrap();
+    std::fs::write(&map_path, &paper.map).unwrap();
     let exe = dir.join("api_test");
     compile(&[root().join("crates/capi/tests/c/api_test.c")], &exe);
-    let args = [&inputs.rig, &map_path, &inputs.stream];
+    let args = [&paper.rig_path, &map_path, &inputs.stream];
     let output = if valgrind() {
         Command::new("valgrind")
             .args([
@@ -219,11 +183,12 @@ fn the_api_test_in_c_holds_every_check_without_an_invalid_access_or_a_leak() {
 #[test]
 fn the_firmware_example_maps_the_log_as_stereonav_replay_does() {
     let dir = scratch("firmware");
-    let inputs = inputs(&dir);
+    let paper = support::paper();
+    let inputs = inputs(&paper, &dir);
     let exe = dir.join("firmware");
     compile(&[root().join("examples/c/firmware.c")], &exe);
     let output = Command::new(&exe)
-        .arg(&inputs.rig)
+        .arg(&paper.rig_path)
         .arg(&inputs.firmware)
         .output()
         .unwrap();
@@ -234,7 +199,7 @@ fn the_firmware_example_maps_the_log_as_stereonav_replay_does() {
         output.status.code(),
         String::from_utf8_lossy(&output.stderr)
     );
-    let (end, _) = replayed(&inputs);
+    let end = &paper.end;
     // The firmware's landmarks and parameters.
     let mut landmarks: Vec<(u64, [f64; 3])> = Vec::new();
     let mut params: Vec<(String, f64, f64)> = Vec::new();

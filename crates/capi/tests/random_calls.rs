@@ -6,18 +6,15 @@
 //! here too).
 #![allow(clippy::unwrap_used, clippy::expect_used, unsafe_code)]
 
+mod support;
+
 use std::ffi::{CString, c_char};
-use std::path::Path;
 use std::sync::OnceLock;
 
 use proptest::prelude::*;
 use stereonav::*;
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-}
-
-/// The paper experiment's rig text, its board bytes and a map made from it.
+/// The paper experiment's rig text, its first board bytes and the map replay saves of it.
 struct Data {
     rig: Vec<u8>,
     stream: Vec<u8>,
@@ -27,30 +24,13 @@ struct Data {
 fn data() -> &'static Data {
     static DATA: OnceLock<Data> = OnceLock::new();
     DATA.get_or_init(|| {
-        let rig_path = root().join("fixtures/logs/paper-experiment.rig.toml");
-        let log = root().join("fixtures/logs/paper-experiment.mcap");
-        let rig_text = std::fs::read(&rig_path).unwrap();
-        let read = vehicle_log::read_log(&log).unwrap();
-        let mut stream = Vec::new();
-        for r in &read.records {
-            if let vehicle_log::Record::Features { bytes, .. } = r {
-                stream.extend_from_slice(bytes);
-                if stream.len() > 40_000 {
-                    break;
-                }
-            }
-        }
-        let rig = rig_model::Rig::load(&rig_path).unwrap();
-        let replayer =
-            replay::Replayer::open(&log, Some(rig.clone()), &replay::NavSettings::default())
-                .unwrap();
-        let mut sink = replay::ReplayCollector::default();
-        let end = replayer.run(&mut sink, &mut |_, _| {}).unwrap();
-        let map = replay::saved_map(&end, &rig, &log).to_bytes().unwrap();
+        let paper = support::paper();
+        let mut stream = paper.stream;
+        stream.truncate(40_000);
         Data {
-            rig: rig_text,
+            rig: std::fs::read(&paper.rig_path).unwrap(),
             stream,
-            map,
+            map: paper.map,
         }
     })
 }

@@ -83,12 +83,7 @@ fn peak(settings: NavSettings) -> (usize, usize) {
     };
     for record in &read.records {
         match record {
-            vehicle_log::Record::Odom(s) => window.push_odometry(rig_model::odometry::OdomSample {
-                t_us: s.t_us,
-                vx: s.vx,
-                vy: s.vy,
-                vtheta: s.vtheta,
-            }),
+            vehicle_log::Record::Odom(s) => window.push_odometry(*s),
             vehicle_log::Record::Features { bytes, .. } => {
                 let mut rest: &[u8] = bytes;
                 loop {
