@@ -28,6 +28,8 @@ pub(crate) struct Args {
     /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
+    #[command(flatten)]
+    topics: crate::topics::TopicArgs,
     /// The saved map (`stereonav replay --save-map` or `stereonav map import`, docs/maps.md).
     #[arg(long, value_name = "MAP")]
     map: PathBuf,
@@ -100,8 +102,10 @@ pub(crate) fn run(args: &Args) -> Result<()> {
         }
         Ok(())
     };
+    let topics = args.topics.topics();
     let result = replay::localize_log(
         &args.log,
+        topics.as_ref(),
         &map,
         rig,
         LocalizerSettings::default(),

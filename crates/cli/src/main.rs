@@ -17,6 +17,7 @@ mod progress;
 mod replay;
 mod rig_import;
 mod simulate;
+mod topics;
 mod view;
 
 /// Ceiling-lamp stereo navigation for autonomous forklifts.

@@ -29,6 +29,8 @@ pub(crate) struct Args {
     /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
+    #[command(flatten)]
+    topics: crate::topics::TopicArgs,
     /// The rig file (TOML, section 3); without it, the log's /rig message.
     #[arg(long, value_name = "RIG.toml")]
     rig: Option<PathBuf>,
@@ -113,7 +115,8 @@ pub(crate) fn run(args: &Args) -> Result<()> {
     let mut progress = |done: u64, total: u64| bar.update(done, total);
     let started = Instant::now();
     // The log's start first: a foreign file or one without a rig makes no output.
-    let replayer = Replayer::open(&args.log, rig, &settings)?;
+    let topics = args.topics.topics();
+    let replayer = Replayer::open_with_topics(&args.log, topics.as_ref(), rig, &settings)?;
     let rig_used = replayer.rig().clone();
     let mut outputs = OutputFiles::create(args.out.as_deref(), args.trajectory.as_deref())?
         .with_tum(args.trajectory_tum.as_deref(), args.truth_tum.as_deref())?;
@@ -158,6 +161,18 @@ fn human_summary(log: &std::path::Path, r: &ReplayEnd, took: Duration) -> String
         r.counts.corrupt,
         r.counts.lost
     );
+    let c = &r.counts;
+    if c.images_left + c.images_right > 0 {
+        let _ = writeln!(
+            s,
+            "camera images: {} left, {} right, {} stereo frames detected on the host; {} without a partner, {} unreadable",
+            c.images_left,
+            c.images_right,
+            c.frames,
+            c.images_unpaired,
+            c.images_wrong_size + c.images_unsupported + c.images_undecodable
+        );
+    }
     let phase2 = r.phase2_frames;
     let phases = match (r.phase1_skipped, r.phase_switch_t_us) {
         (true, _) => "phase 1 skipped: phase 2 from the rig's priors".to_string(),

@@ -398,6 +398,14 @@ impl At<'_> {
             // Absent from estimates files written before loops were closed by constellation.
             loops_closed: self.uint(c, "loops_closed").unwrap_or(0),
             lamps_held_mapped: self.uint(c, "lamps_held_mapped").unwrap_or(0),
+            // Absent from estimates files written before ROS 2 bags were read.
+            images_left: self.uint(c, "images_left").unwrap_or(0),
+            images_right: self.uint(c, "images_right").unwrap_or(0),
+            images_unpaired: self.uint(c, "images_unpaired").unwrap_or(0),
+            images_wrong_size: self.uint(c, "images_wrong_size").unwrap_or(0),
+            images_unsupported: self.uint(c, "images_unsupported").unwrap_or(0),
+            images_undecodable: self.uint(c, "images_undecodable").unwrap_or(0),
+            image_frames_dropped: self.uint(c, "image_frames_dropped").unwrap_or(0),
         })
     }
 

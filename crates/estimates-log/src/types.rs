@@ -202,11 +202,27 @@ pub struct Counts {
     /// Lamps held while the pose was lost and mapped from where they were held
     /// (`nav::NavStats::held_mapped`).
     pub lamps_held_mapped: u64,
+    /// Left camera images read from a ROS 2 bag (vehicle-interfaces.md 4.1; 0 for the
+    /// board's stream).
+    pub images_left: u64,
+    /// Right camera images read from a ROS 2 bag.
+    pub images_right: u64,
+    /// Images without a partner within a quarter of the frame interval (frames with one
+    /// image).
+    pub images_unpaired: u64,
+    /// Images of another size than the rig's `[camera]`.
+    pub images_wrong_size: u64,
+    /// Images of an encoding or format that is not read.
+    pub images_unsupported: u64,
+    /// Images whose bytes or message do not decode.
+    pub images_undecodable: u64,
+    /// Stereo frames lost because one of their images could not be read.
+    pub image_frames_dropped: u64,
 }
 
 impl Counts {
     /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 21] {
+    pub fn named(&self) -> [(&'static str, u64); 28] {
         [
             ("frames", self.frames),
             ("corrupt", self.corrupt),
@@ -229,6 +245,13 @@ impl Counts {
             ("features_outside_field", self.features_outside_field),
             ("loops_closed", self.loops_closed),
             ("lamps_held_mapped", self.lamps_held_mapped),
+            ("images_left", self.images_left),
+            ("images_right", self.images_right),
+            ("images_unpaired", self.images_unpaired),
+            ("images_wrong_size", self.images_wrong_size),
+            ("images_unsupported", self.images_unsupported),
+            ("images_undecodable", self.images_undecodable),
+            ("image_frames_dropped", self.image_frames_dropped),
         ]
     }
 }

@@ -49,6 +49,7 @@ pub(crate) fn localize_log(
         let mut frames = Vec::new();
         let end = replay::localize_log(
             &log_path,
+            None,
             &map,
             rig,
             LocalizerSettings::default(),

@@ -55,6 +55,13 @@ COUNTS = {
     "features_outside_field",
     "loops_closed",
     "lamps_held_mapped",
+    "images_left",
+    "images_right",
+    "images_unpaired",
+    "images_wrong_size",
+    "images_unsupported",
+    "images_undecodable",
+    "image_frames_dropped",
 }
 
 

@@ -29,7 +29,7 @@ fn main() -> ExitCode {
         let mut first = None;
         let mut was_localized = false;
         replay::localize_log(
-            Path::new(log),
+            Path::new(log), None,
             &map,
             rig,
             LocalizerSettings::default(),

@@ -22,6 +22,47 @@ pub enum Error {
         /// The topics it has instead.
         topics: Vec<String>,
     },
+    /// A ROS 2 bag with camera images replayed without naming its topics.
+    #[error(
+        "{} is a ROS 2 bag without the board's /fpga/features: name its camera and odometry topics with --left, --right and --odom (its camera topics: {}; odometry: {})",
+        path.display(),
+        cameras.join(", "),
+        if odometry.is_empty() { "none".to_string() } else { odometry.join(", ") }
+    )]
+    Ros2TopicsNotNamed {
+        /// The file.
+        path: PathBuf,
+        /// Its image topics with their types.
+        cameras: Vec<String>,
+        /// Its odometry topics.
+        odometry: Vec<String>,
+    },
+    /// A topic named for the replay of a ROS 2 bag is not in it.
+    #[error(
+        "{}: {option} {topic}: the bag has no such topic (its topics: {})",
+        path.display(),
+        if topics.is_empty() { "none".to_string() } else {
+            topics.iter().map(|(t, ty)| if ty.is_empty() { t.clone() } else { format!("{t} ({ty})") }).collect::<Vec<_>>().join(", ")
+        }
+    )]
+    MissingTopic {
+        /// The file.
+        path: PathBuf,
+        /// The option that named it (`--left`, ...).
+        option: &'static str,
+        /// The topic named.
+        topic: String,
+        /// The bag's other topics and their types.
+        topics: Vec<(String, String)>,
+    },
+    /// The rig's `[board]` registers cannot run the host's detector on a bag's images.
+    #[error("{}: the rig's [camera] size and [board] registers cannot run the board's detector: {problem}", path.display())]
+    HostBoard {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        problem: String,
+    },
     /// No rig was given and the log has no `/rig` message (or lost it to damage).
     #[error(
         "{}: no rig: {} and no rig file was given",

@@ -77,7 +77,7 @@ pub use map::saved_map;
 pub use nav::{FramePairSettings, NavMode, NavSettings, Navigator};
 pub use navigate::{
     LAMP_MATCH_RADIUS_M, LAMP_SEEN_FRAMES, MAP_SNAPSHOT_US, ReplayCollector, ReplaySink, Replayer,
-    replay_log, truth_camera,
+    replay_log, replay_log_with_topics, truth_camera,
 };
 pub use output::{
     OutputFiles, TRAJ_TUM_FILE, TRUTH_TUM_FILE, TrajectoryWriter, write_estimates, write_summary,
@@ -85,6 +85,7 @@ pub use output::{
 };
 pub use stream::REORDER_US;
 pub use tum::{TUM_HEADER, TumWriter, tum_line};
+pub use vehicle_log::Ros2Topics;
 
 /// Where the rig came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

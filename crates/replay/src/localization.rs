@@ -216,6 +216,7 @@ fn pair_radius(c: &CameraParams, rig: &Rig, highest_m: f64) -> f64 {
 /// Errors: the log cannot be read or is not a vehicle log, the map cannot localise.
 pub fn localize_log(
     path: &Path,
+    topics: Option<&vehicle_log::Ros2Topics>,
     map: &Map,
     rig: Option<Rig>,
     settings: LocalizerSettings,
@@ -223,10 +224,12 @@ pub fn localize_log(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<LocalizeEnd, Error> {
     let rig = rig_for(map, rig)?;
+    let regs = rig.board_registers();
     let (camera, camera_sigma) = map_camera(map, &rig);
     let mut localizer = localizer_for(map, Some(rig), settings)?;
-    let mut stream = LogStream::open(path)?;
+    let mut stream = LogStream::open(path, topics)?;
     stream.preamble(false)?;
+    stream.start_host_board(regs)?;
     let mut refused: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
     let mut frames = 0_u64;
     let mut first_t = None;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use nav::{NavSettings, Navigator};
 use rig_model::camera::{CameraParams, Param, Pose2};
 use rig_model::config::Rig;
-use vehicle_log::{TruthCamera, TruthPose};
+use vehicle_log::{Ros2Topics, TruthCamera, TruthPose};
 
 use crate::stream::{Input, LogStream, TruthStream};
 use crate::{
@@ -179,7 +179,19 @@ pub fn replay_log(
     settings: &NavSettings,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Replay, Error> {
-    let replayer = Replayer::open(path.as_ref(), rig, settings)?;
+    replay_log_with_topics(path, None, rig, settings, progress)
+}
+
+/// [`replay_log`] of a ROS 2 bag whose named topics are the input (`None`: the board's
+/// stream; see [`Replayer::open_with_topics`]).
+pub fn replay_log_with_topics(
+    path: impl AsRef<Path>,
+    topics: Option<&Ros2Topics>,
+    rig: Option<Rig>,
+    settings: &NavSettings,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Replay, Error> {
+    let replayer = Replayer::open_with_topics(path.as_ref(), topics, rig, settings)?;
     let mut collected = ReplayCollector::default();
     let end = replayer.run(&mut collected, progress)?;
     Ok(Replay::from_parts(
@@ -249,7 +261,20 @@ impl Replayer {
     /// Errors: the file cannot be read, is not MCAP, has no vehicle topics, there is no rig, or
     /// the settings are out of range.
     pub fn open(path: &Path, rig: Option<Rig>, settings: &NavSettings) -> Result<Self, Error> {
-        let mut stream = LogStream::open(path)?;
+        Self::open_with_topics(path, None, rig, settings)
+    }
+
+    /// [`Replayer::open`] for a ROS 2 bag whose named camera and odometry topics are the
+    /// input (vehicle-interfaces.md 4.1; `None`: the board's stream). Further errors: a named
+    /// topic the bag does not have, or of another type, or a rig whose `[board]` registers
+    /// cannot run the detector.
+    pub fn open_with_topics(
+        path: &Path,
+        topics: Option<&Ros2Topics>,
+        rig: Option<Rig>,
+        settings: &NavSettings,
+    ) -> Result<Self, Error> {
+        let mut stream = LogStream::open(path, topics)?;
         stream.preamble(rig.is_none())?;
         let given_rig = rig.is_some();
         let rig = match rig {
@@ -259,6 +284,7 @@ impl Replayer {
                 Rig::from_json_str(text, &format!("{} /rig", path.display()))?
             }
         };
+        stream.start_host_board(rig.board_registers())?;
         let navigator = Navigator::new(rig.clone(), *settings)?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -497,11 +523,24 @@ impl Replayer {
         let mut counts = self.stream.counts;
         let mut warnings = self.read_warnings();
         warnings.append(&mut self.warnings);
+        let topics = self.stream.reader().ros2_topics().cloned();
+        if let Some(images) = self.stream.image_counts() {
+            warnings.extend(image_warnings(images));
+        }
         if counts.frames == 0 {
-            warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
+            warnings.push(match &topics {
+                None => "no stereo frame could be decoded from /fpga/features".to_string(),
+                Some(t) => format!(
+                    "no stereo frame could be made from the images of {} and {}",
+                    t.left, t.right
+                ),
+            });
         }
         if counts.odometry == 0 {
-            warnings.push("no odometry on /odom: the vehicle's motion is unknown".to_string());
+            let topic = topics.as_ref().map_or("/odom", |t| t.odom.as_str());
+            warnings.push(format!(
+                "no odometry on {topic}: the vehicle's motion is unknown"
+            ));
         }
         let navigator = &self.navigator;
         let stats = navigator.stats();
@@ -592,6 +631,32 @@ impl Replayer {
         }
         warnings
     }
+}
+
+/// What became of a bag's camera images, one warning per kind of loss (with its first case).
+fn image_warnings(images: &host_board::ImageCounts) -> Vec<String> {
+    let mut out = Vec::new();
+    if images.unpaired > 0 {
+        out.push(format!(
+            "{} of {} camera images had no partner within a quarter of the frame interval \
+             (frames with one image): left out",
+            images.unpaired,
+            images.left + images.right
+        ));
+    }
+    if images.bad_images() > 0 {
+        out.push(format!(
+            "{} camera images could not be read ({} of the wrong size, {} of an encoding not \
+             read, {} undecodable), {} stereo frames lost; the first: {}",
+            images.bad_images(),
+            images.wrong_size,
+            images.unsupported,
+            images.undecodable,
+            images.frames_dropped,
+            images.first_problems.join("; ")
+        ));
+    }
+    out
 }
 
 /// Lost stretches of a damaged log told one warning each (the rest in one more line).

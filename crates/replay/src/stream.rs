@@ -15,10 +15,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use fpga_link::{Decoder, Event};
+use host_board::HostBoard;
 use nav::sequencer::{Sequenced, Sequencer};
 use rig_model::odometry::OdomSample;
 use track::Pixel;
-use vehicle_log::{LogReader, Record, TruthCamera, TruthLandmark, TruthPose};
+use vehicle_log::{
+    CameraImage, LogReader, Record, Role, Ros2Topics, Side, TruthCamera, TruthLandmark, TruthPose,
+};
 
 use crate::{Counts, DecodedFrame, Error};
 
@@ -26,6 +29,10 @@ pub use nav::sequencer::REORDER_US;
 
 /// Most untimed bytes of input read before the log's `/rig` when no rig was given.
 const MAX_BYTES_BEFORE_RIG: u64 = 64 << 20;
+
+/// Most camera images of a ROS 2 bag held before the host board starts (the preamble reads
+/// until every named topic has a channel; a recorder declares them at its start).
+const MAX_IMAGES_BEFORE_START: usize = 256;
 
 /// One input of the navigator, in data-time order.
 #[derive(Debug, Clone, PartialEq)]
@@ -75,6 +82,11 @@ pub(crate) struct LogStream {
     feature_bytes: u64,
     /// A stretch of the log was lost before its first board bytes or odometry.
     lost_before_data: bool,
+    /// A ROS 2 bag's camera images: the board on the host (`None` for the board's stream, or
+    /// until [`LogStream::start_host_board`]).
+    host: Option<HostBoard>,
+    /// Images (or undecodable image messages) read before the host board started.
+    early_images: Vec<Result<CameraImage, (Side, String)>>,
 }
 
 impl std::fmt::Debug for LogStream {
@@ -88,9 +100,13 @@ impl std::fmt::Debug for LogStream {
 }
 
 impl LogStream {
-    /// Opens the log at `path` (an MCAP file, or an error).
-    pub(crate) fn open(path: &Path) -> Result<Self, Error> {
-        let reader = LogReader::open(path)?;
+    /// Opens the log at `path` (an MCAP file, or an error); with `topics`, a ROS 2 bag whose
+    /// named camera and odometry topics are the input (vehicle-interfaces.md 4.1).
+    pub(crate) fn open(path: &Path, topics: Option<&Ros2Topics>) -> Result<Self, Error> {
+        let mut reader = LogReader::open(path)?;
+        if let Some(topics) = topics {
+            reader.set_ros2_topics(topics.clone());
+        }
         Ok(Self {
             path: path.to_path_buf(),
             reader,
@@ -102,7 +118,37 @@ impl LogStream {
             counts: Counts::default(),
             feature_bytes: 0,
             lost_before_data: false,
+            host: None,
+            early_images: Vec::new(),
         })
+    }
+
+    /// Whether the input is a ROS 2 bag's images (topics named).
+    pub(crate) fn is_bag(&self) -> bool {
+        self.reader.ros2_topics().is_some()
+    }
+
+    /// Starts the board on the host for a bag's images with `regs` (the rig's `[camera]`
+    /// size and `[board]` registers), and feeds it the images read so far. Nothing for the
+    /// board's stream.
+    pub(crate) fn start_host_board(&mut self, regs: harris_core::Registers) -> Result<(), Error> {
+        if !self.is_bag() || self.host.is_some() {
+            return Ok(());
+        }
+        let host = HostBoard::new(regs).map_err(|e| Error::HostBoard {
+            path: self.path.clone(),
+            problem: e.to_string(),
+        })?;
+        self.host = Some(host);
+        for image in std::mem::take(&mut self.early_images) {
+            self.image(image);
+        }
+        Ok(())
+    }
+
+    /// The host board's image counts (a bag's), if it ran.
+    pub(crate) fn image_counts(&self) -> Option<&host_board::ImageCounts> {
+        self.host.as_ref().map(HostBoard::counts)
     }
 
     /// `(bytes read, file size)`.
@@ -121,6 +167,9 @@ impl LogStream {
     /// topics (a foreign MCAP file), no rig is given and the log has none before
     /// [`MAX_BYTES_BEFORE_RIG`] of data, or the reading fails.
     pub(crate) fn preamble(&mut self, need_rig: bool) -> Result<(), Error> {
+        if self.is_bag() {
+            return self.bag_preamble(need_rig);
+        }
         loop {
             let data = self.feature_bytes > 0 || self.counts.odometry > 0;
             let have_rig = !need_rig || self.rig_text.is_some();
@@ -133,10 +182,56 @@ impl LogStream {
             self.pump()?;
         }
         if !self.reader.has_vehicle_topics() {
+            if let Some(e) = ros2_hint(&self.path, self.reader.foreign_channels()) {
+                return Err(e);
+            }
             return Err(Error::NotVehicleLog {
                 path: self.path.clone(),
                 topics: self.reader.ignored_topics().to_vec(),
             });
+        }
+        if need_rig && self.rig_text.is_none() {
+            return Err(Error::NoRig {
+                path: self.path.clone(),
+                lost_to_damage: self.lost_before_data || self.reader.damage().header_damaged,
+            });
+        }
+        Ok(())
+    }
+
+    /// [`LogStream::preamble`] of a ROS 2 bag: reads until every named topic has its channel
+    /// (and, when `need_rig`, the `/rig` is met), or the bag ends. Errors: a named topic the
+    /// bag does not have, or one of another type (from the reader).
+    fn bag_preamble(&mut self, need_rig: bool) -> Result<(), Error> {
+        loop {
+            let all_met = self.reader.ros2_met().len() == Role::ALL.len();
+            let have_rig = !need_rig || self.rig_text.is_some();
+            if self.ended || (all_met && have_rig) {
+                break;
+            }
+            if self.early_images.len() > MAX_IMAGES_BEFORE_START {
+                break;
+            }
+            self.pump()?;
+        }
+        let topics = self
+            .reader
+            .ros2_topics()
+            .cloned()
+            .unwrap_or_else(|| Ros2Topics {
+                left: String::new(),
+                right: String::new(),
+                odom: String::new(),
+            });
+        for role in Role::ALL {
+            if self.ended && !self.reader.ros2_met().iter().any(|(r, _)| *r == role) {
+                return Err(Error::MissingTopic {
+                    path: self.path.clone(),
+                    option: role.option(),
+                    topic: topics.topic(role).to_owned(),
+                    topics: self.reader.foreign_channels().to_vec(),
+                });
+            }
         }
         if need_rig && self.rig_text.is_none() {
             return Err(Error::NoRig {
@@ -170,6 +265,10 @@ impl LogStream {
                 self.ended = true;
                 let mut frames = Vec::new();
                 decode_end(&mut self.decoder, &mut frames);
+                if let Some(host) = &mut self.host {
+                    host.end();
+                    host_frames(host, &mut frames);
+                }
                 self.hold_frames(frames);
                 self.window.end();
                 let stats = self.decoder.stats();
@@ -177,6 +276,17 @@ impl LogStream {
                 self.counts.corrupt = stats.corrupt;
                 self.counts.lost = stats.lost;
                 self.counts.bytes_skipped = stats.bytes_skipped;
+                if let Some(images) = self.host.as_ref().map(HostBoard::counts) {
+                    let c = &mut self.counts;
+                    c.frames = images.frames;
+                    c.images_left = images.left;
+                    c.images_right = images.right;
+                    c.images_unpaired = images.unpaired;
+                    c.images_wrong_size = images.wrong_size;
+                    c.images_unsupported = images.unsupported;
+                    c.images_undecodable = images.undecodable;
+                    c.image_frames_dropped = images.frames_dropped;
+                }
             }
             Some(Err(e)) => return Err(e.into()),
             Some(Ok(record)) => self.record(record),
@@ -201,6 +311,8 @@ impl LogStream {
                     vtheta: s.vtheta,
                 });
             }
+            Record::Image(image) => self.image(Ok(image)),
+            Record::BadImage { side, problem, .. } => self.image(Err((side, problem))),
             // The first /rig counts (the rig is logged once, at the start).
             Record::Rig(text) if self.rig_text.is_none() => self.rig_text = Some(text),
             // The reader counts what was lost; the board stream's decoder resynchronises
@@ -228,11 +340,62 @@ impl LogStream {
         }
     }
 
+    /// A bag's camera image (or an image message that did not decode): to the host board,
+    /// or held until it starts.
+    fn image(&mut self, image: Result<CameraImage, (Side, String)>) {
+        let Some(host) = &mut self.host else {
+            self.early_images.push(image);
+            return;
+        };
+        match image {
+            Ok(image) => host.push(image),
+            Err((side, problem)) => host.push_undecodable(side, &problem),
+        }
+        let mut frames = Vec::new();
+        host_frames(host, &mut frames);
+        self.hold_frames(frames);
+    }
+
     fn hold_frames(&mut self, frames: Vec<DecodedFrame>) {
         for frame in frames {
             self.window.push_frame(frame.t_us, frame);
         }
         self.counts.frames_out_of_order = self.window.frames_out_of_order();
+    }
+}
+
+/// The error for a ROS 2 bag with camera images replayed without its topics named, if the
+/// foreign channels are such a bag's.
+pub(crate) fn ros2_hint(path: &Path, channels: &[(String, String)]) -> Option<Error> {
+    let of = |types: &[&str]| -> Vec<String> {
+        channels
+            .iter()
+            .filter(|(_, ty)| {
+                types
+                    .iter()
+                    .any(|t| vehicle_log::ros2::msgdef::normalise_type_name(ty) == *t)
+            })
+            .map(|(topic, ty)| format!("{topic} ({ty})"))
+            .collect()
+    };
+    let cameras = of(&["sensor_msgs/Image", "sensor_msgs/CompressedImage"]);
+    let odometry = of(&["nav_msgs/Odometry"]);
+    (!cameras.is_empty()).then(|| Error::Ros2TopicsNotNamed {
+        path: path.to_path_buf(),
+        cameras,
+        odometry,
+    })
+}
+
+/// The stereo frames the host board has ready, as pixels onto `frames`.
+fn host_frames(host: &mut HostBoard, frames: &mut Vec<DecodedFrame>) {
+    let px = |x: &harris_core::Feature| Pixel::from_q4(x.x_q4, x.y_q4);
+    while let Some(f) = host.pop() {
+        frames.push(DecodedFrame {
+            t_us: f.t_us,
+            left: f.left.iter().map(px).collect(),
+            right: f.right.iter().map(px).collect(),
+        });
     }
 }
 

@@ -46,6 +46,31 @@ pub enum Error {
         /// What was found instead.
         why: NotMcap,
     },
+    /// A ROS 2 topic named for a role cannot be read as that role (section 4.1): another
+    /// type, another encoding, a schema without the fields.
+    #[error("{}: topic {topic} ({role}): {problem}", path.display())]
+    Ros2Topic {
+        /// The file, or the name given to the reader.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// What it was named for.
+        role: crate::ros2::Role,
+        /// What does not fit, one line.
+        problem: String,
+    },
+    /// A message of the named ROS 2 odometry topic cannot be decoded by its schema.
+    #[error("{}: {topic} message {index}: {problem}", path.display())]
+    BadRos2Message {
+        /// The file, or the name given to the reader.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// The message's index on that topic, counting from 0.
+        index: u64,
+        /// What was wrong.
+        problem: String,
+    },
     /// A message on one of the vehicle topics does not hold what section 4 says it holds.
     #[error("{}: {topic} message {index}: {problem}", path.display())]
     BadMessage {

@@ -9,6 +9,7 @@ use crate::damage::{Damage, LostSpan};
 use crate::error::{Error, Result};
 use crate::json;
 use crate::raw::{CutAt, RawChannel, RawMessage, RawReader, RawRecord};
+use crate::ros2::{Decoded, Plan, Role, Ros2Topics, Side};
 use crate::topics::{self, Topic};
 use crate::types::Record;
 
@@ -222,6 +223,36 @@ impl<R> LogReader<R> {
         has_vehicle_topics(&self.state.topics)
     }
 
+    /// Reads the ROS 2 bag's named camera and odometry topics (vehicle-interfaces.md 4.1)
+    /// instead of the board's stream and the JSON odometry: their images come out as
+    /// [`Record::Image`] (or [`Record::BadImage`]), their odometry as [`Record::Odom`]. Call
+    /// it before reading. A named topic of another type or encoding, or whose schema lacks
+    /// a field read, ends the reading with [`Error::Ros2Topic`].
+    pub fn set_ros2_topics(&mut self, topics: Ros2Topics) {
+        self.state.ros2 = Some(topics);
+    }
+
+    /// The named ROS 2 topics, when set.
+    pub fn ros2_topics(&self) -> Option<&Ros2Topics> {
+        self.state.ros2.as_ref()
+    }
+
+    /// The named ROS 2 roles met so far, with their topic's type (`pkg/Type`).
+    pub fn ros2_met(&self) -> &[(Role, String)] {
+        &self.state.ros2_met
+    }
+
+    /// Messages read so far per ROS 2 role, in [`Role::index`] order.
+    pub fn ros2_counts(&self) -> [u64; 3] {
+        self.state.ros2_counts
+    }
+
+    /// Every foreign channel met so far, each topic once: `(topic, schema name)` (`""`
+    /// without a schema). A ROS 2 bag's topics and types, for messages that help name them.
+    pub fn foreign_channels(&self) -> &[(String, String)] {
+        &self.state.foreign
+    }
+
     /// Whether chunks damaged by one flipped bit are mended (on by default:
     /// [`RawReader::mend_bit_errors`]).
     pub fn mend_bit_errors(&mut self, on: bool) {
@@ -267,13 +298,15 @@ impl<R: Read + Seek> Iterator for LogReader<R> {
                 }
                 Some(Err(err)) => Step::Bad(err),
                 Some(Ok(RawRecord::Schema(schema))) => {
-                    self.state.schemas.insert(schema.id, schema.name);
+                    self.state
+                        .schemas
+                        .insert(schema.id, (schema.name, schema.encoding, schema.data));
                     Step::Nothing
                 }
-                Some(Ok(RawRecord::Channel(channel))) => {
-                    self.state.channel(channel);
-                    Step::Nothing
-                }
+                Some(Ok(RawRecord::Channel(channel))) => match self.state.channel(channel) {
+                    Ok(()) => Step::Nothing,
+                    Err(err) => Step::Bad(err),
+                },
                 Some(Ok(RawRecord::Message(message))) => {
                     // Outside a chunk whose CRC checks, a malformed message is the writer's
                     // only in a file without chunks and without damage so far; in a chunked
@@ -318,6 +351,8 @@ enum Step {
 #[derive(Debug, Clone, Copy)]
 enum Channel {
     Ours(Topic),
+    /// A named topic of a ROS 2 bag; its plan is in [`State::plans`].
+    Ros2(Role),
     Foreign,
 }
 
@@ -325,9 +360,19 @@ enum Channel {
 #[derive(Debug)]
 struct State {
     path: PathBuf,
-    /// Schema id to schema name.
-    schemas: HashMap<u16, String>,
+    /// Schema id to schema name, encoding and document.
+    schemas: HashMap<u16, (String, String, Vec<u8>)>,
     channels: HashMap<u16, Channel>,
+    /// The ROS 2 topics to read, when given.
+    ros2: Option<Ros2Topics>,
+    /// How to read each named ROS 2 channel, by channel id.
+    plans: HashMap<u16, Plan>,
+    /// Messages read per ROS 2 role.
+    ros2_counts: [u64; 3],
+    /// The ROS 2 roles whose topic has a channel, with its type, in the order they were met.
+    ros2_met: Vec<(Role, String)>,
+    /// Every foreign channel's topic and schema name (`""` for none), each topic once.
+    foreign: Vec<(String, String)>,
     /// Messages met per vehicle topic, for error messages.
     counts: [u64; Topic::ALL.len()],
     /// Records yielded.
@@ -348,6 +393,11 @@ impl State {
             path,
             schemas: HashMap::new(),
             channels: HashMap::new(),
+            ros2: None,
+            plans: HashMap::new(),
+            ros2_counts: [0; 3],
+            ros2_met: Vec::new(),
+            foreign: Vec::new(),
             counts: [0; Topic::ALL.len()],
             records: 0,
             ignored_messages: 0,
@@ -363,15 +413,47 @@ impl State {
     /// Whether a lost span may have held messages of our channels (or nothing tells).
     fn concerns_us(&self, span: &LostSpan) -> bool {
         span.messages.as_ref().is_none_or(|m| {
-            m.iter()
-                .any(|(topic, n)| *n > 0 && Topic::from_name(topic).is_some())
+            m.iter().any(|(topic, n)| {
+                *n > 0
+                    && (Topic::from_name(topic).is_some()
+                        || self.ros2.as_ref().is_some_and(|r| r.role(topic).is_some()))
+            })
         })
     }
 
-    fn channel(&mut self, channel: RawChannel) {
-        let schema_name = self.schemas.get(&channel.schema_id).map(String::as_str);
-        let kind = match Topic::from_name(&channel.topic) {
-            Some(topic) => {
+    fn channel(&mut self, channel: RawChannel) -> Result<()> {
+        let schema = self.schemas.get(&channel.schema_id);
+        let schema_name = schema.map(|(name, _, _)| name.as_str());
+        let role = self.ros2.as_ref().and_then(|r| r.role(&channel.topic));
+        let kind = match (role, Topic::from_name(&channel.topic)) {
+            (Some(role), _) => {
+                let plan = Plan::new(
+                    role,
+                    &channel.message_encoding,
+                    schema.map(|(n, e, d)| (n.as_str(), e.as_str(), d.as_slice())),
+                )
+                .map_err(|problem| Error::Ros2Topic {
+                    path: self.path.clone(),
+                    topic: channel.topic.clone(),
+                    role,
+                    problem,
+                })?;
+                if !self.ros2_met.iter().any(|(r, _)| *r == role) {
+                    self.ros2_met.push((role, plan.type_name().to_owned()));
+                }
+                self.plans.insert(channel.id, plan);
+                Channel::Ros2(role)
+            }
+            // With the camera topics named, the board's stream and the JSON odometry are
+            // not read: the named topics are the input.
+            (None, Some(topic @ (Topic::Features | Topic::Odom))) if self.ros2.is_some() => {
+                self.warnings.push(format!(
+                    "channel {} is ignored: the camera and odometry topics were named",
+                    topic.name()
+                ));
+                Channel::Foreign
+            }
+            (None, Some(topic)) => {
                 let encoding_ok = channel.message_encoding == topic.message_encoding();
                 // The byte stream takes no schema (one is ignored); a JSON topic may omit its
                 // schema but must not name another.
@@ -395,7 +477,7 @@ impl State {
                     Channel::Foreign
                 }
             }
-            None => Channel::Foreign,
+            (None, None) => Channel::Foreign,
         };
         match kind {
             Channel::Ours(topic) => {
@@ -403,13 +485,79 @@ impl State {
                     self.topics.push(topic.name());
                 }
             }
+            Channel::Ros2(_) => {}
             Channel::Foreign => {
                 if !self.ignored_topics.contains(&channel.topic) {
+                    self.foreign.push((
+                        channel.topic.clone(),
+                        schema_name.unwrap_or_default().to_owned(),
+                    ));
                     self.ignored_topics.push(channel.topic);
                 }
             }
         }
         self.channels.insert(channel.id, kind);
+        Ok(())
+    }
+
+    /// A message of a named ROS 2 topic.
+    fn ros2_message(&mut self, message: &RawMessage, role: Role, trusted: bool) -> Step {
+        let count = &mut self.ros2_counts[role.index()];
+        let index = *count;
+        *count += 1;
+        let Some(plan) = self.plans.get(&message.channel_id) else {
+            return Step::Nothing;
+        };
+        let side = match role {
+            Role::Left => Some(Side::Left),
+            Role::Right => Some(Side::Right),
+            Role::Odom => None,
+        };
+        match (plan.decode(&message.data), side) {
+            (Ok((t_us, Decoded::Image(payload))), Some(side)) => {
+                Step::Record(Record::Image(crate::ros2::CameraImage {
+                    side,
+                    t_us,
+                    log_time_ns: message.log_time,
+                    payload,
+                }))
+            }
+            (Ok((_, Decoded::Odom(sample))), None) => Step::Record(Record::Odom(sample)),
+            // A plan decodes what its role reads; anything else cannot come out of it.
+            (Ok(_), _) => Step::Nothing,
+            // An image that does not decode is counted by the caller, like one whose pixels
+            // it cannot read: one bad frame does not end a drive.
+            (Err(problem), Some(side)) => Step::Record(Record::BadImage {
+                side,
+                log_time_ns: message.log_time,
+                problem,
+            }),
+            (Err(problem), None) => {
+                let topic = self
+                    .ros2
+                    .as_ref()
+                    .map_or(String::new(), |r| r.topic(role).to_owned());
+                if trusted {
+                    Step::Bad(Error::BadRos2Message {
+                        path: self.path.clone(),
+                        topic,
+                        index,
+                        problem,
+                    })
+                } else {
+                    self.dropped_malformed += 1;
+                    if self.dropped_malformed == 1 {
+                        self.warnings.push(format!(
+                            "{topic} message {index} (log time {} ns) is malformed ({problem}) in \
+                             a part of the damaged log no CRC covers: dropped as damage (and any \
+                             more such)",
+                            message.log_time
+                        ));
+                    }
+                    Step::Nothing
+                }
+            }
+        }
     }
 
     /// A message; `trusted`: a malformed one is an error (it comes from a chunk whose CRC
@@ -418,6 +566,7 @@ impl State {
         let data = message.data.as_slice();
         let topic = match self.channels.get(&message.channel_id) {
             Some(Channel::Ours(topic)) => *topic,
+            Some(Channel::Ros2(role)) => return self.ros2_message(message, *role, trusted),
             Some(Channel::Foreign) => {
                 self.ignored_messages += 1;
                 return Step::Nothing;

@@ -91,7 +91,7 @@ pub enum Record {
         /// The bytes.
         bytes: Vec<u8>,
     },
-    /// An odometry sample on `/odom`.
+    /// An odometry sample on `/odom`, or on the named ROS 2 odometry topic of a bag.
     Odom(OdomSample),
     /// The rig file's tables on `/rig`: the message's text, a JSON object, as logged.
     Rig(String),
@@ -101,6 +101,19 @@ pub enum Record {
     TruthLandmarks(Vec<TruthLandmark>),
     /// Simulator truth: the camera parameters.
     TruthCamera(TruthCamera),
+    /// A camera image of a ROS 2 bag (vehicle-interfaces.md 4.1; only when the reader was
+    /// given the topics, [`crate::LogReader::set_ros2_topics`]).
+    Image(crate::ros2::CameraImage),
+    /// A message of a named camera topic that does not decode by its schema: counted by the
+    /// caller, like an image it cannot read.
+    BadImage {
+        /// Which camera.
+        side: crate::ros2::Side,
+        /// The message's log time, ns.
+        log_time_ns: u64,
+        /// What was wrong, one line.
+        problem: String,
+    },
     /// Data that could not be read (a damaged chunk, bytes skipped where the framing was
     /// lost, the rest of a chunk cut by the end of the file), at the place of the loss: just
     /// before the next good record. A stream decoder should be reset here (the bytes before

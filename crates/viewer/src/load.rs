@@ -146,6 +146,7 @@ fn localize(
     let mut frames = Vec::new();
     let end = replay::localize_log(
         path,
+        None,
         map,
         options.rig.clone(),
         LocalizerSettings::default(),

@@ -91,6 +91,13 @@ _COUNTS: tuple[str, ...] = (
     "features_outside_field",
     "loops_closed",
     "lamps_held_mapped",
+    "images_left",
+    "images_right",
+    "images_unpaired",
+    "images_wrong_size",
+    "images_unsupported",
+    "images_undecodable",
+    "image_frames_dropped",
 )
 
 _PARAMETERS: tuple[str, ...] = CAMERA_PARAMETERS + VEHICLE_PARAMETERS

@@ -68,6 +68,7 @@ fn localized(map: &map_file::Map, hall: &[sim::Lamp], name: &str, seed: u64) -> 
     let mut frames = Vec::new();
     let end = replay::localize_log(
         &log,
+        None,
         map,
         None,
         LocalizerSettings::default(),

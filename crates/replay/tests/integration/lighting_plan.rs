@@ -48,6 +48,7 @@ fn a_drive_localises_on_the_map_of_its_halls_lighting_plan() {
         let mut frames = Vec::new();
         let end = replay::localize_log(
             &log,
+            None,
             &map,
             rig,
             LocalizerSettings::default(),

@@ -747,6 +747,13 @@ fn summary_has_the_contract_keys_and_types() {
             "features_outside_field",
             "loops_closed",
             "lamps_held_mapped",
+            "images_left",
+            "images_right",
+            "images_unpaired",
+            "images_wrong_size",
+            "images_unsupported",
+            "images_undecodable",
+            "image_frames_dropped",
         ])
     );
     assert!(s["counts"].as_object().unwrap().values().all(Value::is_u64));
