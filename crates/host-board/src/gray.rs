@@ -86,6 +86,39 @@ impl Gray<'_> {
     }
 }
 
+/// An image's size and what it is (`mono8`, ..., `PNG`, `JPEG`) from its message or its
+/// file's header, without decoding the pixels.
+pub fn describe(payload: &ImagePayload) -> Result<(u32, u32, String), ImageProblem> {
+    match payload {
+        ImagePayload::Raw {
+            width,
+            height,
+            encoding,
+            ..
+        } => Ok((*width, *height, encoding.clone())),
+        ImagePayload::Compressed { format, data } => {
+            let (fmt, kind) = match image::guess_format(data) {
+                Ok(ImageFormat::Png) => (ImageFormat::Png, "PNG"),
+                Ok(ImageFormat::Jpeg) => (ImageFormat::Jpeg, "JPEG"),
+                Ok(other) => {
+                    return Err(ImageProblem::Unsupported(format!(
+                        "compressed image of format {format:?} holds {other:?}"
+                    )));
+                }
+                Err(_) => {
+                    return Err(ImageProblem::Undecodable(format!(
+                        "compressed image of format {format:?}: neither PNG nor JPEG"
+                    )));
+                }
+            };
+            let (w, h) = ImageReader::with_format(Cursor::new(data), fmt)
+                .into_dimensions()
+                .map_err(|e| ImageProblem::Undecodable(format!("{kind}: {e}")))?;
+            Ok((w, h, kind.to_owned()))
+        }
+    }
+}
+
 /// The gray rows of `payload`, which must be `width x height` pixels.
 pub(crate) fn gray(
     payload: &ImagePayload,

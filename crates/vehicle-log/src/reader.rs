@@ -253,6 +253,11 @@ impl<R> LogReader<R> {
         &self.state.foreign
     }
 
+    /// Messages read so far on each of [`LogReader::foreign_channels`], in its order.
+    pub fn foreign_messages(&self) -> &[u64] {
+        &self.state.foreign_messages
+    }
+
     /// Whether chunks damaged by one flipped bit are mended (on by default:
     /// [`RawReader::mend_bit_errors`]).
     pub fn mend_bit_errors(&mut self, on: bool) {
@@ -373,6 +378,10 @@ struct State {
     ros2_met: Vec<(Role, String)>,
     /// Every foreign channel's topic and schema name (`""` for none), each topic once.
     foreign: Vec<(String, String)>,
+    /// Foreign channel id to its index in `foreign`.
+    foreign_index: HashMap<u16, usize>,
+    /// Messages per entry of `foreign`.
+    foreign_messages: Vec<u64>,
     /// Messages met per vehicle topic, for error messages.
     counts: [u64; Topic::ALL.len()],
     /// Records yielded.
@@ -398,6 +407,8 @@ impl State {
             ros2_counts: [0; 3],
             ros2_met: Vec::new(),
             foreign: Vec::new(),
+            foreign_index: HashMap::new(),
+            foreign_messages: Vec::new(),
             counts: [0; Topic::ALL.len()],
             records: 0,
             ignored_messages: 0,
@@ -487,11 +498,19 @@ impl State {
             }
             Channel::Ros2(_) => {}
             Channel::Foreign => {
+                let at = match self.foreign.iter().position(|(t, _)| *t == channel.topic) {
+                    Some(at) => at,
+                    None => {
+                        self.foreign.push((
+                            channel.topic.clone(),
+                            schema_name.unwrap_or_default().to_owned(),
+                        ));
+                        self.foreign_messages.push(0);
+                        self.foreign.len() - 1
+                    }
+                };
+                self.foreign_index.insert(channel.id, at);
                 if !self.ignored_topics.contains(&channel.topic) {
-                    self.foreign.push((
-                        channel.topic.clone(),
-                        schema_name.unwrap_or_default().to_owned(),
-                    ));
                     self.ignored_topics.push(channel.topic);
                 }
             }
@@ -569,6 +588,11 @@ impl State {
             Some(Channel::Ros2(role)) => return self.ros2_message(message, *role, trusted),
             Some(Channel::Foreign) => {
                 self.ignored_messages += 1;
+                if let Some(&at) = self.foreign_index.get(&message.channel_id)
+                    && let Some(n) = self.foreign_messages.get_mut(at)
+                {
+                    *n += 1;
+                }
                 return Step::Nothing;
             }
             None => {
