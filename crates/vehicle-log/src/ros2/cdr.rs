@@ -74,6 +74,9 @@ pub fn decode<'a>(defs: &MsgDefs, data: &'a [u8]) -> Result<Value<'a>, String> {
         pos: 0,
         little,
         max_align,
+        // Every value but an empty message's takes a byte: more values than bytes (and a
+        // margin for empty messages) is a schema built to blow up, not a message.
+        budget: data.len().saturating_mul(2).saturating_add(4096),
     };
     let fields = defs
         .fields(defs.root())
@@ -86,6 +89,8 @@ struct Reader<'a> {
     pos: usize,
     little: bool,
     max_align: usize,
+    /// Values still allowed.
+    budget: usize,
 }
 
 impl<'a> Reader<'a> {
@@ -154,6 +159,10 @@ impl<'a> Reader<'a> {
     }
 
     fn element(&mut self, defs: &MsgDefs, base: &Base, depth: usize) -> Result<Value<'a>, String> {
+        self.budget = self
+            .budget
+            .checked_sub(1)
+            .ok_or("more values than the message has bytes for")?;
         match base {
             Base::Prim(p) => self.prim(*p),
             Base::Msg(m) => {

@@ -520,4 +520,52 @@ mod tests {
         let e = Plan::new(Role::Left, "cdr", None).unwrap_err();
         assert!(e.contains("no schema"), "{e}");
     }
+
+    #[test]
+    fn nested_empty_arrays_cannot_blow_up() {
+        let mut text = String::from("p/A[200] a\n");
+        for (name, next) in [("A", "B"), ("B", "C"), ("C", "D"), ("D", "E")] {
+            text.push_str(&format!(
+                "{}\nMSG: p/{name}\np/{next}[200] x\n",
+                "=".repeat(80)
+            ));
+        }
+        text.push_str(&format!("{}\nMSG: p/E\n", "=".repeat(80)));
+        let defs = MsgDefs::parse("p/T", &text).unwrap();
+        // Enough bytes for every count check: only the value budget stops 200^5 values.
+        let mut message = vec![0, 1, 0, 0];
+        message.resize(404, 0);
+        let e = cdr::decode(&defs, &message).unwrap_err();
+        assert!(e.contains("more values"), "{e}");
+    }
+
+    proptest::proptest! {
+        /// Any bytes as a message of any of the three types: a value or an error, never a
+        /// panic or a runaway allocation.
+        #[test]
+        fn any_bytes_decode_or_fail(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..512), little in proptest::prelude::any::<bool>()) {
+            let plan = Plan::new(Role::Left, "cdr", Some(("sensor_msgs/msg/Image", "ros2msg", IMAGE.as_bytes()))).unwrap();
+            let mut message = vec![0, u8::from(little), 0, 0];
+            message.extend_from_slice(&bytes);
+            let _ = plan.decode(&message);
+            let _ = plan.decode(&bytes);
+        }
+
+        /// Any text as a schema: parsed or refused, never a panic.
+        #[test]
+        fn any_schema_text_parses_or_fails(text in "[a-z_/0-9\\[\\]<=# \n]{0,200}") {
+            let _ = MsgDefs::parse("p/T", &text);
+            let _ = Plan::new(Role::Odom, "cdr", Some(("nav_msgs/msg/Odometry", "ros2msg", text.as_bytes())));
+        }
+
+        /// A valid image message cut or flipped anywhere: a value or an error.
+        #[test]
+        fn damaged_image_messages_never_panic(at in 0usize..64, bit in 0u8..8, little in proptest::prelude::any::<bool>()) {
+            let plan = Plan::new(Role::Right, "cdr", Some(("sensor_msgs/msg/Image", "ros2msg", IMAGE.as_bytes()))).unwrap();
+            let mut m = image_message(little);
+            let i = at % m.len();
+            m[i] ^= 1 << bit;
+            let _ = plan.decode(&m);
+        }
+    }
 }
