@@ -19,8 +19,11 @@ use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder};
 use vehicle_log::{CameraImage, ImagePayload, Side};
 
-/// The EuRoC pairs as gray pixels, `(width, height, [(left, right)])`.
-fn euroc_pairs() -> Option<(u32, u32, Vec<(Vec<u8>, Vec<u8>)>)> {
+/// Gray stereo pairs `(width, height, [(left, right)])`.
+type Pairs = (u32, u32, Vec<(Vec<u8>, Vec<u8>)>);
+
+/// The EuRoC pairs as gray pixels.
+fn euroc_pairs() -> Option<Pairs> {
     let dir =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/euroc-v101-stereo");
     let list = |side: &str| -> Option<Vec<PathBuf>> {
