@@ -1,7 +1,9 @@
 //! `stereonav view LOG.mcap [--rig RIG.toml] [--skip-phase1] [--phase1-frames N] [--map MAP]
-//! [--screenshot OUT.png] [--time SECONDS] [--size WxH]`: the viewer (crate `viewer`) on a
-//! vehicle log, replayed on the fly or, with `--map`, localised on a saved map as
-//! `stereonav localize` does; or on an estimates file written by `stereonav replay --out`.
+//! [--left TOPIC --right TOPIC --odom TOPIC] [--screenshot OUT.png] [--time SECONDS]
+//! [--size WxH]`: the viewer (crate `viewer`) on a vehicle log, replayed on the fly or, with
+//! `--map`, localised on a saved map as `stereonav localize` does; or on a ROS 2 bag read from
+//! its named topics as `stereonav replay` reads it, its camera images under the features; or
+//! on an estimates file written by `stereonav replay --out`.
 //!
 //! With `--screenshot` it renders the viewer headless (on the CPU: no display, GPU or driver
 //! needed) at the end of the log or at `--time`, writes the PNG and exits; otherwise it opens a
@@ -19,10 +21,13 @@ use selfcal::smoother::SmootherSettings;
 /// Arguments of `stereonav view`.
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
-    /// A vehicle log (MCAP, vehicle-interfaces.md section 4), replayed (or, with --map,
-    /// localised) when it is opened, or an estimates file written by `stereonav replay --out`.
+    /// A vehicle log (MCAP, vehicle-interfaces.md section 4) or, with --left --right --odom,
+    /// a ROS 2 bag (section 4.1), replayed (or, with --map, localised) when it is opened; or an
+    /// estimates file written by `stereonav replay --out`.
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
+    #[command(flatten)]
+    topics: crate::topics::TopicArgs,
     /// The rig file (TOML, section 3); without it, the log's /rig message (with --map, the rig
     /// the map was made with).
     #[arg(long, value_name = "RIG.toml")]
@@ -79,6 +84,7 @@ pub(crate) fn run(args: &Args) -> Result<()> {
         rig,
         settings,
         map: args.map.clone(),
+        topics: args.topics.topics(),
     };
 
     let mut bar = ByteProgress::new(if args.map.is_some() {

@@ -6,6 +6,9 @@ use std::io::Cursor;
 
 use image::{DynamicImage, ImageFormat, ImageReader, Limits};
 use vehicle_log::ImagePayload;
+use zune_core::bytestream::ZCursor;
+use zune_core::colorspace::ColorSpace;
+use zune_core::options::DecoderOptions;
 
 /// Why an image gives no features.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -111,12 +114,40 @@ pub fn describe(payload: &ImagePayload) -> Result<(u32, u32, String), ImageProbl
                     )));
                 }
             };
-            let (w, h) = ImageReader::with_format(Cursor::new(data), fmt)
-                .into_dimensions()
-                .map_err(|e| ImageProblem::Undecodable(format!("{kind}: {e}")))?;
+            let (w, h) = if fmt == ImageFormat::Jpeg {
+                jpeg_decoder(data).1?
+            } else {
+                ImageReader::with_format(Cursor::new(data), fmt)
+                    .into_dimensions()
+                    .map_err(|e| ImageProblem::Undecodable(format!("{kind}: {e}")))?
+            };
             Ok((w, h, kind.to_owned()))
         }
     }
+}
+
+/// zune-jpeg's decoder of a payload's bytes.
+type JpegDecoder<'a> = zune_jpeg::JpegDecoder<ZCursor<&'a [u8]>>;
+
+/// A strict JPEG decoder of `data` to 8-bit gray (the Y channel of a colour JPEG), its
+/// headers read: the decoder and the image's size.
+fn jpeg_decoder(data: &[u8]) -> (JpegDecoder<'_>, Result<(u32, u32), ImageProblem>) {
+    let options = DecoderOptions::default()
+        .set_strict_mode(true)
+        .jpeg_set_out_colorspace(ColorSpace::Luma)
+        .set_max_width(usize::from(u16::MAX))
+        .set_max_height(usize::from(u16::MAX));
+    let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(data), options);
+    let dims = decoder
+        .decode_headers()
+        .map_err(|e| ImageProblem::Undecodable(format!("JPEG: {e}")))
+        .and_then(|()| {
+            decoder
+                .info()
+                .map(|i| (u32::from(i.width), u32::from(i.height)))
+                .ok_or_else(|| ImageProblem::Undecodable("JPEG: no frame header".to_owned()))
+        });
+    (decoder, dims)
 }
 
 /// The gray rows of `payload`, which must be `width x height` pixels.
@@ -195,6 +226,22 @@ pub(crate) fn gray(
                 }
             };
             let fmt = found.unwrap_or(ImageFormat::Png);
+            if fmt == ImageFormat::Jpeg {
+                // The size is checked against the rig's before any pixel is decoded.
+                let (mut decoder, dims) = jpeg_decoder(data);
+                let (w, h) = dims?;
+                size_check(w, h)?;
+                let pixels = decoder
+                    .decode()
+                    .map_err(|e| ImageProblem::Undecodable(format!("JPEG: {e}")))?;
+                if pixels.len() != width as usize * height as usize {
+                    return Err(ImageProblem::Undecodable(format!(
+                        "JPEG: {} gray pixels decoded for {width}x{height}",
+                        pixels.len()
+                    )));
+                }
+                return Ok(Gray::Decoded(pixels));
+            }
             let undecodable =
                 |e: image::ImageError| ImageProblem::Undecodable(format!("{kind}: {e}"));
             let (w, h) = ImageReader::with_format(Cursor::new(data), fmt)
@@ -237,5 +284,79 @@ mod tests {
         assert_eq!(gray_of_rgb(255, 0, 0), 76);
         assert_eq!(gray_of_rgb(0, 255, 0), 150);
         assert_eq!(gray_of_rgb(0, 0, 255), 29);
+    }
+
+    fn synthetic(width: u32, height: u32) -> Vec<u8> {
+        (0..height)
+            .flat_map(|y| {
+                (0..width).map(move |x| {
+                    let d = (f64::from(x) - 40.0).hypot(f64::from(y) - 30.0);
+                    u8::try_from((250.0 * (-d * d / 50.0).exp()) as u32 + 20).unwrap_or(255)
+                })
+            })
+            .collect()
+    }
+
+    fn jpeg(pixels: &[u8], width: u32, height: u32, colour: image::ExtendedColorType) -> Vec<u8> {
+        use image::ImageEncoder;
+        let mut out = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
+            .write_image(pixels, width, height, colour)
+            .unwrap();
+        out
+    }
+
+    fn decode(data: Vec<u8>, width: u32, height: u32) -> Result<Vec<u8>, ImageProblem> {
+        let payload = ImagePayload::Compressed {
+            format: "jpeg".to_owned(),
+            data,
+        };
+        match gray(&payload, width, height)? {
+            Gray::Decoded(p) => Ok(p),
+            _ => unreachable!("a JPEG decodes"),
+        }
+    }
+
+    #[test]
+    fn jpeg_cut_short_is_undecodable() {
+        let (w, h) = (96, 64);
+        let px = synthetic(w, h);
+        let data = jpeg(&px, w, h, image::ExtendedColorType::L8);
+        let full = decode(data.clone(), w, h).unwrap();
+        let worst = full
+            .iter()
+            .zip(&px)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max()
+            .unwrap();
+        assert!(worst <= 8, "quality 95 JPEG off by {worst}");
+        for cut in [data.len() / 2, data.len() - 3] {
+            let e = decode(data[..cut].to_vec(), w, h).unwrap_err();
+            assert!(
+                matches!(e, ImageProblem::Undecodable(_)),
+                "cut at {cut}: {e:?}"
+            );
+        }
+        let e = decode(data, w + 1, h).unwrap_err();
+        assert!(
+            matches!(e, ImageProblem::WrongSize { width: 96, .. }),
+            "{e:?}"
+        );
+    }
+
+    #[test]
+    fn colour_jpeg_gives_its_luma() {
+        let (w, h) = (96, 64);
+        let px = synthetic(w, h);
+        let rgb: Vec<u8> = px.iter().flat_map(|&g| [g, g, g]).collect();
+        let data = jpeg(&rgb, w, h, image::ExtendedColorType::Rgb8);
+        let luma = decode(data, w, h).unwrap();
+        let worst = luma
+            .iter()
+            .zip(&px)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max()
+            .unwrap();
+        assert!(worst <= 8, "luma off by {worst}");
     }
 }

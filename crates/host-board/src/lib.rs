@@ -57,6 +57,10 @@ pub struct ImageCounts {
     pub undecodable: u64,
     /// Frames lost because one of their images could not be read (counted above too).
     pub frames_dropped: u64,
+    /// Pairings decided before they were certain, because the images held passed the
+    /// pairer's limits ([`pair::MAX_HELD`], [`pair::MAX_HELD_BYTES`]: a bag far from stamp
+    /// order).
+    pub pairing_forced: u64,
     /// The first problem of each kind, one line each, for the report.
     #[serde(skip)]
     pub first_problems: Vec<String>,
@@ -172,7 +176,9 @@ impl HostBoard {
     /// (push more, or end).
     pub fn pop(&mut self) -> Option<StereoFeatures> {
         loop {
-            match self.pairer.pop()? {
+            let paired = self.pairer.pop();
+            self.counts.pairing_forced = self.pairer.forced();
+            match paired? {
                 Paired::Alone(_) => self.counts.unpaired += 1,
                 Paired::Frame { left, right } => {
                     let l = self.detect(&left);

@@ -5,9 +5,13 @@
 //! (the right's when the left has too few), so a camera that drops a frame or changes its rate
 //! does not throw the pairing off. Images are held, sorted by stamp, until the pairing of the
 //! oldest left is certain: a right image later than the left's window has been seen (images
-//! come roughly in stamp order), or [`MAX_HELD`] images wait on one side (a camera that went
-//! silent), or the log ends. A left pairs with the right nearest in stamp within the window;
-//! an image left without a partner is a frame with one image, counted.
+//! come roughly in stamp order), or the log ends, or the images held pass [`MAX_HELD`] or
+//! [`MAX_HELD_BYTES`]. The limits are far above what a recorder's interleaving needs (a few
+//! images), so that a bag written topic by topic (every left image, then every right one: a
+//! valid MCAP file, as folder-to-bag scripts write it) still pairs as long as one camera's
+//! images fit; past them the oldest left is decided with what has come, and the decisions so
+//! forced are counted ([`Pairer::forced`]). A left pairs with the right nearest in stamp within
+//! the window; an image left without a partner is a frame with one image, counted.
 
 use std::collections::VecDeque;
 
@@ -15,8 +19,18 @@ use vehicle_log::CameraImage;
 
 /// Steps between stamps over which the frame interval is the median.
 pub const INTERVAL_WINDOW: usize = 15;
-/// Most images held on one side waiting for the other.
-pub const MAX_HELD: usize = 16;
+/// Most images held (both sides) waiting for their partners.
+pub const MAX_HELD: usize = 8192;
+/// Most bytes of image payload held (both sides): 700 raw 752x480 images, 3700 JPEG ones.
+pub const MAX_HELD_BYTES: usize = 256 << 20;
+
+/// An image's payload bytes.
+fn payload_len(image: &CameraImage) -> usize {
+    match &image.payload {
+        vehicle_log::ImagePayload::Raw { data, .. }
+        | vehicle_log::ImagePayload::Compressed { data, .. } => data.len(),
+    }
+}
 
 /// What the pairer gives, in stamp order.
 #[derive(Debug)]
@@ -44,6 +58,10 @@ pub struct Pairer {
     left_latest: Option<u64>,
     right_latest: Option<u64>,
     ended: bool,
+    /// Payload bytes held.
+    held_bytes: usize,
+    /// Decisions forced by the limits.
+    forced: u64,
 }
 
 fn push_stamp(stamps: &mut VecDeque<u64>, t: u64) {
@@ -99,8 +117,15 @@ impl Pairer {
         self.left.len() + self.right.len()
     }
 
+    /// Pairing decisions forced by [`MAX_HELD`] or [`MAX_HELD_BYTES`] before they were
+    /// certain (a bag far from stamp order).
+    pub fn forced(&self) -> u64 {
+        self.forced
+    }
+
     /// Takes a left image.
     pub fn push_left(&mut self, image: CameraImage) {
+        self.held_bytes += payload_len(&image);
         push_stamp(&mut self.left_stamps, image.t_us);
         self.left_latest = Some(self.left_latest.map_or(image.t_us, |t| t.max(image.t_us)));
         insert_sorted(&mut self.left, image);
@@ -108,6 +133,7 @@ impl Pairer {
 
     /// Takes a right image.
     pub fn push_right(&mut self, image: CameraImage) {
+        self.held_bytes += payload_len(&image);
         push_stamp(&mut self.right_stamps, image.t_us);
         self.right_latest = Some(self.right_latest.map_or(image.t_us, |t| t.max(image.t_us)));
         insert_sorted(&mut self.right, image);
@@ -120,7 +146,20 @@ impl Pairer {
 
     /// The next frame or lone image whose pairing is certain, in stamp order.
     pub fn pop(&mut self) -> Option<Paired> {
-        let forced = self.ended || self.left.len() > MAX_HELD || self.right.len() > MAX_HELD;
+        let out = self.decide();
+        if let Some(p) = &out {
+            let n = match p {
+                Paired::Frame { left, right } => payload_len(left) + payload_len(right),
+                Paired::Alone(i) => payload_len(i),
+            };
+            self.held_bytes = self.held_bytes.saturating_sub(n);
+        }
+        out
+    }
+
+    fn decide(&mut self) -> Option<Paired> {
+        let over = self.held() > MAX_HELD || self.held_bytes > MAX_HELD_BYTES;
+        let forced = self.ended || over;
         // Until an interval is known (two stamps on a side) only identical stamps pair.
         let tol = self.tolerance_us();
         if tol.is_none() && !forced {
@@ -142,9 +181,12 @@ impl Pairer {
             return self.right.pop_front().map(Paired::Alone);
         }
         // The left's partner is certain once a right past its window has been seen.
-        let certain = forced || self.right_latest.is_some_and(|t| t > left_t + tol);
-        if !certain {
+        let sure = self.ended || self.right_latest.is_some_and(|t| t > left_t + tol);
+        if !sure && !over {
             return None;
+        }
+        if !sure {
+            self.forced += 1;
         }
         let best = self
             .right
@@ -271,5 +313,27 @@ mod tests {
         assert_eq!(run(&[], &[0, 50_000]), ["Right0", "Right50000"]);
         let lefts: Vec<u64> = (0..40).map(|k| 50_000 * k).collect();
         assert_eq!(run(&lefts, &[]).len(), 40);
+    }
+
+    #[test]
+    fn topic_by_topic_bag_pairs_every_frame() {
+        // Every left image first, then every right one.
+        let mut p = Pairer::new();
+        let mut out = Vec::new();
+        for k in 0..100 {
+            p.push_left(image(Side::Left, 50_000 * k));
+            out.extend(std::iter::from_fn(|| p.pop()));
+        }
+        for k in 0..100 {
+            p.push_right(image(Side::Right, 50_000 * k + 1000));
+            out.extend(std::iter::from_fn(|| p.pop()));
+        }
+        p.end();
+        out.extend(std::iter::from_fn(|| p.pop()));
+        let frames = out
+            .iter()
+            .filter(|x| matches!(x, Paired::Frame { .. }))
+            .count();
+        assert_eq!((frames, out.len(), p.forced()), (100, 100, 0));
     }
 }

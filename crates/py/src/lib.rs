@@ -14,6 +14,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+mod bags;
 mod calibration;
 mod filter;
 mod localization;
@@ -153,7 +154,7 @@ fn row_major_pixels<'a>(view: &ArrayView2<'a, u8>) -> Cow<'a, [u8]> {
 }
 
 /// Packs features into [`FEATURE_RECORD_BYTES`]-byte little-endian records, in the given order.
-fn pack_features(features: &[Feature]) -> Vec<u8> {
+pub(crate) fn pack_features(features: &[Feature]) -> Vec<u8> {
     let mut packed = Vec::with_capacity(features.len() * FEATURE_RECORD_BYTES);
     for feature in features {
         packed.extend_from_slice(&feature.x_q4.to_le_bytes());
@@ -266,6 +267,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<logs::LogDamage>()?;
     m.add_class::<logs::LostSpan>()?;
     m.add_function(wrap_pyfunction!(logs::read_log, m)?)?;
+    m.add_class::<bags::BagContents>()?;
+    m.add_class::<bags::BagFrame>()?;
+    m.add_class::<bags::ImageCounts>()?;
+    m.add_function(wrap_pyfunction!(bags::read_bag, m)?)?;
+    m.add_function(wrap_pyfunction!(bags::decode_image, m)?)?;
     m.add("MAP_VERSION", map_file::VERSION)?;
     m.add("ODOMETRY_LOOKAHEAD_US", nav::ODOMETRY_LOOKAHEAD_US)?;
     m.add_function(wrap_pyfunction!(maps::read_map, m)?)?;

@@ -31,25 +31,36 @@ type NewLampTuple<'py> = (
 ///
 /// `rig` None uses the rig the map was made with (the camera's calibration always comes from
 /// the map). `save_map` writes the map with the lamps this run found that are not in it, as
-/// `--save-map`. Raises `stereonav.InputError` for a map that cannot be read (not a map, a
+/// `--save-map`. `left`, `right` and `odom` (all three or none) name a ROS 2 bag's topics, as
+/// for `replay`. Raises `stereonav.InputError` for a map that cannot be read (not a map, a
 /// newer version, damaged) or cannot localise, a log that cannot be read or is not a vehicle
-/// log, or an output that cannot be written. The GIL is released.
+/// log, topics named badly or missing from the bag, or an output that cannot be written. The
+/// GIL is released.
 #[pyfunction]
-#[pyo3(name = "localize", signature = (log_path, map_path, rig, save_map))]
+#[pyo3(
+    name = "localize",
+    signature = (log_path, map_path, rig, save_map, left = None, right = None, odom = None)
+)]
+#[allow(clippy::too_many_arguments)] // the Python call's keywords, checked by its wrapper
 pub(crate) fn localize_log(
     py: Python<'_>,
     log_path: PathBuf,
     map_path: PathBuf,
     rig: Option<PyRef<'_, PyRig>>,
     save_map: Option<PathBuf>,
+    left: Option<String>,
+    right: Option<String>,
+    odom: Option<String>,
 ) -> PyResult<LocalizeResult> {
+    let topics =
+        crate::bags::ros2_topics(left, right, odom).map_err(|e| crate::input_error(py, e))?;
     let rig = rig.map(|r| r.rig.clone());
     py.detach(|| -> Result<LocalizeResult, FileError> {
         let map = map_file::Map::load(&map_path)?;
         let mut frames = Vec::new();
         let end = replay::localize_log(
             &log_path,
-            None,
+            topics.as_ref(),
             &map,
             rig,
             LocalizerSettings::default(),

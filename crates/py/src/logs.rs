@@ -134,7 +134,7 @@ impl LostSpan {
 
 /// What could not be read in a log, in total (`vehicle_log::Damage`).
 #[pyclass(module = "stereonav._native", frozen)]
-pub(crate) struct LogDamage(vehicle_log::Damage);
+pub(crate) struct LogDamage(pub(crate) vehicle_log::Damage);
 
 #[pymethods]
 impl LogDamage {

@@ -286,15 +286,21 @@ pub(crate) fn phase_names() -> Vec<&'static str> {
 /// `consider_camera` keeps phase 2 from refining the camera parameters
 /// (`vslam_ekf::CameraUpdate::Consider`). `save_map` writes the map the run built (its
 /// landmarks with their covariance, the calibrated C and V, the rig) as `--save-map` does
-/// (`replay::saved_map`, docs/maps.md). Raises `stereonav.InputError` for a log that cannot be
-/// read or is not a vehicle log, a bad rig, a setting out of range or a map that cannot be
-/// written; a log cut short is replayed as far as it goes, with a warning. The GIL is released
-/// during the run.
+/// (`replay::saved_map`, docs/maps.md). `left`, `right` and `odom` (all three or none) name
+/// a ROS 2 bag's camera and odometry topics, read instead of the board's stream as
+/// `--left --right --odom` do (`crate::bags::ros2_topics`). Raises `stereonav.InputError` for
+/// a log that cannot be read or is not a vehicle log, topics named badly or missing from the
+/// bag, a bad rig, a setting out of range or a map that cannot be written; a log cut short is
+/// replayed as far as it goes, with a warning. The GIL is released during the run.
 #[pyfunction]
 #[pyo3(
     name = "replay",
-    signature = (log_path, rig, skip_phase1, phase1_frames, consider_camera, save_map)
+    signature = (
+        log_path, rig, skip_phase1, phase1_frames, consider_camera, save_map,
+        left = None, right = None, odom = None
+    )
 )]
+#[allow(clippy::too_many_arguments)] // the Python call's keywords, checked by its wrapper
 pub(crate) fn replay_log(
     py: Python<'_>,
     log_path: PathBuf,
@@ -303,14 +309,19 @@ pub(crate) fn replay_log(
     phase1_frames: Option<usize>,
     consider_camera: bool,
     save_map: Option<PathBuf>,
+    left: Option<String>,
+    right: Option<String>,
+    odom: Option<String>,
 ) -> PyResult<ReplayResult> {
     let settings = nav_settings(skip_phase1, phase1_frames, consider_camera)
         .map_err(|e| input_error(py, e.to_string()))?;
+    let topics = crate::bags::ros2_topics(left, right, odom).map_err(|e| input_error(py, e))?;
     let rig = rig.map(|r| r.rig.clone());
-    // `replay::replay_log`, keeping the rig used and the run's end for the saved map.
+    // `replay::replay_log_with_topics`, keeping the rig used and the run's end for the saved
+    // map.
     let replay = py
         .detach(|| -> Result<Replay, FileError> {
-            let replayer = Replayer::open(&log_path, rig, &settings)?;
+            let replayer = Replayer::open_with_topics(&log_path, topics.as_ref(), rig, &settings)?;
             let rig_used = replayer.rig().clone();
             let mut collected = ReplayCollector::default();
             let end = replayer.run(&mut collected, &mut |_, _| {})?;

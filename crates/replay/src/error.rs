@@ -37,6 +37,18 @@ pub enum Error {
         /// Its odometry topics.
         odometry: Vec<String>,
     },
+    /// One topic named for two roles of a ROS 2 bag's replay.
+    #[error(
+        "{first} and {second} both name {topic}: the left camera, the right camera and the odometry are three topics"
+    )]
+    TopicNamedTwice {
+        /// The first option that named it.
+        first: &'static str,
+        /// The second.
+        second: &'static str,
+        /// The topic.
+        topic: String,
+    },
     /// A topic named for the replay of a ROS 2 bag is not in it.
     #[error(
         "{}: {option} {topic}: the bag has no such topic (its topics: {})",

@@ -276,12 +276,7 @@ pub fn localize_log(
     for (what, n) in &refused {
         warnings.push(format!("{n} inputs refused: {what}"));
     }
-    if stream.counts.frames == 0 {
-        warnings.push("no stereo frame could be decoded from /fpga/features".to_string());
-    }
-    if stream.counts.odometry == 0 {
-        warnings.push("no odometry on /odom: the vehicle's motion is unknown".to_string());
-    }
+    warnings.extend(stream.input_warnings());
     let unused = map.landmarks.len() - localizer.map().len();
     if unused > 0 {
         warnings.push(format!(
@@ -503,6 +498,7 @@ pub fn localize_summary_json(end: &LocalizeEnd) -> Value {
         "lost_by_reason": {"gap": end.lost[0], "no_odometry": end.lost[1],
                            "innovations": end.lost[2], "uncertain": end.lost[3]},
         "hypotheses": end.hypotheses,
+        "counts": Value::Object(c.named().iter().map(|(k, v)| ((*k).to_owned(), json!(v))).collect()),
         "warnings": end.warnings,
         "truth": truth,
     })

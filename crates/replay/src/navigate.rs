@@ -523,25 +523,7 @@ impl Replayer {
         let mut counts = self.stream.counts;
         let mut warnings = self.read_warnings();
         warnings.append(&mut self.warnings);
-        let topics = self.stream.reader().ros2_topics().cloned();
-        if let Some(images) = self.stream.image_counts() {
-            warnings.extend(image_warnings(images));
-        }
-        if counts.frames == 0 {
-            warnings.push(match &topics {
-                None => "no stereo frame could be decoded from /fpga/features".to_string(),
-                Some(t) => format!(
-                    "no stereo frame could be made from the images of {} and {}",
-                    t.left, t.right
-                ),
-            });
-        }
-        if counts.odometry == 0 {
-            let topic = topics.as_ref().map_or("/odom", |t| t.odom.as_str());
-            warnings.push(format!(
-                "no odometry on {topic}: the vehicle's motion is unknown"
-            ));
-        }
+        warnings.extend(self.stream.input_warnings());
         let navigator = &self.navigator;
         let stats = navigator.stats();
         let tracker = navigator.front_end().tracker().stats();
@@ -631,32 +613,6 @@ impl Replayer {
         }
         warnings
     }
-}
-
-/// What became of a bag's camera images, one warning per kind of loss (with its first case).
-fn image_warnings(images: &host_board::ImageCounts) -> Vec<String> {
-    let mut out = Vec::new();
-    if images.unpaired > 0 {
-        out.push(format!(
-            "{} of {} camera images had no partner within a quarter of the frame interval \
-             (frames with one image): left out",
-            images.unpaired,
-            images.left + images.right
-        ));
-    }
-    if images.bad_images() > 0 {
-        out.push(format!(
-            "{} camera images could not be read ({} of the wrong size, {} of an encoding not \
-             read, {} undecodable), {} stereo frames lost; the first: {}",
-            images.bad_images(),
-            images.wrong_size,
-            images.unsupported,
-            images.undecodable,
-            images.frames_dropped,
-            images.first_problems.join("; ")
-        ));
-    }
-    out
 }
 
 /// Lost stretches of a damaged log told one warning each (the rest in one more line).

@@ -103,6 +103,19 @@ impl LogStream {
     /// Opens the log at `path` (an MCAP file, or an error); with `topics`, a ROS 2 bag whose
     /// named camera and odometry topics are the input (vehicle-interfaces.md 4.1).
     pub(crate) fn open(path: &Path, topics: Option<&Ros2Topics>) -> Result<Self, Error> {
+        if let Some(t) = topics {
+            for (i, a) in Role::ALL.into_iter().enumerate() {
+                for b in Role::ALL.into_iter().skip(i + 1) {
+                    if t.topic(a) == t.topic(b) {
+                        return Err(Error::TopicNamedTwice {
+                            first: a.option(),
+                            second: b.option(),
+                            topic: t.topic(a).to_owned(),
+                        });
+                    }
+                }
+            }
+        }
         let mut reader = LogReader::open(path)?;
         if let Some(topics) = topics {
             reader.set_ros2_topics(topics.clone());
@@ -144,6 +157,32 @@ impl LogStream {
             self.image(image);
         }
         Ok(())
+    }
+
+    /// What limits the input, one line each, once the log has been read: no frame, no
+    /// odometry, and what became of a bag's images.
+    pub(crate) fn input_warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        let topics = self.reader.ros2_topics();
+        if let Some(images) = self.image_counts() {
+            warnings.extend(image_warnings(images));
+        }
+        if self.counts.frames == 0 {
+            warnings.push(match topics {
+                None => "no stereo frame could be decoded from /fpga/features".to_string(),
+                Some(t) => format!(
+                    "no stereo frame could be made from the images of {} and {}",
+                    t.left, t.right
+                ),
+            });
+        }
+        if self.counts.odometry == 0 {
+            let topic = topics.map_or("/odom", |t| t.odom.as_str());
+            warnings.push(format!(
+                "no odometry on {topic}: the vehicle's motion is unknown"
+            ));
+        }
+        warnings
     }
 
     /// The host board's image counts (a bag's), if it ran.
@@ -225,11 +264,19 @@ impl LogStream {
             });
         for role in Role::ALL {
             if self.ended && !self.reader.ros2_met().iter().any(|(r, _)| *r == role) {
+                // The bag's topics: those named for the other roles, and the rest.
+                let mut all: Vec<(String, String)> = self
+                    .reader
+                    .ros2_met()
+                    .iter()
+                    .map(|(r, ty)| (topics.topic(*r).to_owned(), ty.clone()))
+                    .collect();
+                all.extend(self.reader.foreign_channels().iter().cloned());
                 return Err(Error::MissingTopic {
                     path: self.path.clone(),
                     option: role.option(),
                     topic: topics.topic(role).to_owned(),
-                    topics: self.reader.foreign_channels().to_vec(),
+                    topics: all,
                 });
             }
         }
@@ -362,6 +409,42 @@ impl LogStream {
         }
         self.counts.frames_out_of_order = self.window.frames_out_of_order();
     }
+}
+
+/// What became of a bag's camera images, one warning per kind of loss (with its first case).
+pub(crate) fn image_warnings(images: &host_board::ImageCounts) -> Vec<String> {
+    let mut out = Vec::new();
+    if images.unpaired > 0 {
+        out.push(format!(
+            "{} of {} camera images had no partner within a quarter of the frame interval \
+             (frames with one image): left out",
+            images.unpaired,
+            images.left + images.right
+        ));
+    }
+    if images.pairing_forced > 0 {
+        out.push(format!(
+            "the bag's images are far from stamp order: {} pairings were decided before their \
+             partner could have come (held images past {} or {} MiB); reorder the bag by log \
+             time (e.g. `mcap sort`)",
+            images.pairing_forced,
+            host_board::pair::MAX_HELD,
+            host_board::pair::MAX_HELD_BYTES >> 20
+        ));
+    }
+    if images.bad_images() > 0 {
+        out.push(format!(
+            "{} camera images could not be read ({} of the wrong size, {} of an encoding not \
+             read, {} undecodable), {} stereo frames lost; the first: {}",
+            images.bad_images(),
+            images.wrong_size,
+            images.unsupported,
+            images.undecodable,
+            images.frames_dropped,
+            images.first_problems.join("; ")
+        ));
+    }
+    out
 }
 
 /// The error for a ROS 2 bag with camera images replayed without its topics named, if the

@@ -67,6 +67,54 @@ pub enum Error {
     /// Writing the vehicle log failed.
     #[error(transparent)]
     Log(#[from] vehicle_log::Error),
+    /// Writing a ROS 2 bag's MCAP records failed.
+    #[error("writing the ROS 2 bag: {0}")]
+    Bag(#[from] mcap::McapError),
+    /// A JPEG quality outside 1 to 100.
+    #[error("JPEG quality {quality}: expected 1 to 100")]
+    JpegQuality {
+        /// The quality asked for.
+        quality: u8,
+    },
+    /// An image of a frame could not be encoded.
+    #[error("encoding frame {frame} as {format}: {reason}")]
+    ImageEncode {
+        /// Index of the stereo frame in the run.
+        frame: usize,
+        /// `png` or `jpeg`.
+        format: &'static str,
+        /// The encoder's reason.
+        reason: String,
+    },
+    /// A time does not fit a ROS 2 stamp (`int32` seconds).
+    #[error(
+        "t_us {t_us} does not fit a ROS 2 stamp: expected at most {} s",
+        i32::MAX
+    )]
+    Stamp {
+        /// The time, microseconds.
+        t_us: u64,
+    },
+    /// Something too long for a CDR length (`uint32`).
+    #[error("{what} of {len} bytes: a CDR length holds at most {} bytes", u32::MAX)]
+    TooLarge {
+        /// What it is.
+        what: &'static str,
+        /// Its length.
+        len: usize,
+    },
+    /// A frame of the rendered mode came without its images (cannot happen).
+    #[error("frame {frame} has no images: a bag needs the rendered mode")]
+    NoImages {
+        /// Index of the stereo frame in the run.
+        frame: usize,
+    },
+    /// A truth message could not be written as JSON (cannot happen for finite values).
+    #[error("truth as JSON: {reason}")]
+    Json {
+        /// The serializer's reason.
+        reason: String,
+    },
 }
 
 /// Results of this crate.

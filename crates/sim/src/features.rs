@@ -74,7 +74,8 @@ impl ImageFeatures {
     }
 }
 
-/// A lamp's true, noise-free projection in a stereo frame.
+/// A lamp's true, noise-free projection in a stereo frame, in the rectified model (through real
+/// lenses the board sees it at the raw pixel [`rig_model::lens::Lens::unrectify`] gives).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LampView {
     /// The lamp.

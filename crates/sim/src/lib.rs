@@ -20,11 +20,15 @@
 //!   yaw-rate bias; [`integrate`] is the exact integration of one held sample.
 //! * [`features`]: the fast mode (project, noise, clutter, Q12.4, the board's order and cap).
 //! * [`render`]: the rendered mode's images (lamps as blurred disks over a roof with beams,
-//!   sensor noise), for [`harris_core::detect`].
+//!   sensor noise), for [`harris_core::detect`]; through the rig's real lenses
+//!   ([`Renderer::with_lens`]) the raw images each camera's sensor sees.
 //! * [`link`]: packets through [`fpga_link::Encoder`], lost packets, bit flips, chunking and
 //!   arrival times.
 //! * [`run`]: [`simulate`] gives a [`SimRun`] (plain data); [`SimRun::write_log`] writes the
 //!   MCAP log through `vehicle-log`, [`SimRun::truth_json`] the ground truth.
+//! * [`bag`]: [`write_bag`] simulates the rendered mode into a ROS 2 bag (vehicle-interfaces.md
+//!   4.1): both cameras' images (raw, PNG or JPEG; raw through the rig's lenses), the odometry
+//!   as `nav_msgs/msg/Odometry`, and the truth, as a robot without the board records them.
 //!
 //! Determinism: every random draw comes from ChaCha8 streams seeded by the scenario's seed
 //! (one stream per purpose, and per frame for the frames' noise), never from the operating
@@ -33,6 +37,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod bag;
 mod error;
 pub mod features;
 pub mod hall;
@@ -44,6 +49,7 @@ pub mod run;
 pub mod scenario;
 pub mod world;
 
+pub use bag::{BagImages, write_bag, write_bag_to};
 pub use error::{Error, Result};
 pub use features::{ImageFeatures, LampView, SimFeature};
 pub use link::{Chunk, Packet, PacketFate};

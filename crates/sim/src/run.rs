@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::features::{ImageFeatures, LampView, SimFeature, fast_frame, lamp_views};
 use crate::link::{Chunk, Packet, PacketFate, chunks, draw_fates};
 use crate::motion::{Motion, OdomSample, tick_us, wrap_angle};
-use crate::render::Renderer;
+use crate::render::{Renderer, StereoImages};
 use crate::rng::{Stream, stream_rng};
 use crate::scenario::Scenario;
 use crate::world::{Lamp, lamps};
@@ -137,89 +137,166 @@ pub fn simulate_with_progress(
     mode: Mode,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SimRun> {
-    let spec = &scenario.spec;
-    // The fields are public: check them again in case they were changed after loading.
-    spec.validate(&scenario.source_name)?;
-    let seed = spec.seed;
-    let camera = scenario.true_camera();
-    let regs = scenario.registers();
-    let landmarks = lamps(&spec.world, seed);
-    let rates = &spec.rates;
-    let first_frame_us = tick_us(rates.start_t_us, rates.camera_phase_us, rates.camera_hz, 0);
-    let motion = Motion::new(
-        &spec.path,
-        rates.start_t_us,
-        rates.odometry_hz,
-        first_frame_us,
-    );
-    let odometry = motion.measured(&spec.noise, &mut stream_rng(seed, Stream::Odometry, 0));
-    let end_us = motion.end_us();
-    // The exposures (index, time), without those of a blind camera (a carried vehicle).
-    let times: Vec<(usize, u64)> = (0..)
-        .map(|k| {
-            (
-                k,
-                tick_us(rates.start_t_us, rates.camera_phase_us, rates.camera_hz, k),
-            )
+    let plan = Plan::new(scenario, mode)?;
+    let mut frames = Vec::with_capacity(plan.frame_count());
+    plan.frames(
+        BATCH,
+        &|_, _| Ok(()),
+        &mut |frame, ()| {
+            frames.push(frame);
+            Ok(())
+        },
+        progress,
+    )?;
+    plan.finish(frames)
+}
+
+/// A run before its frames: everything the scenario fixes (the true camera, the lamps, the
+/// path and its odometry, the exposure times, the renderer).
+pub(crate) struct Plan<'a> {
+    scenario: &'a Scenario,
+    mode: Mode,
+    pub(crate) camera: CameraParams,
+    regs: Registers,
+    pub(crate) landmarks: Vec<Lamp>,
+    motion: Motion,
+    pub(crate) odometry: Vec<OdomSample>,
+    /// The exposures (index, time), without those of a blind camera (a carried vehicle).
+    times: Vec<(usize, u64)>,
+    renderer: Option<Renderer>,
+    /// The board's clock offset, microseconds.
+    offset_us: f64,
+}
+
+impl<'a> Plan<'a> {
+    pub(crate) fn new(scenario: &'a Scenario, mode: Mode) -> Result<Self> {
+        let spec = &scenario.spec;
+        // The fields are public: check them again in case they were changed after loading.
+        spec.validate(&scenario.source_name)?;
+        let seed = spec.seed;
+        let camera = scenario.true_camera();
+        let regs = scenario.registers();
+        let landmarks = lamps(&spec.world, seed);
+        let rates = &spec.rates;
+        let first_frame_us = tick_us(rates.start_t_us, rates.camera_phase_us, rates.camera_hz, 0);
+        let motion = Motion::new(
+            &spec.path,
+            rates.start_t_us,
+            rates.odometry_hz,
+            first_frame_us,
+        );
+        let odometry = motion.measured(&spec.noise, &mut stream_rng(seed, Stream::Odometry, 0));
+        let end_us = motion.end_us();
+        let times: Vec<(usize, u64)> = (0..)
+            .map(|k| {
+                (
+                    k,
+                    tick_us(rates.start_t_us, rates.camera_phase_us, rates.camera_hz, k),
+                )
+            })
+            .take_while(|&(_, t)| t <= end_us)
+            .filter(|&(_, t)| !motion.blind_at(t))
+            .collect();
+        let renderer = match mode {
+            Mode::Rendered => {
+                let renderer = Renderer::new(camera, &regs, spec.render, landmarks.clone());
+                // Through the rig's lenses (the truth) the board sees raw images.
+                Some(match &scenario.rig.lens {
+                    Some(lens) => renderer.with_lens(lens),
+                    None => renderer,
+                })
+            }
+            Mode::Fast => None,
+        };
+        Ok(Self {
+            scenario,
+            mode,
+            camera,
+            regs,
+            landmarks,
+            motion,
+            odometry,
+            times,
+            renderer,
+            // The board stamps a frame exposed at odometry-clock time T with T + its offset.
+            offset_us: (rates.board_clock_offset_s * 1e6).round(),
         })
-        .take_while(|&(_, t)| t <= end_us)
-        .filter(|&(_, t)| !motion.blind_at(t))
-        .collect();
-    let renderer = match mode {
-        Mode::Rendered => Some(Renderer::new(camera, &regs, spec.render, landmarks.clone())),
-        Mode::Fast => None,
-    };
-    // The board stamps a frame exposed at odometry-clock time T with T + its clock offset.
-    let offset_us = (rates.board_clock_offset_s * 1e6).round();
-    let stamp = |t: u64| -> u64 {
+    }
+
+    pub(crate) fn frame_count(&self) -> usize {
+        self.times.len()
+    }
+
+    /// The board's timestamp of the first frame, if any.
+    pub(crate) fn first_stamp_us(&self) -> Option<u64> {
+        self.times.first().map(|&(_, t)| self.stamp(t))
+    }
+
+    /// The board's timestamp of an exposure at odometry-clock time `t`.
+    fn stamp(&self, t: u64) -> u64 {
         #[allow(
             clippy::cast_precision_loss,
             clippy::cast_possible_truncation,
             clippy::cast_sign_loss
         )]
-        let s = (t as f64 + offset_us).max(0.0) as u64;
+        let s = (t as f64 + self.offset_us).max(0.0) as u64;
         s
-    };
-    let one_frame = |index: usize, exposed_us: u64| -> Result<FrameTruth> {
-        let pose = motion.pose_at(exposed_us);
-        let t_us = stamp(exposed_us);
-        let views = lamp_views(
-            &camera,
-            &pose,
-            &landmarks,
-            &regs,
-            scenario.rig.lens.as_ref(),
-        );
-        let (left, right) = match &renderer {
-            None => fast_frame(
-                &views,
-                &spec.noise,
-                &spec.clutter,
-                spec.world.lamp_response,
-                &regs,
-                scenario.rig.lens.as_ref().map(|l| (l, &camera)),
-                &mut stream_rng(seed, Stream::Features, index as u64),
-            ),
+    }
+
+    /// One frame, with its images in the rendered mode.
+    fn frame(&self, index: usize, exposed_us: u64) -> Result<(FrameTruth, Option<StereoImages>)> {
+        let spec = &self.scenario.spec;
+        let (camera, regs, seed) = (&self.camera, &self.regs, spec.seed);
+        let lens = self.scenario.rig.lens.as_ref();
+        let pose = self.motion.pose_at(exposed_us);
+        let t_us = self.stamp(exposed_us);
+        let views = lamp_views(camera, &pose, &self.landmarks, regs, lens);
+        let (left, right, images) = match &self.renderer {
+            None => {
+                let (l, r) = fast_frame(
+                    &views,
+                    &spec.noise,
+                    &spec.clutter,
+                    spec.world.lamp_response,
+                    regs,
+                    lens.map(|l| (l, camera)),
+                    &mut stream_rng(seed, Stream::Features, index as u64),
+                );
+                (l, r, None)
+            }
             Some(renderer) => {
                 let mut noise_left = stream_rng(seed, Stream::Image, 2 * index as u64);
                 let mut noise_right = stream_rng(seed, Stream::Image, 2 * index as u64 + 1);
                 let images = renderer.render(&pose, Some((&mut noise_left, &mut noise_right)));
                 let detect = |image: &[u8]| {
-                    harris_core::detect(image, &regs).map_err(|source| Error::Detect {
+                    harris_core::detect(image, regs).map_err(|source| Error::Detect {
                         frame: index,
                         source,
                     })
                 };
                 let (l, r) = (detect(&images.left)?, detect(&images.right)?);
+                // The features are where the board sees the lamps: raw pixels through a lens.
+                let seen = |lens: Option<&rig_model::lens::Lens>, u: f64, v: f64| match lens {
+                    None => Some((u, v)),
+                    Some(l) => l
+                        .unrectify(nalgebra::Vector2::new(u, v), camera.f, camera.cx, camera.cy)
+                        .map(|p| (p.x, p.y)),
+                };
                 (
-                    associate(&l, &views, |v| (v.u_left, v.v_left)),
-                    associate(&r, &views, |v| (v.u_right, v.v_right)),
+                    associate(&l, &views, |v| {
+                        seen(lens.map(|l| &l.left), v.u_left, v.v_left)
+                    }),
+                    associate(&r, &views, |v| {
+                        seen(lens.map(|l| &l.right), v.u_right, v.v_right)
+                    }),
+                    Some(images),
                 )
             }
         };
-        Ok(FrameTruth {
+        let frame = FrameTruth {
             index,
-            frame_counter: rates
+            frame_counter: spec
+                .rates
                 .first_frame
                 .wrapping_add(u32::try_from(index).unwrap_or(0)),
             t_us,
@@ -227,114 +304,146 @@ pub fn simulate_with_progress(
             views,
             left,
             right,
-        })
-    };
-    let threads = match mode {
-        Mode::Rendered => std::thread::available_parallelism().map_or(1, usize::from),
-        Mode::Fast => 1,
-    };
-    let mut frames = Vec::with_capacity(times.len());
-    progress(0, times.len());
-    for batch in times.chunks(BATCH) {
-        if threads <= 1 {
-            for &(k, t) in batch {
-                frames.push(one_frame(k, t)?);
-            }
-        } else {
-            let results: Vec<Result<FrameTruth>> = std::thread::scope(|s| {
-                let handles: Vec<_> = (0..threads)
-                    .map(|w| {
-                        let one_frame = &one_frame;
-                        s.spawn(move || {
-                            batch
-                                .iter()
-                                .enumerate()
-                                .skip(w)
-                                .step_by(threads)
-                                .map(|(i, &(k, t))| (i, one_frame(k, t)))
-                                .collect::<Vec<_>>()
-                        })
-                    })
-                    .collect();
-                let mut all: Vec<(usize, Result<FrameTruth>)> = Vec::with_capacity(batch.len());
-                for h in handles {
-                    // A worker panics only on a bug; report it as a panic in this thread.
-                    match h.join() {
-                        Ok(v) => all.extend(v),
-                        Err(p) => std::panic::resume_unwind(p),
-                    }
+        };
+        Ok((frame, images))
+    }
+
+    /// Simulates every frame in order, `batch` frames at a time over the machine's threads in
+    /// the rendered mode: each frame and its images (rendered mode) go through `post` in the
+    /// worker thread, and the frame and what `post` made of it to `sink`, in frame order, a
+    /// batch at a time, so at most `batch` frames' images are alive at once.
+    pub(crate) fn frames<T: Send>(
+        &self,
+        batch: usize,
+        post: &(dyn Fn(&FrameTruth, Option<StereoImages>) -> Result<T> + Sync),
+        sink: &mut dyn FnMut(FrameTruth, T) -> Result<()>,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<()> {
+        let threads = match self.mode {
+            Mode::Rendered => std::thread::available_parallelism().map_or(1, usize::from),
+            Mode::Fast => 1,
+        };
+        let one = |k: usize, t: u64| -> Result<(FrameTruth, T)> {
+            let (frame, images) = self.frame(k, t)?;
+            let extra = post(&frame, images)?;
+            Ok((frame, extra))
+        };
+        let total = self.times.len();
+        let mut done = 0;
+        progress(0, total);
+        for batch in self.times.chunks(batch.max(1)) {
+            if threads <= 1 {
+                for &(k, t) in batch {
+                    let (frame, extra) = one(k, t)?;
+                    sink(frame, extra)?;
                 }
-                all.sort_by_key(|(i, _)| *i);
-                all.into_iter().map(|(_, r)| r).collect()
-            });
-            for r in results {
-                frames.push(r?);
+            } else {
+                let results: Vec<Result<(FrameTruth, T)>> = std::thread::scope(|s| {
+                    let handles: Vec<_> = (0..threads)
+                        .map(|w| {
+                            let one = &one;
+                            s.spawn(move || {
+                                batch
+                                    .iter()
+                                    .enumerate()
+                                    .skip(w)
+                                    .step_by(threads)
+                                    .map(|(i, &(k, t))| (i, one(k, t)))
+                                    .collect::<Vec<_>>()
+                            })
+                        })
+                        .collect();
+                    let mut all: Vec<(usize, Result<(FrameTruth, T)>)> =
+                        Vec::with_capacity(batch.len());
+                    for h in handles {
+                        // A worker panics only on a bug; report it as a panic in this thread.
+                        match h.join() {
+                            Ok(v) => all.extend(v),
+                            Err(p) => std::panic::resume_unwind(p),
+                        }
+                    }
+                    all.sort_by_key(|(i, _)| *i);
+                    all.into_iter().map(|(_, r)| r).collect()
+                });
+                for r in results {
+                    let (frame, extra) = r?;
+                    sink(frame, extra)?;
+                }
             }
+            done += batch.len();
+            progress(done, total);
         }
-        progress(frames.len(), times.len());
+        Ok(())
     }
-    let mut encoder = Encoder::starting_at(rates.first_frame);
-    let mut packets = Vec::with_capacity(frames.len());
-    for f in &frames {
-        if encoder.next_frame() != f.frame_counter {
-            // Across a carry: the counter jumps over the frames that were never sent.
-            encoder = Encoder::starting_at(f.frame_counter);
+
+    /// The run from its frames: the board's packets, their fates on the link and the chunks.
+    pub(crate) fn finish(self, frames: Vec<FrameTruth>) -> Result<SimRun> {
+        let spec = &self.scenario.spec;
+        let (seed, rates) = (spec.seed, &spec.rates);
+        let mut encoder = Encoder::starting_at(rates.first_frame);
+        let mut packets = Vec::with_capacity(frames.len());
+        for f in &frames {
+            if encoder.next_frame() != f.frame_counter {
+                // Across a carry: the counter jumps over the frames that were never sent.
+                encoder = Encoder::starting_at(f.frame_counter);
+            }
+            let mut bytes = Vec::new();
+            let frame_counter = encoder.next_frame();
+            encoder
+                .encode_to_vec(
+                    f.t_us,
+                    (&f.left.board_features(), f.left.overflow),
+                    (&f.right.board_features(), f.right.overflow),
+                    &mut bytes,
+                )
+                .map_err(|source| Error::Encode {
+                    frame: f.index,
+                    source,
+                })?;
+            packets.push(Packet {
+                frame_index: f.index,
+                frame_counter,
+                t_us: f.t_us,
+                bytes,
+                fate: PacketFate::Sent,
+            });
         }
-        let mut bytes = Vec::new();
-        let frame_counter = encoder.next_frame();
-        encoder
-            .encode_to_vec(
-                f.t_us,
-                (&f.left.board_features(), f.left.overflow),
-                (&f.right.board_features(), f.right.overflow),
-                &mut bytes,
-            )
-            .map_err(|source| Error::Encode {
-                frame: f.index,
-                source,
-            })?;
-        packets.push(Packet {
-            frame_index: f.index,
-            frame_counter,
-            t_us: f.t_us,
-            bytes,
-            fate: PacketFate::Sent,
-        });
+        draw_fates(
+            &mut packets,
+            &spec.link,
+            &mut stream_rng(seed, Stream::Faults, 0),
+        );
+        let chunks = chunks(
+            &packets,
+            &spec.link,
+            &mut stream_rng(seed, Stream::Chunks, 0),
+        );
+        Ok(SimRun {
+            name: scenario_name(&self.scenario.source_name),
+            seed,
+            mode: self.mode,
+            camera: self.camera,
+            rig: self.scenario.rig.clone(),
+            registers: self.regs,
+            odometry_truth: self.motion.sent_truth(),
+            landmarks: self.landmarks,
+            odometry: self.odometry,
+            frames,
+            packets,
+            chunks,
+            log_rig: spec.log.rig,
+            log_truth: spec.log.truth,
+        })
     }
-    draw_fates(
-        &mut packets,
-        &spec.link,
-        &mut stream_rng(seed, Stream::Faults, 0),
-    );
-    let chunks = chunks(
-        &packets,
-        &spec.link,
-        &mut stream_rng(seed, Stream::Chunks, 0),
-    );
-    Ok(SimRun {
-        name: scenario_name(&scenario.source_name),
-        seed,
-        mode,
-        camera,
-        rig: scenario.rig.clone(),
-        registers: regs,
-        landmarks,
-        odometry,
-        odometry_truth: motion.sent_truth(),
-        frames,
-        packets,
-        chunks,
-        log_rig: spec.log.rig,
-        log_truth: spec.log.truth,
-    })
 }
 
 /// The detected features with the lamp each is an image of: the nearest lamp in view within
-/// 2 pixels, if any.
+/// 2 pixels of where the detector sees it (`at`: its projection in the image detected on, raw
+/// through a lens; `None` where it has none), if any.
 fn associate(
     detection: &harris_core::Detection,
     views: &[LampView],
-    at: impl Fn(&LampView) -> (f64, f64),
+    at: impl Fn(&LampView) -> Option<(f64, f64)>,
 ) -> ImageFeatures {
     const MAX_DISTANCE_PX: f64 = 2.0;
     let features = detection
@@ -344,9 +453,9 @@ fn associate(
             let (u, v) = (f.u(), f.v());
             let lamp = views
                 .iter()
-                .map(|view| {
-                    let (x, y) = at(view);
-                    (view.id, (x - u).hypot(y - v))
+                .filter_map(|view| {
+                    let (x, y) = at(view)?;
+                    Some((view.id, (x - u).hypot(y - v)))
                 })
                 .filter(|&(_, d)| d <= MAX_DISTANCE_PX)
                 .min_by(|a, b| a.1.total_cmp(&b.1))
@@ -371,6 +480,20 @@ fn scenario_name(source_name: &str) -> String {
         |f| f.to_string_lossy().into_owned(),
     );
     file.strip_suffix(".toml").unwrap_or(&file).to_string()
+}
+
+/// The lit lamps as vehicle-log's truth messages ([`SimRun::truth_landmarks`]).
+pub(crate) fn truth_landmarks(lamps: &[Lamp]) -> Vec<TruthLandmark> {
+    lamps
+        .iter()
+        .filter(|l| l.lit)
+        .map(|l| TruthLandmark {
+            id: l.id,
+            x: l.position.x,
+            y: l.position.y,
+            z: l.position.z,
+        })
+        .collect()
 }
 
 /// The true camera parameters as vehicle-log's truth message.
@@ -414,16 +537,7 @@ impl SimRun {
     /// are left out: nothing of them can be seen in this drive, and a replay judges the map
     /// against every truth landmark in view).
     pub fn truth_landmarks(&self) -> Vec<TruthLandmark> {
-        self.landmarks
-            .iter()
-            .filter(|l| l.lit)
-            .map(|l| TruthLandmark {
-                id: l.id,
-                x: l.position.x,
-                y: l.position.y,
-                z: l.position.z,
-            })
-            .collect()
+        truth_landmarks(&self.landmarks)
     }
 
     /// The true pose at each stereo frame as vehicle-log's truth messages.

@@ -253,6 +253,11 @@ impl<R> LogReader<R> {
         &self.state.foreign
     }
 
+    /// ROS 2 odometry samples left out so far because a velocity was not finite.
+    pub fn nonfinite_odometry(&self) -> u64 {
+        self.state.nonfinite_odometry
+    }
+
     /// Messages read so far on each of [`LogReader::foreign_channels`], in its order.
     pub fn foreign_messages(&self) -> &[u64] {
         &self.state.foreign_messages
@@ -394,6 +399,8 @@ struct State {
     warned_undeclared_channel: bool,
     /// Malformed vehicle messages dropped from unverified parts of a damaged log.
     dropped_malformed: u64,
+    /// ROS 2 odometry samples left out for a velocity that is not finite.
+    nonfinite_odometry: u64,
 }
 
 impl State {
@@ -418,6 +425,7 @@ impl State {
             truncated: None,
             warned_undeclared_channel: false,
             dropped_malformed: 0,
+            nonfinite_odometry: 0,
         }
     }
 
@@ -542,6 +550,19 @@ impl State {
                 }))
             }
             (Ok((_, Decoded::Odom(sample))), None) => Step::Record(Record::Odom(sample)),
+            // A sample with a NaN says nothing of the motion: left out and told, while the
+            // samples around it carry the drive on.
+            (Ok((t_us, Decoded::NonFinite(what))), None) => {
+                self.nonfinite_odometry += 1;
+                let topic = self.ros2.as_ref().map_or("", |r| r.topic(role));
+                if self.nonfinite_odometry == 1 {
+                    self.warnings.push(format!(
+                        "{topic} message {index} (stamp {t_us} us): {what}: left out (and any \
+                         more such: see the count in the report)"
+                    ));
+                }
+                Step::Nothing
+            }
             // A plan decodes what its role reads; anything else cannot come out of it.
             (Ok(_), _) => Step::Nothing,
             // An image that does not decode is counted by the caller, like one whose pixels

@@ -5,8 +5,10 @@
 //! - **Images**: the left and right image planes with the board's features at the current
 //!   frame, marked by the navigator's own associations (`FrameEstimate::associations`), and
 //!   the landmarks' projections, taken through the rig's lenses when it has them so that both
-//!   are in the board's raw pixels ([`Model::marks`]). The logs carry no images, so the planes
-//!   are drawn empty.
+//!   are in the board's raw pixels ([`Model::marks`]). Under them, for a ROS 2 bag, the camera
+//!   images of the frame (the raw images the host's detector ran on), read back from the bag
+//!   on demand through an index built at load time, a few frames cached ([`images`]); the
+//!   board's stream carries no images, and its planes are drawn empty.
 //! - **Map**: the trajectory (estimate, and the simulator's truth when the log has it), the
 //!   landmarks with their 3-sigma covariance ellipses, the robot with its pose ellipse, and
 //!   the two cameras' fields of view on the lamp plane.
@@ -28,6 +30,7 @@
 #![deny(missing_docs)]
 
 mod error;
+pub mod images;
 mod load;
 pub mod model;
 pub mod plot_items;
@@ -41,7 +44,7 @@ pub use error::Error;
 pub use load::{LoadOptions, load};
 pub use model::Model;
 pub use raster::{FillEstimate, Frame, SoftwareRenderer, fill_estimate};
-pub use ui::{Regions, Viewer, background};
+pub use ui::{Regions, Viewer, background, image_to_screen};
 
 /// The smallest screenshot, pixels (the fixed size).
 pub const MIN_SCREENSHOT_SIZE: [u32; 2] = [1280, 800];

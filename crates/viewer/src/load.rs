@@ -2,15 +2,24 @@
 //! (`replay::replay_log`), or run on a saved map (`replay::localize_log`, with
 //! [`LoadOptions::map`]), and its board stream decoded again for the features of every frame;
 //! an estimates file is read back (`estimates_log::read_estimates`).
+//!
+//! A ROS 2 bag ([`LoadOptions::topics`], vehicle-interfaces.md 4.1) is replayed (or localised)
+//! with its named topics as `stereonav replay` and `stereonav localize` run it, while a second
+//! thread reads it once more: it pairs the camera images as the replay's host board does, runs
+//! the board's detector on them for the features of every frame (the navigator's own do not
+//! leave the replay) and indexes where each frame's images are, keeping no pixels
+//! ([`crate::images`]). On two cores the two passes run at the same time.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
-use replay::{LocalizerSettings, NavSettings};
+use replay::{LocalizerSettings, NavSettings, Replay, ReplayCollector, Ros2Topics};
 use rig_model::camera::CameraParams;
 use rig_model::config::Rig;
-use vehicle_log::Record;
+use vehicle_log::{LogReader, Record, SummaryState};
 
 use crate::Error;
+use crate::images::{BagImages, Indexer};
 use crate::model::{Features, ImagePoint, Model, SourceKind, Truth};
 
 /// A decoded frame: its timestamp and the left and right features.
@@ -28,17 +37,23 @@ pub struct LoadOptions {
     /// A saved map (`stereonav replay --save-map`): the log is localised on it
     /// (`replay::localize_log`, default settings) instead of replayed.
     pub map: Option<PathBuf>,
+    /// A ROS 2 bag's camera and odometry topics (vehicle-interfaces.md 4.1): the file is such
+    /// a bag, replayed (or localised) from them, and its images are shown under the features
+    /// ([`Model::images`]).
+    pub topics: Option<Ros2Topics>,
 }
 
 /// Loads `path`: a vehicle log (replayed with `options`; `progress` is called with
 /// `(bytes read, bytes in the file)`) or an estimates file written by `stereonav replay`.
 ///
 /// With [`LoadOptions::map`], the vehicle log is localised on the map instead
-/// ([`Model::localization`]); the map is read first.
+/// ([`Model::localization`]); the map is read first. With [`LoadOptions::topics`], the file is
+/// a ROS 2 bag read from those topics, its images indexed for the image planes.
 ///
 /// Errors: the file cannot be read or is not MCAP, it is an MCAP file of neither kind, a
 /// vehicle message is malformed, or the replay fails (no rig, bad settings); with a map, the
-/// map cannot be read or cannot localise, or the file is not a vehicle log. A log cut short
+/// map cannot be read or cannot localise, or the file is not a vehicle log; with topics, those
+/// of the replay of a bag (a topic the bag does not have, or of another type). A log cut short
 /// is shown as far as it goes, with a warning in [`Model::warnings`].
 pub fn load(
     path: impl AsRef<Path>,
@@ -52,6 +67,9 @@ pub fn load(
         .as_deref()
         .map(|p| map_file::Map::load(p).map(|m| (p, m)))
         .transpose()?;
+    if let Some(topics) = &options.topics {
+        return load_bag(path, topics, map, options, progress);
+    }
     let log = vehicle_log::read_log(path)?;
     if let Some((map_path, map)) = map {
         if !log.has_vehicle_topics() {
@@ -199,20 +217,202 @@ fn decode_features(records: &[Record]) -> Features {
 
 /// The simulator's truth in a log, and its camera.
 fn truth_of(records: &[Record]) -> (Option<Truth>, Option<CameraParams>) {
-    let mut truth = Truth::default();
-    let mut camera = None;
+    let mut truth = TruthCollector::default();
     for r in records {
+        truth.record(r);
+    }
+    truth.finish()
+}
+
+/// The simulator's truth as a log's records go by.
+#[derive(Debug, Default)]
+struct TruthCollector {
+    truth: Truth,
+    camera: Option<vehicle_log::TruthCamera>,
+}
+
+impl TruthCollector {
+    fn record(&mut self, r: &Record) {
         match r {
-            Record::TruthPose(p) => truth.poses.push((p.t_us, [p.x, p.y, p.theta])),
-            Record::TruthLandmarks(lamps) if truth.lamps.is_empty() => {
-                truth.lamps = lamps.iter().map(|l| [l.x, l.y, l.z]).collect();
+            Record::TruthPose(p) => self.truth.poses.push((p.t_us, [p.x, p.y, p.theta])),
+            Record::TruthLandmarks(lamps) if self.truth.lamps.is_empty() => {
+                self.truth.lamps = lamps.iter().map(|l| [l.x, l.y, l.z]).collect();
             }
-            Record::TruthCamera(c) if camera.is_none() => camera = Some(*c),
+            Record::TruthCamera(c) if self.camera.is_none() => self.camera = Some(*c),
             _ => {}
         }
     }
-    truth.poses.sort_by_key(|(t_us, _)| *t_us);
-    let truth_camera = camera.as_ref().map(replay::truth_camera);
-    let any = !truth.poses.is_empty() || !truth.lamps.is_empty();
-    (any.then_some(truth), truth_camera)
+
+    /// The truth, if the log has any, and its camera.
+    fn finish(mut self) -> (Option<Truth>, Option<CameraParams>) {
+        self.truth.poses.sort_by_key(|(t_us, _)| *t_us);
+        let truth_camera = self.camera.as_ref().map(replay::truth_camera);
+        let any = !self.truth.poses.is_empty() || !self.truth.lamps.is_empty();
+        (any.then_some(self.truth), truth_camera)
+    }
+}
+
+/// What the second pass over a bag found: every frame's features, the truth when the bag
+/// carries a simulator's, and where each frame's images are.
+struct BagPass {
+    features: Features,
+    truth: Option<Truth>,
+    truth_camera: Option<CameraParams>,
+    images: BagImages,
+}
+
+/// The ROS 2 bag at `path` with its named `topics`: replayed, or localised on `map` (read from
+/// its path), with the second pass over it alongside (see the module docs).
+fn load_bag(
+    path: &Path,
+    topics: &Ros2Topics,
+    map: Option<(&Path, map_file::Map)>,
+    options: &LoadOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Model, Error> {
+    let nominal_of = |rig: &Rig| (rig.nominal, [f64::from(rig.width), f64::from(rig.height)]);
+    if let Some((map_path, map)) = map {
+        // As `replay::localize_log` chooses it: the rig given, else the map's.
+        let rig = options
+            .rig
+            .clone()
+            .or_else(|| map.rig.clone())
+            .ok_or_else(|| replay::Error::MapWithoutRig {
+                plan: map.source_plan.clone(),
+            })?;
+        let mut frames = Vec::new();
+        let (end, pass) = alongside_bag_pass(path, topics, &rig, || {
+            replay::localize_log(
+                path,
+                Some(topics),
+                &map,
+                options.rig.clone(),
+                LocalizerSettings::default(),
+                &mut |f| {
+                    frames.push(*f);
+                    Ok(())
+                },
+                progress,
+            )
+        });
+        let (end, pass) = (end?, pass?);
+        let mut model = Model::from_localization(
+            path.to_path_buf(),
+            map_path.to_path_buf(),
+            frames,
+            end,
+            pass.features,
+            pass.truth,
+            nominal_of(&rig),
+        );
+        model.lens = rig.lens;
+        set_images(&mut model, pass.images);
+        return Ok(model);
+    }
+    // The replayer reads the bag's start: the rig (given, or the bag's /rig) is known before
+    // the second pass needs its size and registers.
+    let replayer = replay::Replayer::open_with_topics(
+        path,
+        Some(topics),
+        options.rig.clone(),
+        &options.settings,
+    )?;
+    let rig = replayer.rig().clone();
+    let mut collected = ReplayCollector::default();
+    let (end, pass) = alongside_bag_pass(path, topics, &rig, || {
+        replayer.run(&mut collected, progress)
+    });
+    let replay = Replay::from_parts(end?, collected.frames, collected.camera, collected.maps);
+    let pass = pass?;
+    let mut model = Model::from_replay(
+        path.to_path_buf(),
+        SourceKind::VehicleLog,
+        replay,
+        pass.features,
+        pass.truth,
+        Some(nominal_of(&rig)),
+        pass.truth_camera,
+    );
+    model.lens = rig.lens;
+    set_images(&mut model, pass.images);
+    Ok(model)
+}
+
+/// A bag's image index into the model, with a warning when its images cannot be read back.
+fn set_images(model: &mut Model, images: BagImages) {
+    if let Some(why) = images.unavailable() {
+        model.warnings.push(format!(
+            "{}: the camera images cannot be shown, {why}: the frames are found through the \
+             bag's chunk index (`mcap recover` writes the file again with one)",
+            model.path.display()
+        ));
+    }
+    model.images = Some(images);
+}
+
+/// Runs `run` (the replay or the localisation) here and the second pass over the bag on
+/// another thread at the same time; when `run` fails, the pass is cut short (its result is
+/// then of no use).
+fn alongside_bag_pass<T>(
+    path: &Path,
+    topics: &Ros2Topics,
+    rig: &Rig,
+    run: impl FnOnce() -> Result<T, replay::Error>,
+) -> (Result<T, replay::Error>, Result<BagPass, Error>) {
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let pass = scope.spawn(|| bag_pass(path, topics, rig, &stop));
+        let out = run();
+        if out.is_err() {
+            stop.store(true, Ordering::Relaxed);
+        }
+        let pass = pass
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (out, pass)
+    })
+}
+
+/// The second pass over a bag (see the module docs), as far as it went before `stop` was set.
+fn bag_pass(
+    path: &Path,
+    topics: &Ros2Topics,
+    rig: &Rig,
+    stop: &AtomicBool,
+) -> Result<BagPass, Error> {
+    let mut reader = LogReader::open(path)?;
+    reader.set_ros2_topics(topics.clone());
+    let mut indexer = Indexer::new(rig.board_registers());
+    let mut truth = TruthCollector::default();
+    for record in &mut reader {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        match record? {
+            Record::Image(image) => indexer.push(image),
+            other => truth.record(&other),
+        }
+    }
+    let summary = match &reader.damage().summary {
+        SummaryState::Intact => Ok(()),
+        SummaryState::Damaged { why } => {
+            Err(format!("the bag's summary section is damaged ({why})"))
+        }
+        _ => Err(match reader.truncated() {
+            Some(why) => format!("the bag has no summary section ({why})"),
+            None => "the bag has no summary section".to_owned(),
+        }),
+    };
+    let (frames, images) = indexer.finish(path, topics, [rig.width, rig.height], summary);
+    let mut features = Features::default();
+    for f in &frames {
+        features.push(f.images.t_us, &f.left, &f.right);
+    }
+    let (truth, truth_camera) = truth.finish();
+    Ok(BagPass {
+        features,
+        truth,
+        truth_camera,
+        images,
+    })
 }

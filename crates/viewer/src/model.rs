@@ -18,6 +18,8 @@ use replay::{
 use rig_model::camera::{CameraParams, Param, Pose2};
 use rig_model::lens::StereoLens;
 
+use crate::images::BagImages;
+
 /// In a localisation run, a feature is marked as near a map lamp when it lies within this
 /// distance of the lamp's projection at the frame's pose, pixels: the localiser reports how many
 /// lamps it matched, not which. A replay's features are marked by the navigator's own
@@ -211,8 +213,13 @@ pub struct Model {
     /// `f, cx, cy` are [`Model::nominal`]'s, vehicle-interfaces.md 1.1) are taken back through
     /// them to be drawn among the features. Unused without a nominal camera.
     pub lens: Option<StereoLens>,
-    /// The board's features (none for an estimates file).
+    /// The board's features (none for an estimates file). For a ROS 2 bag, those of the
+    /// board's detector run on the host, as the replay ran it.
     pub features: Features,
+    /// A ROS 2 bag's camera images, by frame: where each frame's two images are, read back
+    /// when the frame is shown ([`crate::images`]). `None` for the board's stream and for an
+    /// estimates file, which carry no images.
+    pub images: Option<BagImages>,
     /// The simulator's truth, when the log has it.
     pub truth: Option<Truth>,
     /// The estimated camera parameters over time, [`Param::ALL`] order (those held fixed are
@@ -563,6 +570,7 @@ impl Model {
             nominal: nominal.map(|(c, _)| c),
             lens: None,
             features,
+            images: None,
             truth,
             params,
             nis,

@@ -7,11 +7,13 @@
 //! uncertainty, lamps matched and hypotheses instead of the camera parameters.
 //!
 //! Each frame costs what it shows: the current frame is found by binary search, the marks of
-//! the images are computed when the frame changes (and kept), the plots draw series built once
-//! at start through items that thin them to the pixels ([`crate::plot_items`]), the map draws
-//! the trajectories simplified on the screen and the landmarks inside the view. What is painted
-//! is chosen for software OpenGL, which fills 4x4-pixel blocks once per triangle touching them:
-//! no panel backgrounds, one-pixel bars for grids, unfeathered markers in one mesh.
+//! the images are computed when the frame changes (and kept), as are a bag's camera images
+//! (read back from the bag, a few frames cached: [`crate::images`]), the plots draw series
+//! built once at start through items that thin them to the pixels ([`crate::plot_items`]), the
+//! map draws the trajectories simplified on the screen and the landmarks inside the view. What
+//! is painted is chosen for software OpenGL, which fills 4x4-pixel blocks once per triangle
+//! touching them: no panel backgrounds, one-pixel bars for grids, unfeathered markers in one
+//! mesh.
 
 use egui::{
     Align2, Color32, FontId, Key, Pos2, Rect, Sense, Shape, Stroke, StrokeKind, Ui, Vec2, pos2,
@@ -20,6 +22,7 @@ use egui::{
 use egui_plot::{HLine, LineStyle, Plot, VLine};
 use replay::Phase;
 
+use crate::images::{BagImages, ImageCache};
 use crate::model::{FrameMarks, Localization, Model, SourceKind};
 use crate::plot_items::{Dots, Grid, Series, ThinBand, ThinLine};
 use crate::thin;
@@ -82,6 +85,9 @@ const SIGMAS: f64 = 3.0;
 const ELLIPSE_SEGMENTS: usize = 32;
 /// Fewest points of a drawn ellipse.
 const ELLIPSE_MIN_SEGMENTS: usize = 8;
+/// A bag's camera images are drawn at this gray (multiplying the image): a little dimmed, so
+/// that the features and rings over a white lamp stay readable.
+const IMAGE_TINT: Color32 = Color32::from_gray(190);
 /// Landmark labels are drawn in the images when at most this many are projected.
 const MAX_LABELS: usize = 40;
 /// Playback speeds offered.
@@ -93,6 +99,17 @@ const PLOTS_PER_COLUMN: usize = 6;
 /// theme's panel colour, which the viewer's panels leave unpainted.
 pub fn background(visuals: &egui::Visuals) -> Color32 {
     visuals.panel_fill
+}
+
+/// Where an image point `(u, v)` (pixels of a `w x h` image, as the board's features give them)
+/// is drawn in an image plane at `rect`. The plane is the image: pixel `(i, j)` covers
+/// `[i, i + 1) x [j, j + 1)` of `w x h` scaled to `rect`, and integer coordinates are pixel
+/// centres (board-icd.md), half a pixel in.
+pub fn image_to_screen(rect: Rect, [w, h]: [f64; 2], u: f64, v: f64) -> Pos2 {
+    pos2(
+        rect.left() + ((u + 0.5) / w) as f32 * rect.width(),
+        rect.top() + ((v + 0.5) / h) as f32 * rect.height(),
+    )
 }
 
 /// Where the parts were drawn in the last frame, in points (= pixels in a screenshot).
@@ -225,6 +242,125 @@ pub struct Viewer {
     map_view: Option<MapView>,
     follow: bool,
     regions: Regions,
+    /// A ROS 2 bag's images ([`Model::images`]).
+    bag: Option<BagView>,
+}
+
+/// What one image plane shows of a bag's images.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum PlaneImage {
+    /// Nothing (before the first frame).
+    Nothing,
+    /// The texture, the frame's image.
+    Drawn,
+    /// The image could not be read: why.
+    Unreadable(String),
+}
+
+/// The image planes' view of a bag's images: the decoded frames cached, the frame whose images
+/// are in the two textures, and what each plane shows.
+struct BagView {
+    cache: ImageCache,
+    /// The frame time whose images were last loaded (`Some(None)`: before the first frame).
+    loaded: Option<Option<u64>>,
+    textures: [Option<egui::TextureHandle>; 2],
+    planes: [PlaneImage; 2],
+}
+
+impl std::fmt::Debug for BagView {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BagView")
+            .field("cache", &self.cache)
+            .field("loaded", &self.loaded)
+            .field(
+                "textures",
+                &self.textures.each_ref().map(|t| t.as_ref().map(|t| t.id())),
+            )
+            .field("planes", &self.planes)
+            .finish()
+    }
+}
+
+impl BagView {
+    fn new() -> Self {
+        Self {
+            cache: ImageCache::new(),
+            loaded: None,
+            textures: [None, None],
+            planes: [PlaneImage::Nothing, PlaneImage::Nothing],
+        }
+    }
+
+    /// Loads the images of the frame at `t_us` into the textures, unless they are there: from
+    /// the cache, or read from the bag. One texture a side, updated in place.
+    fn load(&mut self, ctx: &egui::Context, images: &BagImages, t_us: Option<u64>) {
+        if self.loaded == Some(t_us) {
+            return;
+        }
+        self.loaded = Some(t_us);
+        let Some(t_us) = t_us else {
+            self.planes = [PlaneImage::Nothing, PlaneImage::Nothing];
+            return;
+        };
+        let frame = self.cache.frame(images, t_us);
+        let max_side = ctx.input(|i| i.max_texture_side);
+        for (k, side) in [Side::Left, Side::Right].into_iter().enumerate() {
+            let pixels = match &frame {
+                Ok(g) => match side {
+                    Side::Left => g.left.as_ref(),
+                    Side::Right => g.right.as_ref(),
+                },
+                Err(why) => Err(why),
+            };
+            let (Some(plane), Some(texture)) = (self.planes.get_mut(k), self.textures.get_mut(k))
+            else {
+                continue;
+            };
+            *plane = match pixels {
+                Ok(pixels) => {
+                    let image = gray_image(pixels, images.size(), max_side);
+                    match texture {
+                        Some(t) => t.set(image, egui::TextureOptions::LINEAR),
+                        None => {
+                            *texture = Some(ctx.load_texture(
+                                format!("stereonav {} image", side.name()),
+                                image,
+                                egui::TextureOptions::LINEAR,
+                            ));
+                        }
+                    }
+                    PlaneImage::Drawn
+                }
+                Err(why) => PlaneImage::Unreadable(why.clone()),
+            };
+        }
+    }
+}
+
+/// An egui image of gray `pixels` of `size`, shrunk by a whole factor (the mean of each
+/// block) when a side is longer than `max_side`, the largest texture the painter takes.
+fn gray_image(pixels: &[u8], size: [u32; 2], max_side: usize) -> egui::ColorImage {
+    let [w, h] = size.map(|s| s as usize);
+    let k = w.max(h).div_ceil(max_side.max(1)).max(1);
+    if k == 1 && pixels.len() == w * h {
+        return egui::ColorImage::from_gray([w, h], pixels);
+    }
+    let (tw, th) = (w / k, h / k);
+    let at = |x: usize, y: usize| u32::from(pixels.get(y * w + x).copied().unwrap_or(0));
+    let block = |tx: usize, ty: usize| {
+        let sum: u32 = (0..k)
+            .flat_map(|dy| (0..k).map(move |dx| (dx, dy)))
+            .map(|(dx, dy)| at(tx * k + dx, ty * k + dy))
+            .sum();
+        // A mean of 8-bit values: at most 255.
+        u8::try_from(sum / (k * k) as u32).unwrap_or(u8::MAX)
+    };
+    egui::ColorImage::from_gray_iter(
+        [tw, th],
+        (0..th)
+            .flat_map(|ty| (0..tw).map(move |tx| (tx, ty)))
+            .map(|(tx, ty)| block(tx, ty)),
+    )
 }
 
 /// A path on the screen thinned to what its pixels show ([`thin::simplify`]).
@@ -275,6 +411,7 @@ impl Viewer {
             })
             .collect();
         let ellipse_scale = auto_ellipse_scale(&model);
+        let model_images = model.images.is_some();
         let loc_plots = model
             .localization
             .as_ref()
@@ -294,6 +431,7 @@ impl Viewer {
             map_view: None,
             follow: false,
             regions: Regions::default(),
+            bag: model_images.then(BagView::new),
         }
     }
 
@@ -315,6 +453,12 @@ impl Viewer {
     /// Where the parts were drawn in the last frame.
     pub fn regions(&self) -> Regions {
         self.regions
+    }
+
+    /// The decoded images of a bag's last frames shown ([`Model::images`]): what the viewer
+    /// holds of the bag's pixels, besides the two textures of the frame shown.
+    pub fn image_cache(&self) -> Option<&ImageCache> {
+        self.bag.as_ref().map(|b| &b.cache)
     }
 
     /// Draws one frame of the viewer into `ui` (the whole window), and handles its input.
@@ -630,6 +774,11 @@ impl Viewer {
             (Some(i), Some((cached, m))) if *cached == i => Some(m),
             _ => None,
         };
+        // A bag's images of the frame: read when the frame changes.
+        if let (Some(bag), Some(images)) = (&mut self.bag, &self.model.images) {
+            let t_us = frame.and_then(|i| self.model.frame(i)).map(|f| f.t_us);
+            bag.load(ui.ctx(), images, t_us);
+        }
         let [w, h] = self.model.image_size;
         let aspect = (h / w.max(1.0)) as f32;
         let gap = 8.0;
@@ -678,19 +827,42 @@ impl Viewer {
                         Side::Right => self.regions.right_image = rect,
                     }
                     let painter = ui.painter_at(rect);
-                    // Outlined, not filled: the logs carry no images (see [`Viewer::ui`]).
+                    // A bag's image of the frame: the raw image the host's detector saw, in
+                    // the features' own pixels (the rings too are taken through the lens
+                    // into them), so it is drawn as it is, no remapping.
+                    let plane = self.bag.as_ref().and_then(|b| {
+                        let k = usize::from(side == Side::Right);
+                        Some((b.planes.get(k)?, b.textures.get(k)?.as_ref()))
+                    });
+                    match plane {
+                        Some((PlaneImage::Drawn, Some(texture))) => {
+                            painter.image(
+                                texture.id(),
+                                rect,
+                                Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
+                                IMAGE_TINT,
+                            );
+                        }
+                        Some((PlaneImage::Unreadable(why), _)) => {
+                            let galley = painter.layout(
+                                format!("no image: {why}"),
+                                FontId::proportional(12.0),
+                                Color32::from_gray(160),
+                                rect.width() - 16.0,
+                            );
+                            painter.galley(rect.min + vec2(8.0, 8.0), galley, Color32::WHITE);
+                        }
+                        _ => {}
+                    }
+                    // Outlined, not filled: the board's stream carries no images (see
+                    // [`Viewer::ui`]).
                     painter.rect_stroke(
                         rect,
                         0.0,
                         Stroke::new(1.0, Color32::from_gray(90)),
                         StrokeKind::Inside,
                     );
-                    let to_screen = |u: f64, v: f64| {
-                        pos2(
-                            rect.left() + (u / w) as f32 * rect.width(),
-                            rect.top() + (v / h) as f32 * rect.height(),
-                        )
-                    };
+                    let to_screen = |u: f64, v: f64| image_to_screen(rect, [w, h], u, v);
                     let labels = projected.len() <= MAX_LABELS;
                     for p in projected {
                         let colour = if p.observed { UPDATED } else { MAPPED };

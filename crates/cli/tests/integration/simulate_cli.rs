@@ -321,3 +321,64 @@ fn the_localising_drive_starts_in_the_hall_and_is_carried_blind() {
     let lost = decoder.stats().lost;
     assert!((159..=160).contains(&lost), "{lost}");
 }
+
+/// `--ros2`: a ROS 2 bag of the rendered run (vehicle-interfaces.md 4.1), its truth beside it;
+/// a JPEG quality outside 1-100 is a usage error.
+#[test]
+fn ros2_writes_a_bag_of_the_rendered_images() {
+    let scenario = edited("paper-experiment-radtan", "bag", |t| {
+        t.replace("repeat = 2", "repeat = 1")
+            .replace("duration_s = 1.0", "duration_s = 0.1")
+            .replace("length_m = 2.5", "length_m = 0.05")
+            .replace("length_m = -2.5", "length_m = -0.05")
+    });
+    let (bag, truth) = (scratch("radtan.mcap"), scratch("radtan.json"));
+    let out = stereonav(&[
+        "simulate",
+        s(&scenario),
+        "--out",
+        s(&bag),
+        "--ros2",
+        "png",
+        "--truth",
+        s(&truth),
+    ]);
+    ok(&out);
+    let bytes = std::fs::read(&bag).unwrap();
+    assert!(bytes.starts_with(b"\x89MCAP0\r\n"));
+    let has = |needle: &[u8]| bytes.windows(needle.len()).any(|w| w == needle);
+    for needle in [
+        &b"ros2"[..],
+        b"/cam0/image_raw/compressed",
+        b"/cam1/image_raw/compressed",
+        b"sensor_msgs/msg/CompressedImage",
+        b"nav_msgs/msg/Odometry",
+        b"\x89PNG",
+    ] {
+        assert!(has(needle), "{}", String::from_utf8_lossy(needle));
+    }
+    assert!(!has(b"/fpga/features"));
+    // The truth topics read as a vehicle log's; the truth file agrees.
+    let read = vehicle_log::read_log(&bag).unwrap();
+    let poses = read
+        .records
+        .iter()
+        .filter(|r| matches!(r, Record::TruthPose(_)))
+        .count();
+    let truth: Value = serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    assert_eq!(truth["mode"], "rendered");
+    assert_eq!(truth["trajectory"].as_array().unwrap().len(), poses);
+    assert!(poses > 10, "{poses} frames");
+    let out = stereonav(&[
+        "simulate",
+        s(&scenario),
+        "--out",
+        s(&bag),
+        "--ros2",
+        "jpeg",
+        "--jpeg-quality",
+        "0",
+    ]);
+    common::assert_one_line_error(&out, "--jpeg-quality");
+    assert_eq!(out.status.code(), Some(2));
+}

@@ -54,6 +54,13 @@ Vehicle logs for analysis (:mod:`stereonav.logs`): :func:`read_log` reads a log 
 returns a :class:`VehicleLog` with what was logged -- the board's byte stream and its decoded
 frames, the odometry, the ``/rig`` rig and, from the simulator, the truth (:class:`LogTruth`).
 
+Robot logs with camera images (:mod:`stereonav.bags`, ``vehicle-interfaces.md`` 4.1): a ROS 2
+bag (MCAP) of a vehicle without the board is replayed with its topics named --
+``replay(bag, rig, left=..., right=..., odom=...)``, likewise :func:`localize` -- the board's
+arithmetic running on the host. :func:`read_bag` reads such a bag as the replay does and
+returns the stereo frames the host detected, the image counts (:class:`ImageCounts`) and the
+odometry; :func:`decode_image` is the host's decode of one PNG or JPEG to gray.
+
 Rig files (:mod:`stereonav.rig`): :func:`load_rig` reads one into a :class:`RigConfig`;
 :func:`import_rig` makes one from a Kalibr, ROS or OpenCV stereo calibration, as
 ``stereonav rig import`` does (the same code; ``to_toml()`` gives the same file).
@@ -128,6 +135,7 @@ from .localization import (
     write_map,
 )
 from .logs import LogDamage, LogTruth, LostSpan, VehicleLog, read_log
+from .bags import BagFrame, ImageCounts, Ros2Bag, decode_image, read_bag
 from .montecarlo import Banded, MonteCarloRuns, MonteCarloSummary, monte_carlo
 from .rig import (
     CAMERA_PARAMETERS,
@@ -162,6 +170,11 @@ __all__ = [
     "LostSpan",
     "VehicleLog",
     "read_log",
+    "BagFrame",
+    "ImageCounts",
+    "Ros2Bag",
+    "decode_image",
+    "read_bag",
     "FRAME_INFO_DTYPE",
     "MAP_LANDMARK_DTYPE",
     "NIS_DTYPE",

@@ -23,6 +23,11 @@ __all__ = [
     "LogDamage",
     "LostSpan",
     "read_log",
+    "BagContents",
+    "BagFrame",
+    "ImageCounts",
+    "read_bag",
+    "decode_image",
     "ImportedRig",
     "import_rig_kalibr",
     "import_rig_ros",
@@ -822,6 +827,9 @@ def replay(
     phase1_frames: int | None,
     consider_camera: bool,
     save_map: str | None,
+    left: str | None = None,
+    right: str | None = None,
+    odom: str | None = None,
 ) -> ReplayResult:
     """The whole stack on a vehicle log, the map it built written to ``save_map`` (unless
     None); raises ``stereonav.InputError`` naming the file or the setting."""
@@ -896,7 +904,13 @@ class LocalizeResult:
         """Write the trajectory as TUM; raises ``stereonav.InputError``."""
 
 def localize(
-    log_path: str, map_path: str, rig: Rig | None, save_map: str | None
+    log_path: str,
+    map_path: str,
+    rig: Rig | None,
+    save_map: str | None,
+    left: str | None = None,
+    right: str | None = None,
+    odom: str | None = None,
 ) -> LocalizeResult:
     """A vehicle log on the saved map at ``map_path``, the map with the run's new lamps
     written to ``save_map`` (unless None); raises ``stereonav.InputError`` naming the file
@@ -1050,6 +1064,97 @@ def read_log(path: str) -> LogContents:
     """Read a vehicle log whole with the GIL released; raises ``stereonav.InputError`` (the
     ``OSError`` as ``__cause__`` when the OS refused the file, the replay's message for a file
     without the vehicle topics)."""
+
+@final
+class ImageCounts:
+    """What became of a bag's camera images (``host_board::ImageCounts``)."""
+
+    @property
+    def left(self) -> int:
+        """Left images read."""
+    @property
+    def right(self) -> int:
+        """Right images read."""
+    @property
+    def frames(self) -> int:
+        """Stereo frames detected (both images read)."""
+    @property
+    def unpaired(self) -> int:
+        """Images without a partner within a quarter of the frame interval."""
+    @property
+    def wrong_size(self) -> int:
+        """Images of another size than the rig's ``[camera]``."""
+    @property
+    def unsupported(self) -> int:
+        """Images of an encoding or format that is not read."""
+    @property
+    def undecodable(self) -> int:
+        """Images whose bytes or message do not decode."""
+    @property
+    def frames_dropped(self) -> int:
+        """Frames lost because one of their images could not be read."""
+    @property
+    def problems(self) -> list[str]:
+        """The first problem of each kind, one line each."""
+    def __eq__(self, value: object, /) -> bool: ...
+    def __ne__(self, value: object, /) -> bool: ...
+    __hash__: None  # type: ignore[assignment]
+
+@final
+class BagFrame:
+    """One stereo frame of a bag, detected on the host."""
+
+    @property
+    def t_us(self) -> int:
+        """The left image's stamp, microseconds."""
+    @property
+    def left(self) -> npt.NDArray[np.void]:
+        """The left image's features, ``(N,)`` of ``FEATURE_DTYPE``, in the board's order."""
+    @property
+    def right(self) -> npt.NDArray[np.void]:
+        """The right image's features."""
+    @property
+    def overflow(self) -> bool:
+        """Either image had more than ``MAX_FEATURES`` features."""
+
+@final
+class BagContents:
+    """A ROS 2 bag read whole with the board on the host (see ``stereonav.Ros2Bag``)."""
+
+    @property
+    def frames(self) -> list[BagFrame]:
+        """The stereo frames in stamp order."""
+    @property
+    def images(self) -> ImageCounts | None:
+        """The image counts; None without camera topics."""
+    @property
+    def odometry(self) -> tuple[_U64, _F64]:
+        """``(t_us (S,), vx vy vtheta (S, 3))`` in log order."""
+    @property
+    def topics(self) -> list[tuple[str, str, str]]:
+        """``(argument, topic, type)`` of each named topic."""
+    @property
+    def messages(self) -> list[int]:
+        """Messages read on the left, right and odometry topics."""
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def truncated(self) -> str | None: ...
+    @property
+    def damage(self) -> LogDamage: ...
+
+def read_bag(
+    log_path: str,
+    rig: Rig | None,
+    left: str | None,
+    right: str | None,
+    odom: str | None,
+) -> BagContents:
+    """Read a ROS 2 bag whole with the board on the host; raises ``stereonav.InputError``."""
+
+def decode_image(data: bytes) -> npt.NDArray[np.uint8]:
+    """A PNG or JPEG file's bytes to gray ``(H, W)`` as the host decodes them; raises
+    ``stereonav.InputError``."""
 
 @final
 class ImportedRig:

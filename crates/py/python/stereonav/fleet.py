@@ -300,6 +300,9 @@ def replay_logs(
     skip_phase1: bool = False,
     phase1_frames: Optional[int] = None,
     consider_camera: bool = False,
+    left: Optional[str] = None,
+    right: Optional[str] = None,
+    odom: Optional[str] = None,
     progress: Progress = True,
 ) -> pd.DataFrame:
     """Replay many vehicle logs in parallel on Dask, one row per log.
@@ -327,6 +330,11 @@ def replay_logs(
         ``scheduler=None``.
     skip_phase1, phase1_frames, consider_camera : keyword-only
         As for :func:`stereonav.replay`, for every log.
+    left, right, odom : str, keyword-only
+        The topics of ROS 2 bags with camera images (``vehicle-interfaces.md`` 4.1), all
+        three or none, as for :func:`stereonav.replay`: every log is then such a bag with
+        these topics (a fleet records under the same names), and the rig is needed
+        (``rig_path``). Checked here, before any task starts.
     progress : bool or callable, keyword-only
         True (default): how many logs are done, on stderr. False: silent. A callable: called
         as ``progress(done, total, row)`` in this process as each log finishes.
@@ -354,7 +362,8 @@ def replay_logs(
         (a ``TypeError``) ``log_paths`` is one path or holds something other than paths; an
         option has the wrong type.
     InputError
-        (a ``ValueError``) ``n_workers`` is given with a scheduler, or is below 1.
+        (a ``ValueError``) ``n_workers`` is given with a scheduler, or is below 1; one or two
+        of ``left``, ``right``, ``odom`` are named (the message names the missing ones).
     OSError
         The scheduler cannot be reached (Dask's own error).
 
@@ -375,10 +384,24 @@ def replay_logs(
                 f"stereonav.RigConfig, got {type(rig_path).__qualname__}"
             )
         rig = os.path.abspath(os.fspath(rig_path))
+    named = {"left": left, "right": right, "odom": odom}
+    for name, topic in named.items():
+        if not (topic is None or isinstance(topic, str)):
+            raise InputTypeError(
+                f"{name} must be a topic name (str) or None, got {type(topic).__qualname__}"
+            )
+    missing = [name for name, topic in named.items() if topic is None]
+    if 0 < len(missing) < len(named):
+        given = ", ".join(f"{name}={topic!r}" for name, topic in named.items() if topic is not None)
+        raise InputError(
+            "a ROS 2 bag is read with all three topics named (left, right and odom) or none: "
+            f"{' and '.join(missing)} missing (given {given})"
+        )
     options: dict[str, Any] = {
         "skip_phase1": skip_phase1,
         "phase1_frames": phase1_frames,
         "consider_camera": consider_camera,
+        **({} if missing else named),
     }
     if not (isinstance(progress, bool) or callable(progress)):
         raise InputTypeError(
@@ -460,8 +483,8 @@ def replay_logs(
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """``python -m stereonav.fleet LOG... [--rig RIG] [--scheduler ADDR] [--workers N] --out TABLE``.
 
-    With ``--skip-phase1``, ``--phase1-frames N`` and ``--consider-camera`` as for
-    ``stereonav replay``.
+    With ``--skip-phase1``, ``--phase1-frames N``, ``--consider-camera`` and a ROS 2 bag's
+    ``--left TOPIC --right TOPIC --odom TOPIC`` as for ``stereonav replay``.
 
     Replays the logs with :func:`replay_logs` and writes the table to ``TABLE``: CSV
     (``.csv``) or Parquet (``.parquet``, ``.pq``; needs pyarrow, which the ``fleet`` extra
@@ -489,8 +512,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument(
         "--consider-camera", action="store_true", help="as stereonav replay --consider-camera"
     )
+    for option, what in (
+        ("--left", "left camera"),
+        ("--right", "right camera"),
+        ("--odom", "odometry"),
+    ):
+        parser.add_argument(
+            option,
+            metavar="TOPIC",
+            help=f"every log is a ROS 2 bag: its {what} topic (all three of --left --right "
+            "--odom, as stereonav replay)",
+        )
     parser.add_argument("--no-progress", action="store_true", help="no progress on stderr")
     args = parser.parse_args(argv)
+    topics = {"--left": args.left, "--right": args.right, "--odom": args.odom}
+    missing = [option for option, topic in topics.items() if topic is None]
+    if 0 < len(missing) < len(topics):
+        parser.error(f"--left, --right and --odom go together: {' and '.join(missing)} missing")
     extension = os.path.splitext(args.out)[1].lower()
     if extension not in (".csv", ".parquet", ".pq"):
         parser.error(f"--out {args.out}: the table must be .csv or .parquet")
@@ -505,6 +543,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             skip_phase1=args.skip_phase1,
             phase1_frames=args.phase1_frames,
             consider_camera=args.consider_camera,
+            left=args.left,
+            right=args.right,
+            odom=args.odom,
             progress=not args.no_progress,
         )
     except (InputError, InputTypeError, OSError) as error:

@@ -38,7 +38,7 @@ from ._arrays import LOCALIZED_TRAJECTORY_DTYPE, NEW_LAMP_DTYPE
 from ._arrays import readonly as _readonly
 from ._errors import InputError, InputTypeError
 from .calibration import RigLike, _describe
-from .navigation import _path, _rig
+from .navigation import _path, _rig, _topic
 
 __all__ = [
     "LOCALIZED_TRAJECTORY_DTYPE",
@@ -225,6 +225,9 @@ def localize(
     rig_path: Optional[RigLike] = None,
     *,
     save_map: Optional[_PathLike] = None,
+    left: Optional[str] = None,
+    right: Optional[str] = None,
+    odom: Optional[str] = None,
 ) -> Localization:
     """Run a vehicle log on a saved map, as ``stereonav localize`` does.
 
@@ -251,6 +254,9 @@ def localize(
         Write a new version of the map, with the lamps this run found that are not in it and
         the vehicle parameters it refined, as ``stereonav localize --save-map`` does. Written
         after the run.
+    left, right, odom : str, keyword-only
+        A ROS 2 bag's camera and odometry topics, all three or none, as for
+        :func:`stereonav.replay` (``stereonav localize --left --right --odom``).
 
     Returns
     -------
@@ -266,7 +272,8 @@ def localize(
         damaged, or has a missing key or a wrong type; it has no rig and none is given; it
         cannot localise (no lamps); the log
         cannot be read or is not a vehicle log; the rig is not valid; ``save_map`` cannot be
-        written. Each message is one line naming the file and the problem. A log cut short is
+        written; the bag's topics are named badly (one or two of three), are not in the bag or
+        are of another type. Each message is one line naming the file and the problem. A log cut short is
         not an error: it is run as far as it goes, and :attr:`Localization.warnings` says so.
 
     Examples
@@ -282,6 +289,9 @@ def localize(
         _path("map_path", map_path),
         None if rig_path is None else _rig("rig_path", rig_path),
         None if save_map is None else _path("save_map", save_map),
+        _topic("left", left),
+        _topic("right", right),
+        _topic("odom", odom),
     )
     return Localization._from_native(native)
 

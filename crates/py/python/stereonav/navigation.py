@@ -407,6 +407,14 @@ def _path(name: str, value: object) -> str:
     return path
 
 
+def _topic(name: str, value: object) -> Optional[str]:
+    """A ROS 2 topic's name, or None; whether the topics named fit together is checked by the
+    native call (one message for the command line's rule: all three or none)."""
+    if value is None or isinstance(value, str):
+        return value
+    raise InputTypeError(f"{name} must be a topic name (str) or None, got {_describe(value)}")
+
+
 def _flag(name: str, value: object) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise InputTypeError(f"{name} must be a bool, got {_describe(value)} {value!r}")
@@ -507,6 +515,9 @@ def replay(
     phase1_frames: Optional[int] = None,
     consider_camera: bool = False,
     save_map: Optional[Union[str, "os.PathLike[str]"]] = None,
+    left: Optional[str] = None,
+    right: Optional[str] = None,
+    odom: Optional[str] = None,
 ) -> Replay:
     """Run the whole stack on a vehicle log, as ``stereonav replay`` does.
 
@@ -516,6 +527,13 @@ def replay(
     with them frame by frame: phase 1 until the calibration is stable, the switch, phase 2.
     When the log carries the simulator's truth, the result says how far from it the estimates
     are (:attr:`Replay.truth`).
+
+    A ROS 2 bag with camera images instead of the board's stream (section 4.1) is replayed
+    with its topics named, as ``stereonav replay --left --right --odom`` does: the board's
+    arithmetic runs on the host (:mod:`stereonav.bags`), and the summary's ``counts`` say what
+    became of the images (``images_left``, ``images_right``, ``images_unpaired``,
+    ``images_wrong_size``, ``images_unsupported``, ``images_undecodable``,
+    ``image_frames_dropped``; an image that cannot be read is counted, never an error).
 
     Parameters
     ----------
@@ -540,6 +558,13 @@ def replay(
         final landmarks with their covariance, the calibrated camera and vehicle parameters
         and the rig, in the project's map format (``docs/maps.md``), for
         :func:`stereonav.localize` and :func:`stereonav.read_map`. Written after the run.
+    left, right : str, keyword-only
+        A ROS 2 bag's camera topics (``sensor_msgs/msg/Image`` or
+        ``sensor_msgs/msg/CompressedImage``), as ``--left`` and ``--right``.
+    odom : str, keyword-only
+        The bag's odometry topic (``nav_msgs/msg/Odometry``), as ``--odom``. The three topics
+        are named together or not at all; without them the log's ``/fpga/features`` and
+        ``/odom`` are read. A bag carries no ``/rig``: give ``rig_path``.
 
     Returns
     -------
@@ -555,7 +580,11 @@ def replay(
         file without the vehicle topics, or has a malformed vehicle message; there is no rig
         (none given and no ``/rig`` in the log) or it is not valid (the file, the key and the
         problem are named); ``phase1_frames`` is out of range; the map cannot be written (the
-        message names the file, the ``OSError`` is the ``__cause__``). A log cut short is not
+        message names the file, the ``OSError`` is the ``__cause__``); one or two of ``left``,
+        ``right``, ``odom`` are named (the message names the missing ones), a named topic is
+        not in the bag (the message names the bag's topics) or is of another type; a ROS 2 bag
+        with camera topics is replayed without them named (the message names its camera and
+        odometry topics). A log cut short is not
         an error: it is replayed as far as it goes, and :attr:`Replay.warnings` says so.
 
     Examples
@@ -574,6 +603,9 @@ def replay(
         _phase1_frames(phase1_frames),
         _flag("consider_camera", consider_camera),
         None if save_map is None else _path("save_map", save_map),
+        _topic("left", left),
+        _topic("right", right),
+        _topic("odom", odom),
     )
     return Replay._from_native(native)
 

@@ -5,11 +5,13 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure is the test failing
 
+mod bag;
 mod common;
 mod determinism;
 mod features;
 mod fixture_logs;
 mod hall;
+mod lens;
 mod link;
 mod log;
 mod odometry;

@@ -312,8 +312,7 @@ impl Plan {
         };
         let float = |idx: &[usize], what: &str| -> Result<f64, String> {
             match msg.at(idx) {
-                Some(Value::Float(x)) if x.is_finite() => Ok(*x),
-                Some(Value::Float(x)) => Err(format!("{what} is {x}")),
+                Some(Value::Float(x)) => Ok(*x),
                 other => Err(format!("{what}: expected a float, found {other:?}")),
             }
         };
@@ -361,12 +360,30 @@ impl Plan {
                 format: text(format),
                 data: bytes(data),
             }),
-            Kind::Odometry { vx, vy, vtheta } => Decoded::Odom(OdomSample {
-                t_us,
-                vx: float(vx, "twist.twist.linear.x")?,
-                vy: float(vy, "twist.twist.linear.y")?,
-                vtheta: float(vtheta, "twist.twist.angular.z")?,
-            }),
+            Kind::Odometry { vx, vy, vtheta } => {
+                let values = [
+                    float(vx, "twist.twist.linear.x")?,
+                    float(vy, "twist.twist.linear.y")?,
+                    float(vtheta, "twist.twist.angular.z")?,
+                ];
+                match values.iter().position(|v| !v.is_finite()) {
+                    Some(i) => Decoded::NonFinite(format!(
+                        "{} is {}",
+                        [
+                            "twist.twist.linear.x",
+                            "twist.twist.linear.y",
+                            "twist.twist.angular.z"
+                        ][i],
+                        values[i]
+                    )),
+                    None => Decoded::Odom(OdomSample {
+                        t_us,
+                        vx: values[0],
+                        vy: values[1],
+                        vtheta: values[2],
+                    }),
+                }
+            }
         };
         Ok((t_us, decoded))
     }
@@ -377,6 +394,8 @@ impl Plan {
 pub(crate) enum Decoded {
     Image(ImagePayload),
     Odom(OdomSample),
+    /// An odometry message whose velocities are not all finite (a driver's NaN): one line.
+    NonFinite(String),
 }
 
 #[cfg(test)]

@@ -27,6 +27,7 @@ pub(crate) fn load(path: &Path) -> Result<Model, String> {
             rig: None,
             settings,
             map: None,
+            topics: None,
         },
         &mut |_, _| {},
     )

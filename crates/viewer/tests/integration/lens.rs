@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use viewer::model::{FeatureMark, FrameMarks, Projection};
-use viewer::{Frame, LoadOptions, MIN_SCREENSHOT_SIZE, Model, load, screenshot};
+use viewer::{Frame, LoadOptions, MIN_SCREENSHOT_SIZE, Model, image_to_screen, load, screenshot};
 
 /// The scenario simulated once per test process (seed 0), written as a vehicle log.
 fn radtan_log() -> &'static Path {
@@ -188,8 +188,9 @@ fn a_screenshot_draws_each_accepted_feature_inside_its_ring() {
         (shot.regions.right_image, &marks.right),
     ] {
         for feature in features.iter().filter(|m| m.observed) {
-            let x = f64::from(rect.left()) + f64::from(feature.u) / w * f64::from(rect.width());
-            let y = f64::from(rect.top()) + f64::from(feature.v) / h * f64::from(rect.height());
+            let at_screen =
+                image_to_screen(rect, [w, h], f64::from(feature.u), f64::from(feature.v));
+            let (x, y) = (f64::from(at_screen.x), f64::from(at_screen.y));
             let at = |dx: f64, dy: f64| pixel(f, (x + dx).floor() as i64, (y + dy).floor() as i64);
             assert!(
                 green(at(0.0, 0.0)),

@@ -34,6 +34,7 @@ fn paper_experiment() -> viewer::Model {
             ..NavSettings::default()
         },
         map: None,
+        topics: None,
     };
     load(fixture("paper-experiment.mcap"), &options, &mut |_, _| {}).unwrap()
 }
