@@ -342,6 +342,7 @@ fn drain(host: &mut HostBoard, frames: &mut Vec<StereoFeatures>) {
 
 /// Reads the bag at `path` as [`BagRequest`] says (see the module docs).
 fn read(path: &Path, request: BagRequest) -> Result<BagContents, FileError> {
+    replay::check_topics(&request.topics)?;
     let mut reader = LogReader::open(path)?;
     reader.set_ros2_topics(request.topics.clone());
     let mut host = match request.regs {
@@ -390,7 +391,7 @@ fn read(path: &Path, request: BagRequest) -> Result<BagContents, FileError> {
                     path: path.to_path_buf(),
                     option: role.option(),
                     topic,
-                    topics: reader.foreign_channels().to_vec(),
+                    topics: reader.bag_topics(),
                 }));
             }
         }

@@ -283,8 +283,8 @@ def test_euroc_images_give_the_boards_features(
     bag = stereonav.read_bag(path, euroc_rig, **TOPICS)
     assert counts_of(bag.images) == counts(left=10, right=10, frames=10)
     assert bag.images is not None and bag.images.problems == []
-    kind = "sensor_msgs/Image" if encoding in ("mono8", "rgb8", "bgr8") else "sensor_msgs/CompressedImage"
-    assert bag.topics == {"left": (LEFT, kind), "right": (RIGHT, kind), "odom": (ODOM, "nav_msgs/Odometry")}
+    kind = "sensor_msgs/msg/Image" if encoding in ("mono8", "rgb8", "bgr8") else "sensor_msgs/msg/CompressedImage"
+    assert bag.topics == {"left": (LEFT, kind), "right": (RIGHT, kind), "odom": (ODOM, "nav_msgs/msg/Odometry")}
     assert bag.messages == {"left": 10, "right": 10, "odom": len(odometry)}
     assert bag.warnings == () and bag.truncated is None and not bag.damage.damaged
     assert [f.t_us for f in bag.frames] == [t for t, *_ in expected]
@@ -527,13 +527,6 @@ def test_imperfect_compressed_images_are_counted_alike_by_every_reader(
     assert_same_summary(python, command_line)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="host-board decodes a JPEG cut short without error (the image crate runs zune-jpeg "
-    "with strict_mode(false) and fills the missing rows; cv2.imdecode refuses it; zune-jpeg in "
-    "strict mode says 'Exhausted data in the image'): its frame reaches the navigator instead "
-    "of being counted as undecodable",
-)
 def test_a_jpeg_cut_short_is_undecodable(scratch: pathlib.Path) -> None:
     frames = []
     for k in range(6):
@@ -550,13 +543,6 @@ def test_a_jpeg_cut_short_is_undecodable(scratch: pathlib.Path) -> None:
     assert counts_of(bag.images) == counts(left=6, right=6, frames=5, undecodable=1, frames_dropped=1)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the bag is read in file order and the host board pairs images as they come, holding "
-    "at most 16 on a side: a valid MCAP file whose messages are not in log-time order across "
-    "topics (written topic by topic, as folder-to-bag scripts do) loses most of its frames "
-    "(here 16 of 40 paired, 48 images counted unpaired though every one has a partner)",
-)
 def test_a_bag_written_topic_by_topic_pairs_every_frame(scratch: pathlib.Path) -> None:
     out = bags.writer("mcap_ros2", scratch, "topic-by-topic")
     stamps = [T0_US + k * INTERVAL_US for k in range(40)]
@@ -578,8 +564,9 @@ def test_missing_topics_and_wrong_types_are_one_line_errors(scratch: pathlib.Pat
     cases = {
         "missing": ({**TOPICS, "right": "/cam3/image_raw"}, ["--right /cam3/image_raw", "no such topic",
                                                              f"{RIGHT} (sensor_msgs/msg/Image)"]),
-        "odometry as a camera": ({**TOPICS, "left": ODOM}, [f"topic {ODOM} (left camera)", "nav_msgs/msg/Odometry",
-                                                         "not sensor_msgs/msg/Image"]),
+        "one topic for two roles": ({**TOPICS, "left": ODOM}, [f"--left and --odom both name {ODOM}"]),
+        "odometry as a camera": ({**TOPICS, "left": ODOM, "odom": "/odom2"},
+                                 [f"topic {ODOM} (left camera)", "nav_msgs/msg/Odometry", "not sensor_msgs/msg/Image"]),
         "a camera as odometry": ({**TOPICS, "odom": THIRD}, [f"topic {THIRD} (odometry)", "not nav_msgs/msg/Odometry"]),
     }
     for name, (topics, words) in cases.items():
@@ -603,11 +590,6 @@ def test_missing_topics_and_wrong_types_are_one_line_errors(scratch: pathlib.Pat
     assert f"{LEFT} (sensor_msgs/msg/Image)" in str(e.value) and ODOM in str(e.value)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a topic named for two roles is read as its first (Ros2Topics::role) and the other "
-    "role is then reported as 'the bag has no such topic', which it has",
-)
 def test_a_topic_named_twice_is_refused_as_such(scratch: pathlib.Path) -> None:
     path, _, _ = imperfect_bag("mcap_ros2", "raw", scratch)
     with pytest.raises(stereonav.InputError) as e:
@@ -668,7 +650,7 @@ def test_odometry_of_a_real_third_party_bag_equals_mcap_ros2s(cli: pathlib.Path)
         pytest.skip(f"no {TURTLEBOT} (the shared data folder is absent)")
     bag = stereonav.read_bag(TURTLEBOT, odom="/odom")
     assert bag.images is None and bag.frames == ()
-    assert bag.topics == {"odom": ("/odom", "nav_msgs/Odometry")}
+    assert bag.topics == {"odom": ("/odom", "nav_msgs/msg/Odometry")}
     theirs = bags.read_odometry(TURTLEBOT, "/odom")
     assert len(theirs) == 2639 == bag.messages["odom"]
     ours = np.column_stack([bag.odometry[f] for f in ("t_us", "vx", "vy", "vtheta")])
@@ -705,12 +687,6 @@ def test_localize_takes_the_topics(scratch: pathlib.Path, cli: pathlib.Path) -> 
         stereonav.localize(path, lamp_map(scratch), PLAIN_RIG, **{**TOPICS, "odom": "/wheels"})
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="replay::localize_log reads a bag's images through the host board but its summary has "
-    "no counts (no images_* nor image_frames_dropped) and no warning about the images it lost; "
-    "its warnings name /fpga/features and /odom whatever the topics",
-)
 def test_localize_reports_what_became_of_the_images(scratch: pathlib.Path) -> None:
     path, expected, _ = imperfect_bag("rosbags", "raw", scratch)
     summary = stereonav.localize(path, lamp_map(scratch), PLAIN_RIG, **TOPICS).summary

@@ -83,7 +83,7 @@ pub use output::{
     OutputFiles, TRAJ_TUM_FILE, TRUTH_TUM_FILE, TrajectoryWriter, write_estimates, write_summary,
     write_summary_value, write_trajectory, write_trajectory_tum,
 };
-pub use stream::REORDER_US;
+pub use stream::{REORDER_US, check_topics};
 pub use tum::{TUM_HEADER, TumWriter, tum_line};
 pub use vehicle_log::Ros2Topics;
 

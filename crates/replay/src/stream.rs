@@ -104,17 +104,7 @@ impl LogStream {
     /// named camera and odometry topics are the input (vehicle-interfaces.md 4.1).
     pub(crate) fn open(path: &Path, topics: Option<&Ros2Topics>) -> Result<Self, Error> {
         if let Some(t) = topics {
-            for (i, a) in Role::ALL.into_iter().enumerate() {
-                for b in Role::ALL.into_iter().skip(i + 1) {
-                    if t.topic(a) == t.topic(b) {
-                        return Err(Error::TopicNamedTwice {
-                            first: a.option(),
-                            second: b.option(),
-                            topic: t.topic(a).to_owned(),
-                        });
-                    }
-                }
-            }
+            check_topics(t)?;
         }
         let mut reader = LogReader::open(path)?;
         if let Some(topics) = topics {
@@ -264,19 +254,12 @@ impl LogStream {
             });
         for role in Role::ALL {
             if self.ended && !self.reader.ros2_met().iter().any(|(r, _)| *r == role) {
-                // The bag's topics: those named for the other roles, and the rest.
-                let mut all: Vec<(String, String)> = self
-                    .reader
-                    .ros2_met()
-                    .iter()
-                    .map(|(r, ty)| (topics.topic(*r).to_owned(), ty.clone()))
-                    .collect();
-                all.extend(self.reader.foreign_channels().iter().cloned());
                 return Err(Error::MissingTopic {
                     path: self.path.clone(),
                     option: role.option(),
                     topic: topics.topic(role).to_owned(),
-                    topics: all,
+                    // The bag's topics: those named for the other roles, and the rest.
+                    topics: self.reader.bag_topics(),
                 });
             }
         }
@@ -468,6 +451,22 @@ pub(crate) fn ros2_hint(path: &Path, channels: &[(String, String)]) -> Option<Er
         cameras,
         odometry,
     })
+}
+
+/// The three topics of a bag's replay are three: one topic named for two roles is refused.
+pub fn check_topics(t: &Ros2Topics) -> Result<(), Error> {
+    for (i, a) in Role::ALL.into_iter().enumerate() {
+        for b in Role::ALL.into_iter().skip(i + 1) {
+            if t.topic(a) == t.topic(b) {
+                return Err(Error::TopicNamedTwice {
+                    first: a.option(),
+                    second: b.option(),
+                    topic: t.topic(a).to_owned(),
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The stereo frames the host board has ready, as pixels onto `frames`.

@@ -258,6 +258,22 @@ impl<R> LogReader<R> {
         self.state.nonfinite_odometry
     }
 
+    /// Every topic with a channel so far but the vehicle topics: the named ROS 2 topics met,
+    /// then the foreign ones, `(topic, schema name)`; for messages that list a bag's topics.
+    pub fn bag_topics(&self) -> Vec<(String, String)> {
+        let named = self.state.ros2.as_ref().map_or(Vec::new(), |t| {
+            self.state
+                .ros2_met
+                .iter()
+                .map(|(r, ty)| (t.topic(*r).to_owned(), ty.clone()))
+                .collect()
+        });
+        named
+            .into_iter()
+            .chain(self.state.foreign.iter().cloned())
+            .collect()
+    }
+
     /// Messages read so far on each of [`LogReader::foreign_channels`], in its order.
     pub fn foreign_messages(&self) -> &[u64] {
         &self.state.foreign_messages
@@ -458,7 +474,9 @@ impl State {
                     problem,
                 })?;
                 if !self.ros2_met.iter().any(|(r, _)| *r == role) {
-                    self.ros2_met.push((role, plan.type_name().to_owned()));
+                    // The type as the file names it, as for the foreign channels.
+                    let name = schema_name.unwrap_or(plan.type_name());
+                    self.ros2_met.push((role, name.to_owned()));
                 }
                 self.plans.insert(channel.id, plan);
                 Channel::Ros2(role)

@@ -89,7 +89,7 @@ class Ros2Bag:
         (``<f8``, rad/s, ``twist.twist.angular.z``). Empty when no odometry topic was named.
     topics : dict of str to tuple of (str, str)
         Each named topic by its argument (``"left"``, ``"right"``, ``"odom"``): ``(topic,
-        type)``, the type of its schema as ``pkg/Type`` (``"sensor_msgs/Image"``).
+        type)``, the type as the bag's schema names it (``"sensor_msgs/msg/Image"``).
     messages : dict of str to int
         Messages read on each named topic, by argument.
     warnings : tuple of str
