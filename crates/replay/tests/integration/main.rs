@@ -14,6 +14,7 @@ mod mapped_once;
 mod navigate;
 mod output;
 mod real_log;
+mod ros2_bag;
 mod slipping_wheels;
 mod streaming;
 mod vehicle;
