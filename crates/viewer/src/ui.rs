@@ -561,10 +561,13 @@ impl Viewer {
             self.localization_header(ui, &name, loc);
             return;
         }
-        let source = match (m.kind, m.replay.phase1_skipped) {
-            (SourceKind::VehicleLog, true) => "vehicle log, replayed with phase 1 skipped",
-            (SourceKind::VehicleLog, false) => "vehicle log, replayed",
-            (SourceKind::Estimates, _) => "estimates file",
+        let bag = m.images.is_some();
+        let source = match (m.kind, m.replay.phase1_skipped, bag) {
+            (SourceKind::VehicleLog, true, false) => "vehicle log, replayed with phase 1 skipped",
+            (SourceKind::VehicleLog, false, false) => "vehicle log, replayed",
+            (SourceKind::VehicleLog, true, true) => "ROS 2 bag, replayed with phase 1 skipped",
+            (SourceKind::VehicleLog, false, true) => "ROS 2 bag, replayed",
+            (SourceKind::Estimates, _, _) => "estimates file",
         };
         let frame = m.frame_at(self.time_s);
         let phase = match m.phase_at(self.time_s) {
