@@ -132,6 +132,20 @@ fi
 step "build the Rust tests and the stereonav binary (profile $PROFILE)"
 rust_tests build
 
+# ---- issue 40: the board's HDL (hdl/, docs/hdl.md), a step of its own --------------------------
+# hdl/sim.sh simulates the Verilog with Verilator (installed with apt-get when missing) and
+# hdl/test.py compares it, case by case, with the stereonav binary just built (harris-core and
+# fpga-link): fast tier about 15 s, slow tier (whole 752x480 frames) about a minute.
+hdl_tests() {
+    step "HDL: the board's Verilog simulated against harris-core and fpga-link (hdl/test.py, $tier tier)"
+    if [ "$tier" = fast ]; then
+        python3 hdl/test.py --stereonav "$TARGET_DIR/$PROFILE/stereonav"
+    else
+        python3 hdl/test.py --slow --stereonav "$TARGET_DIR/$PROFILE/stereonav"
+    fi
+}
+# ---- end of issue 40's step ------------------------------------------------------------------
+
 if [ "$tier" = fast ]; then
     step "Rust tests (the slow tier's left out) and doc tests"
     rust_tests fast
@@ -146,6 +160,7 @@ else
     step "Rust tests of the slow tier"
     rust_tests slow
 fi
+hdl_tests
 
 wait_for_pip
 step "Python module (maturin develop, profile $PROFILE, on the test build's compiled tree)"
