@@ -25,7 +25,8 @@ use crate::progress::ByteProgress;
 /// Arguments of `stereonav localize`.
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
-    /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
+    /// The vehicle log (MCAP, vehicle-interfaces.md section 4), or a ROS 2 bag of camera images
+    /// and wheel odometry with --left, --right and --odom (4.1).
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
     #[command(flatten)]

@@ -26,7 +26,8 @@ use selfcal::smoother::SmootherSettings;
 /// Arguments of `stereonav replay`.
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
-    /// The vehicle log (MCAP, vehicle-interfaces.md section 4).
+    /// The vehicle log (MCAP, vehicle-interfaces.md section 4), or a ROS 2 bag of camera images
+    /// and wheel odometry with --left, --right and --odom (4.1).
     #[arg(value_name = "LOG.mcap")]
     log: PathBuf,
     #[command(flatten)]
