@@ -34,6 +34,10 @@ pub struct StereoFeatures {
     pub right: Vec<Feature>,
     /// Either image had more than `MAX_FEATURES` features (the board's overflow flag).
     pub overflow: bool,
+    /// The right image's stamp, us.
+    pub right_t_us: u64,
+    /// The two images' log times, ns: where they are in the bag (`[left, right]`).
+    pub log_time_ns: [u64; 2],
 }
 
 /// What became of a log's camera images.
@@ -191,6 +195,8 @@ impl HostBoard {
                                 left: l,
                                 right: r,
                                 overflow: lo || ro,
+                                right_t_us: right.t_us,
+                                log_time_ns: [left.log_time_ns, right.log_time_ns],
                             });
                         }
                         _ => self.counts.frames_dropped += 1,

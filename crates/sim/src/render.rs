@@ -837,28 +837,11 @@ impl Renderer {
         out: &mut [f32],
         hit: impl Fn(f64, f64) -> bool,
     ) {
-        #[allow(clippy::cast_precision_loss)]
-        let (w, h) = (self.width as f64, self.height as f64);
         let sigma = self.params.optics_blur_px;
         let margin = PATCH_SIGMAS * sigma + 1.0;
-        if bounds.2 < -margin
-            || bounds.3 < -margin
-            || bounds.0 > w + margin
-            || bounds.1 > h + margin
-        {
+        let Some((x0, y0, cols, rows)) = self.patch(bounds, margin) else {
             return;
-        }
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // clamped
-        let clamp = |x: f64, n: usize| -> usize { x.max(0.0).min(n as f64 - 1.0) as usize };
-        let (x0, y0) = (
-            clamp((bounds.0 - margin).floor(), self.width),
-            clamp((bounds.1 - margin).floor(), self.height),
-        );
-        let (x1, y1) = (
-            clamp((bounds.2 + margin).ceil(), self.width),
-            clamp((bounds.3 + margin).ceil(), self.height),
-        );
-        let (cols, rows) = (x1 - x0 + 1, y1 - y0 + 1);
+        };
         let mut cover = vec![0.0f64; cols * rows];
         for k in 0..rows {
             for i in 0..cols {

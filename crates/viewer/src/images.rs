@@ -4,7 +4,7 @@
 //!
 //! **Memory.** A shift is hours of 20 Hz stereo images (a 752 x 480 gray pair is 0.7 MB: about
 //! 50 GB an hour), so the viewer never holds them all, decoded or not. While the bag is loaded,
-//! one pass pairs its images as the replay pairs them ([`host_board::Pairer`]) and keeps, per
+//! one pass runs them through the replay's board on the host ([`host_board::HostBoard`]) and keeps, per
 //! stereo frame, only where its two images are in the bag: each one's log time and stamp
 //! ([`FrameImages`], 40 bytes a frame, like the frame's features that the model keeps anyway).
 //! The frame shown is read back when it is asked for ([`BagImages::read`]): the bag's MCAP
@@ -33,7 +33,7 @@ use std::io::{Cursor, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use host_board::{Paired, Pairer};
+use host_board::HostBoard;
 use mcap::records::MessageHeader;
 use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
 use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
@@ -349,31 +349,27 @@ pub(crate) struct IndexedFrame {
 /// pairing, same registers, same order), and keeps each frame's features and where its images
 /// are, never the pixels. Feed it the bag's [`Record::Image`]s in log order.
 pub(crate) struct Indexer {
-    regs: harris_core::Registers,
-    pairer: Pairer,
+    board: HostBoard,
     frames: Vec<IndexedFrame>,
 }
 
 impl Indexer {
-    pub(crate) fn new(regs: harris_core::Registers) -> Self {
-        Self {
-            regs,
-            pairer: Pairer::new(),
+    /// Errors: registers the board's detector cannot run with.
+    pub(crate) fn new(regs: harris_core::Registers) -> Result<Self, harris_core::Error> {
+        Ok(Self {
+            board: HostBoard::new(regs)?,
             frames: Vec::new(),
-        }
+        })
     }
 
     /// Takes an image of the bag, in log order.
     pub(crate) fn push(&mut self, image: CameraImage) {
-        match image.side {
-            Side::Left => self.pairer.push_left(image),
-            Side::Right => self.pairer.push_right(image),
-        }
+        self.board.push(image);
         self.drain();
     }
 
-    /// As `host_board::HostBoard::pop`: a frame whose two images both give features is a
-    /// frame; a lone image, or a frame with an image the detector cannot read, is none.
+    /// The frames the host board lets out, as the replay's: a lone image, or a frame with an
+    /// image the detector cannot read, is none.
     fn drain(&mut self) {
         let points = |features: &[harris_core::Feature]| -> Vec<ImagePoint> {
             features
@@ -385,27 +381,22 @@ impl Indexer {
                 })
                 .collect()
         };
-        while let Some(paired) = self.pairer.pop() {
-            let Paired::Frame { left, right } = paired else {
-                continue;
-            };
-            let l = host_board::detect_payload(&left.payload, &self.regs);
-            let r = host_board::detect_payload(&right.payload, &self.regs);
-            if let (Ok((l, _)), Ok((r, _))) = (l, r) {
-                let at = |i: &CameraImage| ImageRef {
-                    log_time_ns: i.log_time_ns,
-                    stamp_us: i.t_us,
-                };
-                self.frames.push(IndexedFrame {
-                    left: points(&l),
-                    right: points(&r),
-                    images: FrameImages {
-                        t_us: left.t_us,
-                        left: at(&left),
-                        right: at(&right),
+        while let Some(f) = self.board.pop() {
+            self.frames.push(IndexedFrame {
+                left: points(&f.left),
+                right: points(&f.right),
+                images: FrameImages {
+                    t_us: f.t_us,
+                    left: ImageRef {
+                        log_time_ns: f.log_time_ns[0],
+                        stamp_us: f.t_us,
                     },
-                });
-            }
+                    right: ImageRef {
+                        log_time_ns: f.log_time_ns[1],
+                        stamp_us: f.right_t_us,
+                    },
+                },
+            });
         }
     }
 
@@ -418,7 +409,7 @@ impl Indexer {
         size: [u32; 2],
         summary_intact: Result<(), String>,
     ) -> (Vec<IndexedFrame>, BagImages) {
-        self.pairer.end();
+        self.board.end();
         self.drain();
         let mut frames = self.frames;
         // Stable: equal stamps keep the pairing's order, as the replay's sequencer does.

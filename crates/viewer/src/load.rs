@@ -382,7 +382,11 @@ fn bag_pass(
 ) -> Result<BagPass, Error> {
     let mut reader = LogReader::open(path)?;
     reader.set_ros2_topics(topics.clone());
-    let mut indexer = Indexer::new(rig.board_registers());
+    let mut indexer =
+        Indexer::new(rig.board_registers()).map_err(|e| replay::Error::HostBoard {
+            path: path.to_path_buf(),
+            problem: e.to_string(),
+        })?;
     let mut truth = TruthCollector::default();
     for record in &mut reader {
         if stop.load(Ordering::Relaxed) {
