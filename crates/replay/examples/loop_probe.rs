@@ -6,14 +6,16 @@
 //! by more than `JUMP_M`, is printed with the pose error and sigma.
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
-//! [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]`:
+//! [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
+//! [--nees-at T_S]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
 //! smoother; `--rig` runs on that rig instead of the log's; `--field` and `--max-in-view` set
 //! the navigator's field of use and its cap on landmarks in view; `--missed` reports, per lamp
 //! in view 20 frames or more that no landmark is, where its observations were lost; `--lamp`
-//! follows one lamp's stereo match and track while it is in view. Every 100th frame is printed
-//! too (the drift in between).
+//! follows one lamp's stereo match and track while it is in view; `--nees-at T` prints the
+//! map's NEES and its widest common modes at `T` seconds ([`print_map_nees`]). Every 100th
+//! frame is printed too (the drift in between).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::collections::BTreeMap;
@@ -28,6 +30,54 @@ use vehicle_log::Record;
 const JUMP_M: f64 = 0.2;
 /// A feature farther than this from every lamp's raw pixel is clutter, pixels.
 const LAMP_PX: f64 = 3.0;
+
+/// The map's consistency at one frame: the NEES of every landmark's horizontal position
+/// jointly (each against the lamp nearest it, within 1.5 m) with the filter's joint
+/// covariance, and the map's six widest common modes (eigenvectors of that covariance) with
+/// the error along each in its sigmas: a map whose common modes (its shift and turn
+/// against the first frame's world) have gained spurious information shows a NEES far above
+/// its degrees of freedom and errors of many sigmas along its widest modes.
+fn print_map_nees(t_s: f64, ekf: &vslam_ekf::Ekf, lamps: &[vehicle_log::TruthLandmark]) {
+    let p = ekf.covariance();
+    let mut idx = Vec::new();
+    let mut err = Vec::new();
+    for (s, l) in ekf.landmarks().enumerate() {
+        let pos = l.position;
+        let near = lamps.iter().min_by(|a, b| {
+            (a.x - pos.x)
+                .hypot(a.y - pos.y)
+                .total_cmp(&(b.x - pos.x).hypot(b.y - pos.y))
+        });
+        if let Some(n) = near
+            && (n.x - pos.x).hypot(n.y - pos.y) < 1.5
+        {
+            let i = vslam_ekf::StateLayout::landmark(s);
+            idx.extend([i, i + 1]);
+            err.extend([pos.x - n.x, pos.y - n.y]);
+        }
+    }
+    let k = idx.len();
+    let sub = nalgebra::DMatrix::from_fn(k, k, |a, b| p[(idx[a], idx[b])]);
+    let e = nalgebra::DVector::from_vec(err);
+    let nees = sub.clone().cholesky().map(|c| e.dot(&c.solve(&e)));
+    let eig = sub.symmetric_eigen();
+    let mut modes: Vec<(f64, f64)> = (0..k)
+        .map(|j| {
+            let s = eig.eigenvalues[j].max(1e-30).sqrt();
+            (s, eig.eigenvectors.column(j).dot(&e) / s)
+        })
+        .collect();
+    modes.sort_by(|a, b| b.0.total_cmp(&a.0));
+    modes.truncate(6);
+    let modes: Vec<String> = modes
+        .iter()
+        .map(|(s, e)| format!("{s:.3} m: {e:+.1} sigma"))
+        .collect();
+    println!(
+        "map NEES at {t_s:.2} s: {} over {k} dof; widest modes {modes:?}",
+        nees.map_or("not positive definite".to_string(), |v| format!("{v:.1}")),
+    );
+}
 
 fn main() -> ExitCode {
     match run() {
@@ -53,10 +103,11 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut every_frame = false;
+    let mut nees_at: Option<f64> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value; {usage}"));
@@ -65,6 +116,13 @@ fn run() -> Result<(), String> {
             "--no-smoother" => opts.no_smoother = true,
             "--missed" => opts.missed = true,
             "--every-frame" => every_frame = true,
+            "--nees-at" => {
+                nees_at = Some(
+                    value("--nees-at")?
+                        .parse()
+                        .map_err(|e| format!("--nees-at: {e}"))?,
+                );
+            }
             "--rig" => opts.rig = Some(value("--rig")?),
             "--field" => {
                 let v = value("--field")?;
@@ -341,6 +399,12 @@ fn run() -> Result<(), String> {
             continue;
         };
         let t_s = (f.t_us - first_t) as f64 * 1e-6;
+        if let Some(at) = nees_at
+            && t_s >= at
+            && t_s < at + 0.03
+        {
+            print_map_nees(t_s, ekf, &lamps);
+        }
         let pose = ekf.pose();
         let jump = previous.map_or(0.0, |p| {
             ((p.x - pose.x).powi(2) + (p.y - pose.y).powi(2)).sqrt()

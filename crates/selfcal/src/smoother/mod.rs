@@ -27,6 +27,7 @@
 //! (`factors`), the normal equations, their elimination and the damped step (`system`); the
 //! [`Smoother`] here holds the frames, the landmarks, the marginalised prior and the hand-over.
 
+mod closure;
 mod consistency;
 mod factors;
 mod settings;
@@ -141,6 +142,10 @@ pub const MIN_TURN_FOR_STABLE_RAD: f64 = 0.3;
 /// Frames back that a newly confirmed track's earlier measurements are looked for.
 const TENTATIVE_FRAMES: usize = 8;
 
+/// Frames a track's held measurements are kept: a tentative track's, and a track held back
+/// while a blind vehicle waits for a constellation ([`closure::DEFER_FRAMES`]).
+const TENTATIVE_KEEP: usize = TENTATIVE_FRAMES + closure::DEFER_FRAMES;
+
 /// Phase 1 over every frame (see the module docs).
 #[derive(Debug, Clone)]
 pub struct Smoother {
@@ -182,6 +187,13 @@ pub struct Smoother {
     since_solve: usize,
     /// How the odometry's noise model was widened ([`Smoother::odometry_widening`]).
     widening: Option<OdometryWidening>,
+    /// How far phase 1 has driven without the map in view ([`closure`]).
+    blind: closure::Blind,
+    /// Loops phase 1 closed by a constellation after a blind stretch.
+    loops_closed: usize,
+    /// The tracks declined in the last [`closure::HOLD_FRAMES`] frames of a blind stretch,
+    /// the latest of each: the constellation searched for.
+    declined_tracks: BTreeMap<u64, closure::Declined>,
 }
 
 impl Smoother {
@@ -213,6 +225,9 @@ impl Smoother {
             smoothed: Vec::new(),
             since_solve: 0,
             widening: None,
+            blind: closure::Blind::default(),
+            loops_closed: 0,
+            declined_tracks: BTreeMap::new(),
         }
     }
 
@@ -325,7 +340,7 @@ impl Smoother {
             return false;
         }
         let odometry = odometry_information(odometry);
-        let pose = match (self.frames.last(), &odometry) {
+        let mut pose = match (self.frames.last(), &odometry) {
             (None, _) => Pose2::default(),
             (Some(prev), Some((o, _))) => o.motion_for(&self.camera.vehicle).apply(&prev.pose),
             (Some(prev), None) => prev.pose,
@@ -358,7 +373,15 @@ impl Smoother {
             .iter()
             .filter_map(|(t, _)| self.track_landmark.get(t).copied())
             .collect();
+        let defer = self.close_loop(&mut pose, &odometry, observations, &seen_now);
+        // Again: a closure binds tracks.
+        let seen_now: Vec<usize> = observations
+            .iter()
+            .filter_map(|(t, _)| self.track_landmark.get(t).copied())
+            .collect();
         let mut created = 0usize;
+        let mut held: Vec<(u64, Measurement)> = Vec::new();
+        let mut held_at_budget = false;
         let mut landmarks_full = false;
         for (track, z) in observations {
             if !z.iter().all(|v| v.is_finite()) {
@@ -368,11 +391,25 @@ impl Smoother {
                 Some(&j) => j,
                 None => {
                     let Some(j) = self.rebind(&pose, z, &seen_now, &used) else {
+                        if defer {
+                            // Held, like a tentative track's: bound or born later, it is
+                            // backfilled.
+                            held.push((*track, *z));
+                            continue;
+                        }
                         if seen_now.len() + created >= self.settings.max_in_view {
                             continue;
                         }
                         if self.landmarks.len() >= self.settings.max_landmarks {
-                            landmarks_full = true;
+                            // Blind, the hand-over waits for the map to come back into view
+                            // (a hand-over now would give phase 2 a pose still blind).
+                            if self.blind.searching() && self.blind.deferred < closure::DEFER_FRAMES
+                            {
+                                held_at_budget = true;
+                                held.push((*track, *z));
+                            } else {
+                                landmarks_full = true;
+                            }
                             continue;
                         }
                         created += 1;
@@ -414,6 +451,9 @@ impl Smoother {
             }
             used.push((index, *z));
         }
+        if held_at_budget && !defer {
+            self.blind.deferred += 1;
+        }
         for (j, _) in &used {
             if let Some(l) = self.landmarks.get_mut(*j) {
                 l.observations += 1;
@@ -423,8 +463,9 @@ impl Smoother {
             .iter()
             .filter(|(_, z)| z.iter().all(|v| v.is_finite()))
             .copied()
+            .chain(held)
             .collect();
-        if let Some(old) = self.frames.len().checked_sub(TENTATIVE_FRAMES)
+        if let Some(old) = self.frames.len().checked_sub(TENTATIVE_KEEP)
             && let Some(f) = self.frames.get_mut(old)
         {
             f.tentative = Vec::new();
@@ -471,12 +512,12 @@ impl Smoother {
     fn backfill(&mut self, track: u64, j: usize) {
         let n = self.frames.len();
         let mut earliest = None;
-        for i in (n.saturating_sub(TENTATIVE_FRAMES)..n).rev() {
+        for i in (n.saturating_sub(TENTATIVE_KEEP)..n).rev() {
             let Some(f) = self.frames.get_mut(i) else {
                 break;
             };
             let Some(&(_, z)) = f.tentative.iter().find(|(t, _)| *t == track) else {
-                break;
+                continue;
             };
             if f.observations.iter().any(|(u, _)| *u == j) {
                 break;
@@ -503,6 +544,184 @@ impl Smoother {
         }
         suffix_min.reverse();
         suffix_min
+    }
+
+    /// Phase 1's loop closure after a blind stretch ([`closure`]): keeps count of the distance
+    /// driven without two landmarks in view; once it is long enough, the tracks that the
+    /// per-observation test ([`Self::rebind`]) declines are tried as a constellation against
+    /// the landmarks not in view. A correction found moves `pose` (and the blind frames
+    /// before it, spread along the stretch, as the solve's start) and binds them. Returns
+    /// whether this frame's declined tracks wait for a constellation instead of becoming new
+    /// landmarks (at most [`closure::DEFER_FRAMES`] frames in a row).
+    fn close_loop(
+        &mut self,
+        pose: &mut Pose2,
+        odometry: &Option<(OdometryFactor, Matrix3<f64>)>,
+        observations: &[(u64, Measurement)],
+        seen_now: &[usize],
+    ) -> bool {
+        let k = self.dropped + self.frames.len();
+        // The map as it was when the vehicle last saw it: landmarks born during the blind
+        // stretch were placed from the drifting pose and re-anchor nothing.
+        let searching_since = self.blind.searching_since;
+        let old = |l: &BatchLandmark| searching_since.is_none_or(|a| l.first_frame < a);
+        let old_seen = seen_now
+            .iter()
+            .filter(|&&j| self.landmarks.get(j).is_some_and(old))
+            .count();
+        if old_seen >= 2 {
+            self.declined_tracks.clear();
+            self.blind = closure::Blind {
+                since_frame: Some(k),
+                ..closure::Blind::default()
+            };
+            return false;
+        }
+        if let Some((o, _)) = odometry {
+            self.blind.distance_m += libm::hypot(o.motion.dx, o.motion.dy);
+            self.blind.seconds += o.motion.dt_s.max(0.0);
+        }
+        if !self.blind.searching() {
+            return false;
+        }
+        if self.blind.searching_since.is_none() {
+            self.blind.searching_since = Some(k);
+        }
+        let declined: Vec<closure::Declined> = observations
+            .iter()
+            .filter(|(t, z)| {
+                !self.track_landmark.contains_key(t)
+                    && z.iter().all(|v| v.is_finite())
+                    && self.rebind(pose, z, seen_now, &[]).is_none()
+            })
+            .filter_map(|(t, z)| {
+                let world = triangulate(&self.camera, z)
+                    .ok()?
+                    .p_in_world(&self.camera, pose);
+                world
+                    .iter()
+                    .all(|v| v.is_finite())
+                    .then_some(closure::Declined {
+                        track: *t,
+                        world,
+                        z: *z,
+                        pose: *pose,
+                        frame: k,
+                    })
+            })
+            .collect();
+        // The constellation spans a few seconds of the stretch: lamps 4 m apart come back
+        // into view one at a time, and the dead reckoning over seconds is good enough to
+        // put them together ([`closure::HOLD_FRAMES`]).
+        for d in &declined {
+            self.declined_tracks.insert(d.track, *d);
+        }
+        let track_landmark = &self.track_landmark;
+        self.declined_tracks
+            .retain(|t, d| d.frame + closure::HOLD_FRAMES >= k && !track_landmark.contains_key(t));
+        let constellation: Vec<closure::Declined> =
+            self.declined_tracks.values().copied().collect();
+        if declined.is_empty() {
+            return false;
+        }
+        let landmarks: Vec<(usize, Vector3<f64>)> = self
+            .landmarks
+            .iter()
+            .enumerate()
+            .filter(|(j, l)| !seen_now.contains(j) && old(l))
+            .map(|(j, l)| (j, l.position))
+            .collect();
+        let seen: Vec<Measurement> = observations.iter().map(|(_, z)| *z).collect();
+        let view = closure::View {
+            seen: &seen,
+            width: f64::from(self.rig.width),
+            height: f64::from(self.rig.height),
+        };
+        if let Some(found) = closure::find(
+            &self.camera,
+            pose,
+            self.blind.extent_m(),
+            &constellation,
+            &landmarks,
+            &view,
+        ) {
+            self.spread_correction(pose, &found.pose);
+            *pose = found.pose;
+            for (track, j) in found.bound {
+                self.track_landmark.insert(track, j);
+                self.backfill(track, j);
+            }
+            self.loops_closed += 1;
+            self.declined_tracks.clear();
+            self.blind = closure::Blind {
+                since_frame: Some(k),
+                ..closure::Blind::default()
+            };
+            return false;
+        }
+        // Wait for a constellation only where the map has landmarks the declined points may
+        // be: a part of the hall seen for the first time is mapped at once.
+        if self.blind.deferred < closure::DEFER_FRAMES
+            && closure::within_reach(pose, self.blind.extent_m(), &declined, &landmarks)
+        {
+            self.blind.deferred += 1;
+            return true;
+        }
+        false
+    }
+
+    /// Moves the blind frames (after the last one with the map in view) by a share of the
+    /// correction `from -> to` of the newest pose that grows along the stretch: the start the
+    /// solve needs to close the loop without Gauss-Newton crossing degrees in one step.
+    fn spread_correction(&mut self, from: &Pose2, to: &Pose2) {
+        let Some(start) = self.blind.since_frame else {
+            return;
+        };
+        let dropped = self.dropped;
+        let span = (dropped + self.frames.len()).saturating_sub(start);
+        if span == 0 {
+            return;
+        }
+        let turn = wrap_angle(to.theta - from.theta);
+        #[allow(clippy::cast_precision_loss)] // frame counts far below 2^53
+        let share_at = |frame: usize| {
+            frame
+                .checked_sub(start)
+                .filter(|s| *s > 0)
+                .map(|s| s as f64 / span as f64)
+        };
+        // The point `(x, y)` moved by `share` of the correction: turned about `from` by that
+        // share of the turn, shifted by that share of the shift.
+        let moved = |x: f64, y: f64, share: f64| {
+            let (s, c) = libm::sincos(share * turn);
+            let (dx, dy) = (x - from.x, y - from.y);
+            (
+                from.x + c * dx - s * dy + share * (to.x - from.x),
+                from.y + s * dx + c * dy + share * (to.y - from.y),
+            )
+        };
+        // A landmark born in the stretch moves with the frame it was born in.
+        for l in &mut self.landmarks {
+            if let Some(share) = share_at(l.first_frame) {
+                (l.position.x, l.position.y) = moved(l.position.x, l.position.y, share);
+            }
+        }
+        for (i, f) in self.frames.iter_mut().enumerate() {
+            if let Some(share) = share_at(dropped + i) {
+                let (x, y) = moved(f.pose.x, f.pose.y, share);
+                f.pose = Pose2 {
+                    x,
+                    y,
+                    theta: wrap_angle(f.pose.theta + share * turn),
+                };
+            }
+        }
+    }
+
+    /// Loops phase 1 closed by recognising the lamps it came back to after a blind stretch
+    /// as a constellation of the map's (docs/vehicle.md, "Dark stretches").
+    pub fn loops_closed(&self) -> usize {
+        self.loops_closed
     }
 
     /// The unique landmark, not seen under another track in this frame, that projects close
