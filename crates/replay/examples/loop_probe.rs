@@ -441,7 +441,6 @@ fn run() -> Result<(), String> {
             && outcome.merged.is_empty()
             && jump < JUMP_M
             && !nav.stats().frames.is_multiple_of(100)
-            && !(95.0..100.5).contains(&t_s)
         {
             continue;
         }
@@ -570,6 +569,11 @@ fn run() -> Result<(), String> {
             }
         }
     }
+    let st = nav.stats();
+    println!(
+        "loops: {} closed, {} ambiguous, {} given up; {} lamps held while lost",
+        st.loops_closed, st.loops_ambiguous, st.loops_given_up, st.held_while_lost
+    );
     Ok(())
 }
 
