@@ -53,7 +53,8 @@ pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 /// its largest position sigma is below this, metres, and the camera is learned
 /// ([`FEJ_CAMERA_RELATIVE`]), and then stays; a joint estimate from the smoother
 /// (`Ekf::set_joint`) is a new linearisation point, and the iterated update relinearises at
-/// the estimate unless the pose is lost ([`FEJ_POSITION_SIGMA_M`]). Jacobians at each
+/// the estimate but for the heading's column (the observability constraint at this point:
+/// `Ekf::observation_model_constrained`). Jacobians at each
 /// update's estimate gave the filter information on its global heading from lamps seen for the first time: on a loop (5.6
 /// degrees of heading sigma became 0.4 within a second, docs/halls.md "Loops") and after
 /// every dark stretch of the generated halls (the heading's sigma halved by new lamps while
@@ -72,16 +73,15 @@ pub const FEJ_CAMERA_RELATIVE: f64 = 0.005;
 
 /// While the pose's position sigma is above this, metres, the pose is lost: a new landmark's
 /// linearisation point stays at its first estimate (lamps seen for the first time must not
-/// tell the filter where it is), and the iterated update keeps the first-estimates Jacobians.
+/// tell the filter where it is).
 pub const FEJ_POSITION_SIGMA_M: f64 = 0.5;
 
 /// While the pose's heading sigma is above this, radians, the pose is lost as it is by
-/// [`FEJ_POSITION_SIGMA_M`]: the iterated update keeps the first-estimates Jacobians and new
-/// landmarks keep their first estimates. Wheels that slip for a while leave the position
-/// known to a decimetre after a 15 m dark stretch but the heading to 2.3 degrees; the update
-/// iterated at each estimate (its threshold [`ITERATE_HEADING_SIGMA_RAD`]) took the heading's
-/// sigma to 0.9 degrees from two lamps seen for the first time, 4.4 degrees off
-/// (docs/vehicle.md, "Dark stretches").
+/// [`FEJ_POSITION_SIGMA_M`]: new landmarks keep their first estimates. Wheels that slip for a
+/// while leave the position known to a decimetre after a 15 m dark stretch but the heading to
+/// 2.3 degrees; the update iterated at each estimate (its threshold
+/// [`ITERATE_HEADING_SIGMA_RAD`]) took the heading's sigma to 0.9 degrees from two lamps seen
+/// for the first time, 4.4 degrees off (docs/vehicle.md, "Dark stretches").
 pub(crate) const FEJ_HEADING_SIGMA_RAD: f64 = ITERATE_HEADING_SIGMA_RAD;
 
 /// Passes of the iterated update at most (the first, linear one included).

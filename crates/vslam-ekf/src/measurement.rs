@@ -92,7 +92,7 @@ impl Ekf {
     }
 
     /// [`Self::observation_model`]; with `fej` false `H` is at the current estimate throughout
-    /// (the derivative itself, and the iterated update's relinearisations).
+    /// (the derivative itself).
     pub(crate) fn observation_model_with(
         &self,
         s: usize,
@@ -100,6 +100,47 @@ impl Ekf {
         pose: &Pose2,
         fej: bool,
     ) -> Result<(Measurement, Obs), Error> {
+        let (predicted, h) = self.observation_columns(s, camera, pose, fej)?;
+        Ok((predicted, Obs::new(&h)))
+    }
+
+    /// The iterated update's linearisation (`Ekf::update` on an uncertain pose): `H` at the
+    /// current estimate, but for the heading's column, which comes from the observability
+    /// constraint at the landmark's linearisation point (the OC-EKF of Huang, Mourikis and
+    /// Roumeliotis, IEEE T-RO 2010). A rotation of the whole world about its origin, `dp = J
+    /// p`, `dtheta = 1`, `dL = J L` with `J` the planar quarter turn, changes no prediction,
+    /// `H_p J p + H_theta + H_L J L = 0`; `h` depends on `L - p` horizontally, so `H_theta =
+    /// H_L J (p - L)`, with `L` where the filter's covariance ties the landmark to the heading.
+    /// The other columns at the estimate keep Gauss-Newton's steps right where a landmark's
+    /// first estimate is far from it (a linearisation point that had settled 0.25 m off made
+    /// the closure of hall 11's loop out of a dark stretch undo itself in the next frame);
+    /// the whole of `H` at the estimate gave the heading information from lamps seen for the
+    /// first time (docs/vehicle.md, "Dark stretches").
+    pub(crate) fn observation_model_constrained(
+        &self,
+        s: usize,
+        camera: &CameraParams,
+        pose: &Pose2,
+    ) -> Result<(Measurement, Obs), Error> {
+        let (predicted, mut h) = self.observation_columns(s, camera, pose, false)?;
+        if let Some(first) = self.landmarks.get(s).and_then(|l| l.first) {
+            let (dx, dy) = (pose.x - first.x, pose.y - first.y);
+            // Columns 0..3 are the pose's (x, y, heading), 3..6 the landmark's.
+            for row in &mut h.h {
+                row[2] = -dy * row[3] + dx * row[4];
+            }
+        }
+        Ok((predicted, Obs::new(&h)))
+    }
+
+    /// The predicted measurement and `H`'s non-zero columns ([`Self::observation_model_with`]).
+    fn observation_columns(
+        &self,
+        s: usize,
+        camera: &CameraParams,
+        pose: &Pose2,
+        fej: bool,
+    ) -> Result<(Measurement, HColumns), Error> {
         let id = self.landmarks.get(s).map_or(LandmarkId(u64::MAX), |l| l.id);
         let landmark = self
             .x
@@ -138,7 +179,7 @@ impl Ekf {
                 }
             }
         }
-        Ok((predicted, Obs::new(&h)))
+        Ok((predicted, h))
     }
 
     /// The predicted measurement of a landmark and its innovation covariance
@@ -170,8 +211,15 @@ impl Ekf {
     ) -> Result<(Measurement, Matrix4<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
         // The derivative at the estimate: where the landmark is predicted and how uncertainly
-        // (the first-estimates Jacobians are the update's, for its information).
-        let (z, mut m) = self.observation_model_with(s, &self.camera(), &self.pose(), false)?;
+        // (the first-estimates Jacobians are the update's, for its information), but for the
+        // heading's column, constrained as the iterated update's: where the landmark's
+        // estimate has moved from the point its covariance ties it to the heading at (lamps
+        // mapped out of a dark stretch, half a metre in depth), the derivative's heading column
+        // measured the heading's spread with a lever the covariance does not have, and map
+        // matching's gates on hall 11 after the stretch (`hall_mc 4 11 --lens radtan
+        // --odometry-tau 0.6`) were off: trajectory 528 mm against 204 mm with it
+        // (docs/vehicle.md, "Dark stretches").
+        let (z, mut m) = self.observation_model_constrained(s, &self.camera(), &self.pose())?;
         m.r = self.measurement_variances(&z);
         Ok((z, self.innovation_covariance_with(&m, upper)))
     }
