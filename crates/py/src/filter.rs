@@ -621,6 +621,21 @@ impl Filter {
         ))
     }
 
+    /// `(z (4,), H (4, n))`: the Jacobian `predict_measurement`'s `S` is formed with, dense:
+    /// `measurement_jacobian`'s but for the heading's column, from the observability
+    /// constraint at the landmark's linearisation point.
+    fn prediction_jacobian<'py>(&self, py: Python<'py>, id: u64) -> PyResult<PredictedTuple<'py>> {
+        let (z, h) = self
+            .locked()
+            .ekf
+            .prediction_jacobian(LandmarkId(id))
+            .map_err(|e| filter_error(py, e))?;
+        Ok((
+            z.iter().copied().collect::<Vec<_>>().into_pyarray(py),
+            matrix_array(py, &h),
+        ))
+    }
+
     /// The state `[X, Y, theta, L_1 .. L_N, C_est]`, (n,).
     #[getter]
     fn state<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {

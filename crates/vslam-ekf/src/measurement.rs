@@ -242,6 +242,20 @@ impl Ekf {
         self.dense_jacobian(id, true)
     }
 
+    /// The predicted measurement of a landmark and the `4 x n` matrix `H` that
+    /// [`Self::predict_measurement`]'s innovation covariance is formed with, dense:
+    /// [`Self::measurement_jacobian`] but for the heading's column, from the observability
+    /// constraint at the landmark's linearisation point (as the iterated update's). For tests
+    /// and tools.
+    pub fn prediction_jacobian(
+        &self,
+        id: LandmarkId,
+    ) -> Result<(Measurement, DMatrix<f64>), Error> {
+        let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
+        let (z, m) = self.observation_model_constrained(s, &self.camera(), &self.pose())?;
+        Ok((z, self.dense_of(&m)))
+    }
+
     /// A landmark's predicted measurement and its `H` as a dense `4 x n` matrix, at the
     /// estimate or (`fej`) as the update takes it ([`Self::observation_model_with`]).
     fn dense_jacobian(
@@ -251,13 +265,18 @@ impl Ekf {
     ) -> Result<(Measurement, DMatrix<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
         let (z, m) = self.observation_model_with(s, &self.camera(), &self.pose(), fej)?;
+        Ok((z, self.dense_of(&m)))
+    }
+
+    /// An observation's non-zero columns as a dense `4 x n` matrix.
+    fn dense_of(&self, m: &Obs) -> DMatrix<f64> {
         let mut h = DMatrix::zeros(4, self.x.len());
         for (t, &c) in m.cols.iter().enumerate().take(m.q) {
             for r in 0..4 {
                 h[(r, c)] = m.h[r][t];
             }
         }
-        Ok((z, h))
+        h
     }
 
     /// The landmarks not among `in_view` (the caller's [`Ekf::visible_landmarks`], computed

@@ -610,6 +610,8 @@ class Filter:
         """``(z (4,), S (4, 4))``."""
     def measurement_jacobian(self, id: int) -> tuple[_F64, _F64]:
         """``(z (4,), H (4, n))``."""
+    def prediction_jacobian(self, id: int) -> tuple[_F64, _F64]:
+        """``(z (4,), H (4, n))``: the Jacobian ``predict_measurement``'s ``S`` is formed with."""
     @property
     def state(self) -> _F64: ...
     @property

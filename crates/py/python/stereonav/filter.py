@@ -523,7 +523,8 @@ class Filter:
     # --- Inspection ----------------------------------------------------------------------
 
     def predict_measurement(self, id: int) -> PredictedMeasurement:
-        """A landmark's predicted measurement and innovation covariance ``S = H P H^T + R``.
+        """A landmark's predicted measurement and innovation covariance ``S = H P H^T + R``,
+        ``H`` from :meth:`prediction_jacobian`.
 
         For association and map matching: a measurement ``z`` is this landmark's when
         ``(z - p.z) @ inv(p.covariance) @ (z - p.z) <= gate_bound``.
@@ -544,6 +545,14 @@ class Filter:
         the landmark's and the estimated camera columns). For tests and tools: the update
         itself never forms ``H``. Raises as :meth:`predict_measurement`."""
         return self._native.measurement_jacobian(_id("id", id))
+
+    def prediction_jacobian(self, id: int) -> tuple[_F64, _F64]:
+        """``(z (4,), H (4, n))``: the Jacobian :meth:`predict_measurement`'s ``S`` is formed
+        with, dense: :meth:`measurement_jacobian`'s but for the heading's column (index 2),
+        which comes from the observability constraint at the landmark's linearisation point
+        (so that turning the whole world changes no prediction as the covariance has it;
+        docs/vehicle.md, "Dark stretches"). Raises as :meth:`predict_measurement`."""
+        return self._native.prediction_jacobian(_id("id", id))
 
     @property
     def state(self) -> _F64:
