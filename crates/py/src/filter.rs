@@ -83,6 +83,18 @@ type LandmarkTuple<'py> = (
 /// A predicted measurement (4,) with a matrix: its innovation covariance (4, 4) or its
 /// Jacobian (4, n).
 type PredictedTuple<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
+
+/// `(z (4,), H (4, n))` of one of the filter's dense Jacobians, or its error as Python's.
+fn dense_jacobian<'py>(
+    py: Python<'py>,
+    jacobian: Result<(Measurement, DMatrix<f64>), vslam_ekf::Error>,
+) -> PyResult<PredictedTuple<'py>> {
+    let (z, h) = jacobian.map_err(|e| filter_error(py, e))?;
+    Ok((
+        z.iter().copied().collect::<Vec<_>>().into_pyarray(py),
+        matrix_array(py, &h),
+    ))
+}
 /// `stereonav.Error(message)`, or a plain `RuntimeError` (caused by the import error) if that
 /// class cannot be imported.
 pub(crate) fn stereonav_error(py: Python<'_>, message: String) -> PyErr {
@@ -610,30 +622,14 @@ impl Filter {
     /// `(z (4,), H (4, n))`: a landmark's predicted measurement and the dense Jacobian of the
     /// measurement with respect to the whole state (the update itself never forms it).
     fn measurement_jacobian<'py>(&self, py: Python<'py>, id: u64) -> PyResult<PredictedTuple<'py>> {
-        let (z, h) = self
-            .locked()
-            .ekf
-            .measurement_jacobian(LandmarkId(id))
-            .map_err(|e| filter_error(py, e))?;
-        Ok((
-            z.iter().copied().collect::<Vec<_>>().into_pyarray(py),
-            matrix_array(py, &h),
-        ))
+        dense_jacobian(py, self.locked().ekf.measurement_jacobian(LandmarkId(id)))
     }
 
     /// `(z (4,), H (4, n))`: the Jacobian `predict_measurement`'s `S` is formed with, dense:
     /// `measurement_jacobian`'s but for the heading's column, from the observability
     /// constraint at the landmark's linearisation point.
     fn prediction_jacobian<'py>(&self, py: Python<'py>, id: u64) -> PyResult<PredictedTuple<'py>> {
-        let (z, h) = self
-            .locked()
-            .ekf
-            .prediction_jacobian(LandmarkId(id))
-            .map_err(|e| filter_error(py, e))?;
-        Ok((
-            z.iter().copied().collect::<Vec<_>>().into_pyarray(py),
-            matrix_array(py, &h),
-        ))
+        dense_jacobian(py, self.locked().ekf.prediction_jacobian(LandmarkId(id)))
     }
 
     /// The state `[X, Y, theta, L_1 .. L_N, C_est]`, (n,).

@@ -41,7 +41,7 @@ pub use settings::SmootherSettings;
 use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
 
-use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector2, Vector3};
 
 use crate::observability::structural_trap;
 use rig_model::camera::{CameraParams, N_CAMERA, N_PARAMS, Param, ParamVector, Pose2, wrap_angle};
@@ -570,11 +570,7 @@ impl Smoother {
             .filter(|&&j| self.landmarks.get(j).is_some_and(old))
             .count();
         if old_seen >= 2 {
-            self.declined_tracks.clear();
-            self.blind = closure::Blind {
-                since_frame: Some(k),
-                ..closure::Blind::default()
-            };
+            self.map_in_view(k);
             return false;
         }
         if let Some((o, _)) = odometry {
@@ -652,11 +648,7 @@ impl Smoother {
                 self.backfill(track, j);
             }
             self.loops_closed += 1;
-            self.declined_tracks.clear();
-            self.blind = closure::Blind {
-                since_frame: Some(k),
-                ..closure::Blind::default()
-            };
+            self.map_in_view(k);
             return false;
         }
         // Wait for a constellation only where the map has landmarks the declined points may
@@ -668,6 +660,16 @@ impl Smoother {
             return true;
         }
         false
+    }
+
+    /// Frame `k` has the map in view (seen, or found again): no blind stretch, nothing held
+    /// for a constellation.
+    fn map_in_view(&mut self, k: usize) {
+        self.declined_tracks.clear();
+        self.blind = closure::Blind {
+            since_frame: Some(k),
+            ..closure::Blind::default()
+        };
     }
 
     /// Moves the blind frames (after the last one with the map in view) by a share of the
@@ -690,30 +692,23 @@ impl Smoother {
                 .filter(|s| *s > 0)
                 .map(|s| s as f64 / span as f64)
         };
-        // The point `(x, y)` moved by `share` of the correction: turned about `from` by that
-        // share of the turn, shifted by that share of the shift.
-        let moved = |x: f64, y: f64, share: f64| {
-            let (s, c) = libm::sincos(share * turn);
-            let (dx, dy) = (x - from.x, y - from.y);
-            (
-                from.x + c * dx - s * dy + share * (to.x - from.x),
-                from.y + s * dx + c * dy + share * (to.y - from.y),
-            )
+        // `share` of the correction: that share of the turn about `from`, of the shift.
+        let pivot = Vector2::new(from.x, from.y);
+        let shift = Vector2::new(to.x, to.y) - pivot;
+        let part = |share: f64| closure::Correction {
+            turn: share * turn,
+            shift: share * shift,
         };
         // A landmark born in the stretch moves with the frame it was born in.
         for l in &mut self.landmarks {
             if let Some(share) = share_at(l.first_frame) {
-                (l.position.x, l.position.y) = moved(l.position.x, l.position.y, share);
+                let p = part(share).apply(&pivot, &l.position.xy());
+                (l.position.x, l.position.y) = (p.x, p.y);
             }
         }
         for (i, f) in self.frames.iter_mut().enumerate() {
             if let Some(share) = share_at(dropped + i) {
-                let (x, y) = moved(f.pose.x, f.pose.y, share);
-                f.pose = Pose2 {
-                    x,
-                    y,
-                    theta: wrap_angle(f.pose.theta + share * turn),
-                };
+                f.pose = part(share).apply_pose(&pivot, &f.pose);
             }
         }
     }
