@@ -7,14 +7,16 @@
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
 //! [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
-//! [--nees-at T_S]`:
+//! [--nees-at T_S [--worst N]]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
 //! smoother; `--rig` runs on that rig instead of the log's; `--field` and `--max-in-view` set
 //! the navigator's field of use and its cap on landmarks in view; `--missed` reports, per lamp
 //! in view 20 frames or more that no landmark is, where its observations were lost; `--lamp`
 //! follows one lamp's stereo match and track while it is in view; `--nees-at T` prints the
-//! map's NEES and its widest common modes at `T` seconds ([`print_map_nees`]). Every 100th
+//! map's NEES and its widest common modes at `T` seconds ([`print_map_nees`]), and with
+//! `--worst N` the `N` landmarks that add the most to it (a landmark off relative to the others
+//! it is correlated with shows there even when its own sigmas cover its error). Every 100th
 //! frame is printed too (the drift in between).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
@@ -37,10 +39,16 @@ const LAMP_PX: f64 = 3.0;
 /// the error along each in its sigmas: a map whose common modes (its shift and turn
 /// against the first frame's world) have gained spurious information shows a NEES far above
 /// its degrees of freedom and errors of many sigmas along its widest modes.
-fn print_map_nees(t_s: f64, ekf: &vslam_ekf::Ekf, lamps: &[vehicle_log::TruthLandmark]) {
+fn print_map_nees(
+    t_s: f64,
+    ekf: &vslam_ekf::Ekf,
+    lamps: &[vehicle_log::TruthLandmark],
+    worst: usize,
+) {
     let p = ekf.covariance();
     let mut idx = Vec::new();
     let mut err = Vec::new();
+    let mut ids = Vec::new();
     for (s, l) in ekf.landmarks().enumerate() {
         let pos = l.position;
         let near = lamps.iter().min_by(|a, b| {
@@ -54,11 +62,12 @@ fn print_map_nees(t_s: f64, ekf: &vslam_ekf::Ekf, lamps: &[vehicle_log::TruthLan
             let i = vslam_ekf::StateLayout::landmark(s);
             idx.extend([i, i + 1]);
             err.extend([pos.x - n.x, pos.y - n.y]);
+            ids.push((l.id, pos));
         }
     }
     let k = idx.len();
     let sub = nalgebra::DMatrix::from_fn(k, k, |a, b| p[(idx[a], idx[b])]);
-    let e = nalgebra::DVector::from_vec(err);
+    let e = nalgebra::DVector::from_column_slice(&err);
     let nees = sub.clone().cholesky().map(|c| e.dot(&c.solve(&e)));
     let eig = sub.symmetric_eigen();
     let mut modes: Vec<(f64, f64)> = (0..k)
@@ -77,6 +86,36 @@ fn print_map_nees(t_s: f64, ekf: &vslam_ekf::Ekf, lamps: &[vehicle_log::TruthLan
         "map NEES at {t_s:.2} s: {} over {k} dof; widest modes {modes:?}",
         nees.map_or("not positive definite".to_string(), |v| format!("{v:.1}")),
     );
+    let Some(total) = nees else {
+        return;
+    };
+    // Each landmark's share: the NEES of the map less the NEES without it (2 dof each when
+    // consistent).
+    let mut shares: Vec<(f64, usize)> = (0..ids.len())
+        .filter_map(|j| {
+            let keep: Vec<usize> = (0..k).filter(|&a| a / 2 != j).collect();
+            let sub = nalgebra::DMatrix::from_fn(keep.len(), keep.len(), |a, b| {
+                p[(idx[keep[a]], idx[keep[b]])]
+            });
+            let e = nalgebra::DVector::from_fn(keep.len(), |a, _| err[keep[a]]);
+            let without = sub.cholesky()?.solve(&e).dot(&e);
+            Some((total - without, j))
+        })
+        .collect();
+    shares.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for &(share, j) in shares.iter().take(worst) {
+        let (id, pos) = ids[j];
+        let (i, e) = (idx[2 * j], (err[2 * j], err[2 * j + 1]));
+        println!(
+            "  {id:?} at ({:+.2}, {:+.2}): adds {share:.1}; off ({:+.3}, {:+.3}) m, sigma ({:.3}, {:.3}) m",
+            pos.x,
+            pos.y,
+            e.0,
+            e.1,
+            p[(i, i)].sqrt(),
+            p[(i + 1, i + 1)].sqrt()
+        );
+    }
 }
 
 fn main() -> ExitCode {
@@ -103,11 +142,12 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut every_frame = false;
     let mut nees_at: Option<f64> = None;
+    let mut worst: usize = 0;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value; {usage}"));
@@ -122,6 +162,11 @@ fn run() -> Result<(), String> {
                         .parse()
                         .map_err(|e| format!("--nees-at: {e}"))?,
                 );
+            }
+            "--worst" => {
+                worst = value("--worst")?
+                    .parse()
+                    .map_err(|e| format!("--worst: {e}"))?;
             }
             "--rig" => opts.rig = Some(value("--rig")?),
             "--field" => {
@@ -403,7 +448,7 @@ fn run() -> Result<(), String> {
             && t_s >= at
             && t_s < at + 0.03
         {
-            print_map_nees(t_s, ekf, &lamps);
+            print_map_nees(t_s, ekf, &lamps, worst);
         }
         let pose = ekf.pose();
         let jump = previous.map_or(0.0, |p| {
