@@ -758,11 +758,21 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
         ));
     }
     if let Some(w) = &stats.odometry_widened {
-        warnings.push(odometry_widened_warning(
-            &navigator.rig().noise,
-            &navigator.odometry_noise(),
-            w,
-        ));
+        let mut warning =
+            odometry_widened_warning(&navigator.rig().noise, &navigator.odometry_noise(), w);
+        if stats.phase2_odometry_widenings > 0 {
+            // Phase 2's own check widened it further (`nav::Navigator`, after the smoother
+            // stopped): the batch's sentence alone would understate the change.
+            warning = warning.replacen(
+                ": state the odometry's noise",
+                &format!(
+                    " ({} time(s) by phase 2's filter after the smoother stopped): state the odometry's noise",
+                    stats.phase2_odometry_widenings
+                ),
+                1,
+            );
+        }
+        warnings.push(warning);
     }
     if stats.odometry_dropped > 0 {
         warnings.push(format!(

@@ -47,6 +47,6 @@ pub use error::Error;
 pub use observability::structural_trap;
 pub use smoother::{
     CONSISTENCY_SPANS_S, OdometryConsistency, OdometryWidening, Smoother, SmootherSettings,
-    long_run_ratio,
+    judge_odometry, long_run_ratio, trajectory_consistency, widened_odometry_covariance,
 };
 pub use solve::{Calibration, SolveStatus, SolverSettings, calibrate};

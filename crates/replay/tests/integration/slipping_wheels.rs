@@ -247,3 +247,38 @@ fn slow_slipping_wheels_over_many_seeds() {
         assert!(outside.is_empty(), "{outside:?}");
     }
 }
+
+/// A dense hall (`sim::hall`'s seed 18: lamps every 2.5 m, no dark stretch) with 0.6 s of
+/// memory the rig file is silent about. Phase 1 hands over after 14 s, its landmark budget
+/// full, having widened the model from the one-second span alone (about 45 and 76 times the
+/// variance, where the long run needs about 120): before phase 2 looked again, 41 of its 272
+/// lamps were mapped more than 10 cm off. Phase 2's own check, once the smoother has stopped,
+/// sees the memory over three-second spans and widens the model to its long run.
+#[test]
+fn a_dense_hall_silent_about_the_memory_is_widened_to_its_long_run() {
+    let spec = sim::hall::HallSpec::draw(18);
+    let mut sc = sim::hall::scenario(&spec, 18).unwrap();
+    (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
+    let sc = silent(sc);
+    let r = run(&sc, 18, "dense-silent");
+    let w = r.replay.odometry.unwrap().widened.expect("widened");
+    let [tt, th] = w.time_constants_s;
+    let [kt, kh] = w.variance_factors;
+    assert!(
+        (0.3..=1.5).contains(&tt) && (0.3..=1.5).contains(&th) && kt >= 90.0 && kh >= 90.0,
+        "{w:?}"
+    );
+    let t = r.replay.truth.as_ref().unwrap();
+    let d = format!("{t:?}");
+    let total = t.landmarks_matched + t.landmarks_unmatched;
+    assert!(
+        t.lamps_missed * 50 <= total && t.landmarks_unmatched * 50 <= total,
+        "{d}"
+    );
+    assert!(
+        10 * r.inside >= 9 * r.near,
+        "{} of {} inside 3 sigma",
+        r.inside,
+        r.near
+    );
+}

@@ -21,7 +21,7 @@
 use alloc::vec::Vec;
 
 use nalgebra::{Matrix3, Vector3};
-use rig_model::camera::Vehicle;
+use rig_model::camera::{Pose2, Vehicle};
 use rig_model::odometry::{Motion, compose_jacobian_first, compose_jacobian_second};
 
 use super::Frame;
@@ -110,7 +110,7 @@ pub(crate) const MIN_WINDOWS: usize = 8;
 /// 8, 16 and 32 windows, against [`REFINE_LIMIT`]: each look with twice the data, at most
 /// [`MAX_LOOKS`], so that the check, which measures against a trajectory the widened
 /// odometry holds less tightly, cannot feed itself.
-pub(super) fn judge(
+pub fn judge(
     spans: [Option<OdometryConsistency>; 2],
     so_far: Option<OdometryWidening>,
     t_us: u64,
@@ -246,26 +246,47 @@ pub(super) fn odometry_consistency(
     v: &Vehicle,
     span_s: f64,
 ) -> Option<OdometryConsistency> {
+    let poses: Vec<Pose2> = frames.iter().map(|f| f.pose).collect();
+    // The factor's covariance is in the reported odometry's units; D = diag(odom_scale,
+    // odom_scale, odom_yaw_scale) is within a few per cent of 1, well inside what the ratio
+    // is compared with.
+    let steps: Vec<Option<(Motion, Matrix3<f64>)>> = frames
+        .iter()
+        .skip(1)
+        .map(|f| {
+            f.odometry
+                .as_ref()
+                .map(|(o, _)| (o.motion_for(v), o.covariance))
+        })
+        .collect();
+    trajectory_consistency(&poses, &steps, span_s)
+}
+
+/// The consistency of a trajectory's odometry with its poses over windows of `span_s` (see the
+/// module docs), for an estimator other than the batch (phase 2's filter, `nav`): `poses[i]`
+/// and `poses[i + 1]` are the estimates at two frames, `steps[i]` the odometry's motion
+/// between them and its covariance under the model in use (`None`: no odometry, the window
+/// ends uncounted). `None` without a single window.
+pub fn trajectory_consistency(
+    poses: &[Pose2],
+    steps: &[Option<(Motion, Matrix3<f64>)>],
+    span_s: f64,
+) -> Option<OdometryConsistency> {
     let (mut long_t, mut long_h, mut frame_t, mut frame_h) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut span_sum = 0.0;
     // The window being built: its first frame's index, the composed motion and covariance.
     let mut window: Option<(usize, Motion, Matrix3<f64>)> = None;
-    for (i, pair) in frames.windows(2).enumerate() {
+    for (i, (pair, step)) in poses.windows(2).zip(steps).enumerate() {
         let (Some(a), Some(b)) = (pair.first(), pair.get(1)) else {
             continue;
         };
-        let Some((o, _)) = &b.odometry else {
+        let Some((m, cov)) = *step else {
             // No odometry over this interval: the window ends without being counted.
             window = None;
             continue;
         };
-        let m = o.motion_for(v);
-        // The factor's covariance is in the reported odometry's units; D = diag(odom_scale,
-        // odom_scale, odom_yaw_scale) is within a few per cent of 1, well inside what the
-        // ratio is compared with.
-        let cov = o.covariance;
-        let (r, _, _) = odometry_residual(&a.pose, &b.pose, &m);
+        let (r, _, _) = odometry_residual(a, b, &m);
         if let Some((t, h)) = normalised(&r, &cov) {
             frame_t.push(t);
             frame_h.push(h);
@@ -281,10 +302,10 @@ pub(super) fn odometry_consistency(
             window = Some((start, motion, covariance));
             continue;
         }
-        let Some(first) = frames.get(start) else {
+        let Some(first) = poses.get(start) else {
             continue;
         };
-        let (r, _, _) = odometry_residual(&first.pose, &b.pose, &motion);
+        let (r, _, _) = odometry_residual(first, b, &motion);
         if let Some((t, h)) = normalised(&r, &covariance) {
             long_t.push(t);
             long_h.push(h);
@@ -306,14 +327,20 @@ pub(super) fn odometry_consistency(
     })
 }
 
-/// Scales the stored odometry factors' covariance by `translation` on `dx, dy` and `heading`
-/// on `dtheta` (variance factors, at least 1), their information by the inverse.
-pub(super) fn widen(frames: &mut [Frame], translation: f64, heading: f64) {
+/// `covariance` widened by the variance factors `translation` on `dx, dy` and `heading` on
+/// `dtheta` (at least 1): `S C S` with `S` their square roots on the diagonal.
+pub fn widened(covariance: &Matrix3<f64>, translation: f64, heading: f64) -> Matrix3<f64> {
     let s = Matrix3::from_diagonal(&Vector3::new(
         libm::sqrt(translation),
         libm::sqrt(translation),
         libm::sqrt(heading),
     ));
+    s * covariance * s
+}
+
+/// Scales the stored odometry factors' covariance by `translation` on `dx, dy` and `heading`
+/// on `dtheta` (variance factors, at least 1), their information by the inverse.
+pub(super) fn widen(frames: &mut [Frame], translation: f64, heading: f64) {
     let s_inv = Matrix3::from_diagonal(&Vector3::new(
         1.0 / libm::sqrt(translation),
         1.0 / libm::sqrt(translation),
@@ -321,7 +348,7 @@ pub(super) fn widen(frames: &mut [Frame], translation: f64, heading: f64) {
     ));
     for f in frames {
         if let Some((o, info)) = &mut f.odometry {
-            o.covariance = s * o.covariance * s;
+            o.covariance = widened(&o.covariance, translation, heading);
             *info = s_inv * *info * s_inv;
         }
     }
@@ -394,6 +421,124 @@ mod tests {
         // 0.6 s: 51 % of the long-run rate over a second, 80 % over three.
         assert!((memory_fraction(1.0, 0.6) - 0.513).abs() < 1e-3);
         assert!((memory_fraction(3.0, 0.6) - 0.801).abs() < 1e-3);
+    }
+
+    /// Seeded standard normal draws (splitmix64 and Box-Muller: a test's draws need no crate).
+    struct Normal(u64);
+
+    impl Normal {
+        fn uniform(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^= z >> 31;
+            #[allow(clippy::cast_precision_loss)]
+            let u = ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+            u
+        }
+
+        fn draw(&mut self) -> f64 {
+            let (u, v) = (self.uniform(), self.uniform());
+            libm::sqrt(-2.0 * libm::log(u)) * libm::cos(2.0 * core::f64::consts::PI * v)
+        }
+    }
+
+    /// A trajectory known exactly (the filter's where lamps are in view, to first order) and
+    /// its odometry at 100 Hz with errors of 0.6 s memory, stated as white: the two spans'
+    /// ratios are what the batch sees (about 62 and 96), and their quotient gives the memory.
+    #[test]
+    fn a_trajectory_shows_the_odometry_s_memory() {
+        let (sigma_v, sigma_w, tau, period) = (0.02, 0.01, 0.6, 0.01);
+        let phi = libm::exp(-period / tau);
+        let drive = libm::sqrt(1.0 - phi * phi);
+        let mut rng = Normal(36);
+        let (mut ev, mut ew) = (sigma_v * rng.draw(), sigma_w * rng.draw());
+        let mut poses = alloc::vec![Pose2::new(0.0, 0.0, 0.0)];
+        let mut steps = Vec::new();
+        // 20 Hz frames over 300 s, each five odometry samples of 1 m/s and 0.05 rad/s.
+        for _ in 0..6000 {
+            let mut reported = Motion::default();
+            let mut truth = Motion::default();
+            for _ in 0..5 {
+                ev = phi * ev + drive * sigma_v * rng.draw();
+                ew = phi * ew + drive * sigma_w * rng.draw();
+                truth = truth.then(&rig_model::odometry::constant_velocity_motion(
+                    1.0, 0.0, 0.05, period,
+                ));
+                reported = reported.then(&rig_model::odometry::constant_velocity_motion(
+                    1.0 + ev,
+                    0.0,
+                    0.05 + ew,
+                    period,
+                ));
+            }
+            // The white model: each sample's variance (sigma dt)^2, as `Increment` gives it.
+            let cov = Matrix3::from_diagonal(&Vector3::new(
+                5.0 * (sigma_v * period).powi(2),
+                5.0 * (sigma_v * period).powi(2),
+                5.0 * (sigma_w * period).powi(2),
+            ));
+            let last = poses[poses.len() - 1];
+            poses.push(truth.apply(&last));
+            steps.push(Some((reported, cov)));
+        }
+        let [short, long] =
+            SPANS_S.map(|span| trajectory_consistency(&poses, &steps, span).unwrap());
+        assert!(
+            short.windows >= 290 && long.windows >= 95,
+            "{short:?} {long:?}"
+        );
+        let (expect_short, expect_long) = (
+            120.0 * memory_fraction(1.0, tau),
+            120.0 * memory_fraction(3.0, tau),
+        );
+        // The heading's errors are the yaw rate's alone; the translation's half of it is the
+        // lateral `dy`, which the velocity's errors do not reach.
+        for (got, want) in [(short.heading, expect_short), (long.heading, expect_long)] {
+            assert!((got / want - 1.0).abs() < 0.35, "{got} against {want}");
+        }
+        assert!(
+            short.translation > RATIO_LIMIT && long.translation > 1.2 * short.translation,
+            "{short:?} {long:?}"
+        );
+        let (ratio, t) = long_run_ratio(short.heading, long.heading);
+        assert!(
+            (0.3..=1.2).contains(&t) && (60.0..=240.0).contains(&ratio),
+            "{ratio} {t}"
+        );
+        // Judged after a widening from the short span alone (phase 1 handed over early):
+        // widened again, to about the long-run ratio, and the memory named.
+        let first = judge(
+            [
+                Some(OdometryConsistency {
+                    windows: 8,
+                    ..short
+                }),
+                None,
+            ],
+            None,
+            9_000_000,
+        )
+        .unwrap()
+        .1;
+        let rescaled = |c: OdometryConsistency| OdometryConsistency {
+            translation: c.translation / first.factors.0,
+            heading: c.heading / first.factors.1,
+            ..c
+        };
+        let ((kt, kh), w) = judge(
+            [Some(rescaled(short)), Some(rescaled(long))],
+            Some(first),
+            60_000_000,
+        )
+        .unwrap();
+        assert!(kt > 1.0 && kh > 1.0, "{kt} {kh}");
+        assert!(w.factors.0 >= 90.0 && w.factors.1 >= 90.0, "{w:?}");
+        assert!(
+            w.time_constants_s.0 > 0.0 && w.time_constants_s.1 > 0.0,
+            "{w:?}"
+        );
     }
 
     fn spans(

@@ -34,7 +34,8 @@ mod settings;
 mod system;
 
 pub use consistency::{
-    OdometryConsistency, OdometryWidening, SPANS_S as CONSISTENCY_SPANS_S, long_run_ratio,
+    OdometryConsistency, OdometryWidening, SPANS_S as CONSISTENCY_SPANS_S, judge as judge_odometry,
+    long_run_ratio, trajectory_consistency, widened as widened_odometry_covariance,
 };
 pub use settings::SmootherSettings;
 
