@@ -242,6 +242,13 @@ impl Smoother {
             .map(|span| consistency::odometry_consistency(&self.frames, &self.camera.vehicle, span))
     }
 
+    /// Whether the odometry's check has had enough windows of its first span to judge
+    /// (`consistency::MIN_WINDOWS`).
+    fn odometry_checked(&self) -> bool {
+        let [short, _] = self.odometry_consistency();
+        short.is_some_and(|c| c.windows >= consistency::MIN_WINDOWS)
+    }
+
     /// How the batch widened the odometry's noise model after its solves showed the odometry
     /// worse, or its errors longer-lived, than the rig file states (issue 36; `None`: it did
     /// not). The caller integrates later frames' odometry with the rig file's `velocity` and
@@ -484,7 +491,13 @@ impl Smoother {
         });
         let n = self.frames.len();
         let due = n >= 2 && (n - 1).is_multiple_of(self.settings.solve_every);
-        let full = n >= self.settings.max_frames || landmarks_full;
+        // A full landmark budget hands over only once the odometry's check has had its first
+        // span's windows (`consistency::MIN_WINDOWS`, 8 s of them): a hand-over before it
+        // carries a noise model nothing has checked. A fisheye's dense hall filled its 48
+        // landmarks in 8.8 s, its odometry's 0.6 s of memory unstated, and phase 2, on the
+        // white model, ended 9.8 m off (docs/vehicle.md, "Phase 2 looks again").
+        let full = n >= self.settings.max_frames
+            || (landmarks_full && (self.mapping || self.odometry_checked()));
         if !(due || full) {
             return false;
         }
