@@ -243,10 +243,18 @@ impl Smoother {
     }
 
     /// Whether the odometry's check has had enough windows of its first span to judge
-    /// (`consistency::MIN_WINDOWS`).
+    /// (`consistency::MIN_WINDOWS`), or the batch has waited for them twice as long as they
+    /// take (a log whose odometry is missing or gapped would otherwise keep phase 1 to its
+    /// frame budget).
+    #[allow(clippy::cast_precision_loss)] // a handful of windows; microseconds of a drive
     fn odometry_checked(&self) -> bool {
         let [short, _] = self.odometry_consistency();
-        short.is_some_and(|c| c.windows >= consistency::MIN_WINDOWS)
+        let waited_s = 2.0 * consistency::MIN_WINDOWS as f64 * CONSISTENCY_SPANS_S[0];
+        let span_s = match (self.frames.first(), self.frames.last()) {
+            (Some(a), Some(b)) => b.t_us.saturating_sub(a.t_us) as f64 * 1e-6,
+            _ => 0.0,
+        };
+        short.is_some_and(|c| c.windows >= consistency::MIN_WINDOWS) || span_s >= waited_s
     }
 
     /// How the batch widened the odometry's noise model after its solves showed the odometry
