@@ -652,18 +652,17 @@ impl Navigator {
         let Some(ekf) = self.ekf.as_ref() else {
             return;
         };
-        if self.smoother.is_mapping() {
+        // Nothing to refine (the smoother, once stopped, widens no more): nothing kept.
+        let so_far = self.stats.odometry_widened;
+        let Some(so_far) = so_far.filter(|_| !self.smoother.is_mapping()) else {
             self.phase2_track.clear();
             return;
-        }
+        };
         self.phase2_track.push((ekf.pose(), step));
         if self.phase2_track.len() > PHASE2_TRACK_FRAMES {
             let excess = self.phase2_track.len() - PHASE2_TRACK_FRAMES;
             self.phase2_track.drain(..excess);
         }
-        let Some(so_far) = self.stats.odometry_widened else {
-            return;
-        };
         if !self
             .stats
             .frames

@@ -678,11 +678,13 @@ fn odometry_model(navigator: &Navigator) -> estimates_log::OdometryModel {
 }
 
 /// The warning for an odometry noise model the navigator widened (issue 36): what the rig file
-/// stated, what the batch's residuals showed, what was used.
+/// stated, what the batch's residuals showed, what was used, and how many times phase 2's own
+/// check widened it further after the smoother stopped (`phase2_widenings`).
 pub(crate) fn odometry_widened_warning(
     stated: &rig_model::Noise,
     used: &rig_model::Noise,
     w: &selfcal::OdometryWidening,
+    phase2_widenings: u64,
 ) -> String {
     let memory = match w.time_constants_s {
         (t, h) if t > 0.0 && h > 0.0 => {
@@ -692,8 +694,12 @@ pub(crate) fn odometry_widened_warning(
         (_, h) if h > 0.0 => format!("; its heading errors last about {h:.2} s"),
         _ => String::new(),
     };
+    let phase2 = match phase2_widenings {
+        0 => String::new(),
+        n => format!(" ({n} time(s) by phase 2's filter after the smoother stopped)"),
+    };
     format!(
-        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, the batch's trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}): state the odometry's noise and memory in the rig file's [noise]",
+        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, the batch's trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}){}: state the odometry's noise and memory in the rig file's [noise]",
         stated.velocity,
         stated.yaw_rate,
         stated.velocity_tau,
@@ -707,6 +713,7 @@ pub(crate) fn odometry_widened_warning(
         used.yaw_rate,
         w.factors.0,
         w.factors.1,
+        phase2,
     )
 }
 
@@ -758,21 +765,12 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
         ));
     }
     if let Some(w) = &stats.odometry_widened {
-        let mut warning =
-            odometry_widened_warning(&navigator.rig().noise, &navigator.odometry_noise(), w);
-        if stats.phase2_odometry_widenings > 0 {
-            // Phase 2's own check widened it further (`nav::Navigator`, after the smoother
-            // stopped): the batch's sentence alone would understate the change.
-            warning = warning.replacen(
-                ": state the odometry's noise",
-                &format!(
-                    " ({} time(s) by phase 2's filter after the smoother stopped): state the odometry's noise",
-                    stats.phase2_odometry_widenings
-                ),
-                1,
-            );
-        }
-        warnings.push(warning);
+        warnings.push(odometry_widened_warning(
+            &navigator.rig().noise,
+            &navigator.odometry_noise(),
+            w,
+            stats.phase2_odometry_widenings,
+        ));
     }
     if stats.odometry_dropped > 0 {
         warnings.push(format!(

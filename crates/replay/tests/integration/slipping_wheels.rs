@@ -248,6 +248,16 @@ fn slow_slipping_wheels_over_many_seeds() {
     }
 }
 
+/// `sim::hall`'s hall 18 (lamps every 2.5 m, no dark stretch) through `lens`, its odometry's
+/// errors of 0.6 s memory unstated in the rig file, replayed with no flags.
+fn dense_hall_silent(lens: sim::hall::HallLens) -> Run {
+    let mut spec = sim::hall::HallSpec::draw(18);
+    spec.lens = lens;
+    let mut sc = sim::hall::scenario(&spec, 18).unwrap();
+    (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
+    run(&silent(sc), 18, &format!("dense-{lens:?}"))
+}
+
 /// A dense hall (`sim::hall`'s seed 18: lamps every 2.5 m, no dark stretch) with 0.6 s of
 /// memory the rig file is silent about. Phase 1 hands over after 14 s, its landmark budget
 /// full, having widened the model from the one-second span alone (about 45 and 76 times the
@@ -256,12 +266,7 @@ fn slow_slipping_wheels_over_many_seeds() {
 /// sees the memory over three-second spans and widens the model to its long run.
 #[test]
 fn a_dense_hall_silent_about_the_memory_is_widened_to_its_long_run() {
-    let mut spec = sim::hall::HallSpec::draw(18);
-    spec.lens = sim::hall::HallLens::Radtan;
-    let mut sc = sim::hall::scenario(&spec, 18).unwrap();
-    (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
-    let sc = silent(sc);
-    let r = run(&sc, 18, "dense-silent");
+    let r = dense_hall_silent(sim::hall::HallLens::Radtan);
     let w = r.replay.odometry.unwrap().widened.expect("widened");
     let [tt, th] = w.time_constants_s;
     let [kt, kh] = w.variance_factors;
@@ -290,12 +295,7 @@ fn a_dense_hall_silent_about_the_memory_is_widened_to_its_long_run() {
 /// off, the baseline 27 sigma off. A full budget now waits for the check.
 #[test]
 fn a_dense_fisheye_hall_hands_over_only_once_the_odometry_is_checked() {
-    let mut spec = sim::hall::HallSpec::draw(18);
-    spec.lens = sim::hall::HallLens::Fisheye;
-    let mut sc = sim::hall::scenario(&spec, 18).unwrap();
-    (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
-    let sc = silent(sc);
-    let r = run(&sc, 18, "fisheye-silent");
+    let r = dense_hall_silent(sim::hall::HallLens::Fisheye);
     assert!(
         r.replay.phase_switch_t_us.is_some_and(|t| t >= 9_000_000),
         "{:?}",

@@ -240,12 +240,12 @@ const CHI2_1_CLIPPED_MEAN: f64 = 0.941_885_836_754_694_5;
 const CHI2_2_HALF_CLIPPED_MEAN: f64 = 0.999_023_437_5;
 
 /// The consistency of `frames`' odometry with their poses for the vehicle `v` over windows
-/// of `span_s` (see the module docs); `None` without a single window.
-pub(super) fn odometry_consistency(
+/// of each of `spans_s` (see the module docs); `None` for a span without a single window.
+pub(super) fn odometry_consistency<const N: usize>(
     frames: &[Frame],
     v: &Vehicle,
-    span_s: f64,
-) -> Option<OdometryConsistency> {
+    spans_s: [f64; N],
+) -> [Option<OdometryConsistency>; N] {
     let poses: Vec<Pose2> = frames.iter().map(|f| f.pose).collect();
     // The factor's covariance is in the reported odometry's units; D = diag(odom_scale,
     // odom_scale, odom_yaw_scale) is within a few per cent of 1, well inside what the ratio
@@ -259,7 +259,7 @@ pub(super) fn odometry_consistency(
                 .map(|(o, _)| (o.motion_for(v), o.covariance))
         })
         .collect();
-    trajectory_consistency(&poses, &steps, span_s)
+    spans_s.map(|span_s| trajectory_consistency(&poses, &steps, span_s))
 }
 
 /// The consistency of a trajectory's odometry with its poses over windows of `span_s` (see the
@@ -402,6 +402,9 @@ pub fn long_run_ratio(short: f64, long: f64) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand_chacha::ChaCha8Rng;
+    use rand_chacha::rand_core::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
 
     #[test]
     fn the_two_spans_give_the_memory_and_the_long_run_ratio() {
@@ -423,27 +426,6 @@ mod tests {
         assert!((memory_fraction(3.0, 0.6) - 0.801).abs() < 1e-3);
     }
 
-    /// Seeded standard normal draws (splitmix64 and Box-Muller: a test's draws need no crate).
-    struct Normal(u64);
-
-    impl Normal {
-        fn uniform(&mut self) -> f64 {
-            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            z ^= z >> 31;
-            #[allow(clippy::cast_precision_loss)]
-            let u = ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
-            u
-        }
-
-        fn draw(&mut self) -> f64 {
-            let (u, v) = (self.uniform(), self.uniform());
-            libm::sqrt(-2.0 * libm::log(u)) * libm::cos(2.0 * core::f64::consts::PI * v)
-        }
-    }
-
     /// A trajectory known exactly (the filter's where lamps are in view, to first order) and
     /// its odometry at 100 Hz with errors of 0.6 s memory, stated as white: the two spans'
     /// ratios are what the batch sees (about 62 and 96), and their quotient gives the memory.
@@ -452,8 +434,9 @@ mod tests {
         let (sigma_v, sigma_w, tau, period) = (0.02, 0.01, 0.6, 0.01);
         let phi = libm::exp(-period / tau);
         let drive = libm::sqrt(1.0 - phi * phi);
-        let mut rng = Normal(36);
-        let (mut ev, mut ew) = (sigma_v * rng.draw(), sigma_w * rng.draw());
+        let mut rng = ChaCha8Rng::seed_from_u64(36);
+        let mut draw = || -> f64 { StandardNormal.sample(&mut rng) };
+        let (mut ev, mut ew) = (sigma_v * draw(), sigma_w * draw());
         let mut poses = alloc::vec![Pose2::new(0.0, 0.0, 0.0)];
         let mut steps = Vec::new();
         // 20 Hz frames over 300 s, each five odometry samples of 1 m/s and 0.05 rad/s.
@@ -461,8 +444,8 @@ mod tests {
             let mut reported = Motion::default();
             let mut truth = Motion::default();
             for _ in 0..5 {
-                ev = phi * ev + drive * sigma_v * rng.draw();
-                ew = phi * ew + drive * sigma_w * rng.draw();
+                ev = phi * ev + drive * sigma_v * draw();
+                ew = phi * ew + drive * sigma_w * draw();
                 truth = truth.then(&rig_model::odometry::constant_velocity_motion(
                     1.0, 0.0, 0.05, period,
                 ));

@@ -238,8 +238,7 @@ impl Smoother {
     /// [`OdometryConsistency`]): about 1 when the rig file's odometry noise is right. `None`
     /// for a span the frames do not cover once. `O(frames)`.
     pub fn odometry_consistency(&self) -> [Option<OdometryConsistency>; 2] {
-        CONSISTENCY_SPANS_S
-            .map(|span| consistency::odometry_consistency(&self.frames, &self.camera.vehicle, span))
+        consistency::odometry_consistency(&self.frames, &self.camera.vehicle, CONSISTENCY_SPANS_S)
     }
 
     /// Whether the odometry's check has had enough windows of its first span to judge
@@ -248,7 +247,11 @@ impl Smoother {
     /// frame budget).
     #[allow(clippy::cast_precision_loss)] // a handful of windows; microseconds of a drive
     fn odometry_checked(&self) -> bool {
-        let [short, _] = self.odometry_consistency();
+        let [short] = consistency::odometry_consistency(
+            &self.frames,
+            &self.camera.vehicle,
+            [CONSISTENCY_SPANS_S[0]],
+        );
         let waited_s = 2.0 * consistency::MIN_WINDOWS as f64 * CONSISTENCY_SPANS_S[0];
         let span_s = match (self.frames.first(), self.frames.last()) {
             (Some(a), Some(b)) => b.t_us.saturating_sub(a.t_us) as f64 * 1e-6,
