@@ -63,6 +63,7 @@ use rig_model::config::Rig;
 use rig_model::handover::Handover;
 use rig_model::handover::{BatchHandover, HandoverReason};
 use rig_model::odometry::{Motion, OdomSample, OdometryFactor};
+use selfcal::OdometryStep;
 use selfcal::smoother::{Smoother, SmootherSettings};
 use track::{FrontEnd, FrontEndSettings, Model, Pixel, TrackedFrame};
 use vslam_ekf::chi2::chi2_quantile;
@@ -266,9 +267,12 @@ pub struct NavStats {
     /// the filter over the landmarks near the vehicle (a landmark observed that it did not
     /// carry, its budget full, a merge).
     pub phase2_smoother_restarts: u64,
-    /// Times phase 2's own odometry check widened the model further after the smoother
-    /// stopped ([`Navigator::check_phase2_odometry`]).
+    /// Times phase 2's own odometry check widened the model after the smoother stopped
+    /// ([`Navigator::check_phase2_odometry`]).
     pub phase2_odometry_widenings: u64,
+    /// Whether phase 2's check widened the model first (the batch had not): from the
+    /// heading's ratio alone ([`selfcal::heading_strongly_worse`]).
+    pub phase2_widened_first: bool,
     /// Loops closed: lamps held while the pose was lost ([`MATCH_MAX_POSE_SIGMA_M`])
     /// recognised as a constellation of landmarks, and the filter updated with them.
     pub loops_closed: u64,
@@ -351,10 +355,10 @@ pub struct Navigator {
     merge_gate: f64,
     /// Phase 1 by frame pairs, in [`NavMode::CalibrateFramePairs`].
     frame_pairs: Option<FramePairCalibration>,
-    /// Phase 2's trajectory for the odometry check once the smoother has stopped
-    /// ([`Navigator::check_phase2_odometry`]): the filter's pose at each frame and the
-    /// odometry's motion from the frame before with its covariance under the model in use;
-    /// the last [`PHASE2_TRACK_FRAMES`].
+    /// Phase 2's trajectory for its odometry check ([`Navigator::check_phase2_odometry`]):
+    /// phase 1's batch's poses, then the filter's pose at each frame, with the odometry's
+    /// motion from the frame before and its covariance under the model in use; the last
+    /// [`PHASE2_TRACK_FRAMES`].
     phase2_track: Vec<(Pose2, Option<OdometryStep>)>,
     /// The smoother's widening last taken ([`Navigator::sync_odometry`]): phase 2's own check
     /// may have widened further since.
@@ -637,27 +641,40 @@ impl Navigator {
         self.front_end.set_model(model);
     }
 
-    /// Phase 2 goes on checking the odometry once the smoother has stopped (issue 36, item 2):
-    /// the filter's trajectory against the odometry over the batch's spans
+    /// Phase 2 goes on checking the odometry (issue 36, item 2): the filter's trajectory since
+    /// the hand-over (phase 1's batch's before it) against the odometry over the batch's spans
     /// ([`selfcal::trajectory_consistency`], judged as the batch judges its own,
-    /// [`selfcal::judge_odometry`]), every [`PHASE2_ODOMETRY_CHECK_FRAMES`] frames. Only a
-    /// model the batch has widened already is looked at again: a phase 1 that handed over
-    /// early (its landmark budget full in a dense hall after 14 s) widened it from the one-second
-    /// span alone, before the three-second span had the windows that show the errors'
-    /// memory, and left the odometry stated 2 to 3 times too good in variance over longer
-    /// spans. The filter's relative poses over three seconds are a centimetre or two good
-    /// where lamps are in view, which adds to the residuals: the check can only widen too
-    /// much, not too little.
+    /// [`selfcal::judge_odometry`]), every [`PHASE2_ODOMETRY_CHECK_FRAMES`] frames. Phase 2's
+    /// smoother cannot judge it: its window (5 s) holds fewer than the first span's windows.
+    ///
+    /// A model the batch has widened already is refined: a phase 1 that handed over early (its
+    /// landmark budget full in a dense hall after 14 s) widened it from the one-second span
+    /// alone, before the three-second span had the windows that show the errors' memory, and
+    /// left the odometry stated 2 to 3 times too good in variance over longer spans. The
+    /// filter's relative poses over three seconds are a centimetre or two good where lamps
+    /// are in view, which adds to the residuals: the check can only widen too much, not too
+    /// little.
+    ///
+    /// A model the batch has not widened (a phase 1 ended by a short frame budget, before the
+    /// first span's windows; odometry that turns worse later) is widened first only on the
+    /// heading's ratio ([`selfcal::heading_strongly_worse`]): the filter's relative translations
+    /// over a second are too coarse for a first judgement (their ratio reaches 46 with odometry
+    /// as good as stated), its relative headings are not (at most 2.8 on the white Monte
+    /// Carlos, 43 to 110 with 0.6 s of memory stated as white). Once the heading has shown
+    /// it, both axes are judged as the batch judges them. A widening reaches the smoother's
+    /// stored factors while it runs ([`Smoother::widen_odometry`]).
     fn check_phase2_odometry(&mut self, t_us: u64, step: Option<OdometryStep>) {
         let Some(ekf) = self.ekf.as_ref() else {
             return;
         };
-        // Nothing to refine (the smoother, once stopped, widens no more): nothing kept.
         let so_far = self.stats.odometry_widened;
-        let Some(so_far) = so_far.filter(|_| !self.smoother.is_mapping()) else {
+        if so_far.is_some() && self.smoother.is_mapping() {
+            // The batch's widening is refined from the filter's own trajectory once the
+            // smoother has stopped (its solves pull the filter's poses towards the odometry
+            // they weigh, which shrinks the residuals the refinement judges).
             self.phase2_track.clear();
             return;
-        };
+        }
         self.phase2_track.push((ekf.pose(), step));
         if self.phase2_track.len() > PHASE2_TRACK_FRAMES {
             let excess = self.phase2_track.len() - PHASE2_TRACK_FRAMES;
@@ -675,13 +692,21 @@ impl Navigator {
             self.phase2_track.iter().skip(1).map(|(_, s)| *s).collect();
         let spans = selfcal::CONSISTENCY_SPANS_S
             .map(|span| selfcal::trajectory_consistency(&poses, &steps, span));
-        let Some(((kt, kh), w)) = selfcal::judge_odometry(spans, Some(so_far), t_us) else {
+        if so_far.is_none() && !selfcal::heading_strongly_worse(&spans) {
+            return;
+        }
+        let Some(((kt, kh), w)) = selfcal::judge_odometry(spans, so_far, t_us) else {
             return;
         };
         self.stats.odometry_widened = Some(w);
+        if self.smoother.is_mapping() {
+            self.smoother.widen_odometry(kt, kh, w);
+            self.smoother_widening = Some(w);
+        }
         if kt <= 1.0 && kh <= 1.0 {
             return;
         }
+        self.stats.phase2_widened_first |= so_far.is_none();
         // The stored steps under the model now in use, as the batch rescales its factors.
         for (_, s) in &mut self.phase2_track {
             if let Some((_, cov)) = s {
@@ -1140,6 +1165,14 @@ impl Navigator {
         self.smoothed = ids.iter().enumerate().map(|(j, id)| (*id, j)).collect();
         self.ekf = Some(ekf);
         self.phase_switch_t_us = Some(t_us);
+        // A model the batch has not widened is checked from the batch's trajectory on: a
+        // phase 1 ended by a short frame budget saw fewer than the first span's windows.
+        self.phase2_track.clear();
+        if self.stats.odometry_widened.is_none() {
+            let (poses, steps) = self.smoother.odometry_track();
+            self.phase2_track
+                .extend(poses.into_iter().zip(core::iter::once(None).chain(steps)));
+        }
         if self.smooths_phase2() {
             self.smoother.start_mapping();
         } else {
@@ -1695,11 +1728,8 @@ const NEAR_VIEW_SIGMAS: f64 = 3.0;
 /// uncertain (the most map matching allows, `MATCH_MAX_POSE_SIGMA_M`) is 3 degrees off.
 const FAR_MATCH_CONE_RAD: f64 = 0.14;
 
-/// A frame interval's odometry: its motion and covariance under the model in use.
-type OdometryStep = (Motion, Matrix3<f64>);
-
-/// Frames between phase 2's looks at the odometry once the smoother has stopped
-/// ([`Navigator::check_phase2_odometry`]; 5 s at 20 Hz).
+/// Frames between phase 2's looks at the odometry ([`Navigator::check_phase2_odometry`]; 5 s
+/// at 20 Hz).
 const PHASE2_ODOMETRY_CHECK_FRAMES: u64 = 100;
 
 /// Frames of phase 2's trajectory the odometry check keeps (120 s at 20 Hz: the batch's last

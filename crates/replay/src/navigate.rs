@@ -678,13 +678,15 @@ fn odometry_model(navigator: &Navigator) -> estimates_log::OdometryModel {
 }
 
 /// The warning for an odometry noise model the navigator widened (issue 36): what the rig file
-/// stated, what the batch's residuals showed, what was used, and how many times phase 2's own
-/// check widened it further after the smoother stopped (`phase2_widenings`).
+/// stated, what the first widening's residuals showed (the batch's, or phase 2's filter's when
+/// `phase2_first`), what was used, and how many times phase 2's own check widened it after
+/// the smoother stopped (`phase2_widenings`).
 pub(crate) fn odometry_widened_warning(
     stated: &rig_model::Noise,
     used: &rig_model::Noise,
     w: &selfcal::OdometryWidening,
     phase2_widenings: u64,
+    phase2_first: bool,
 ) -> String {
     let memory = match w.time_constants_s {
         (t, h) if t > 0.0 && h > 0.0 => {
@@ -698,13 +700,19 @@ pub(crate) fn odometry_widened_warning(
         0 => String::new(),
         n => format!(" ({n} time(s) by phase 2's filter after the smoother stopped)"),
     };
+    let first = if phase2_first {
+        "the phase-2 filter"
+    } else {
+        "the batch"
+    };
     format!(
-        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, the batch's trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}){}: state the odometry's noise and memory in the rig file's [noise]",
+        "the odometry is worse than the rig file states (velocity {} m/s, yaw_rate {} rad/s, velocity_tau {} s, yaw_rate_tau {} s): from {:.1} s on, {}'s trajectory disagreed with it over {:.0} s spans {:.1}x (translation) and {:.1}x (heading) in variance{}; its noise model was widened to velocity {:.4} m/s and yaw_rate {:.4} rad/s (variance x{:.1} and x{:.1}){}: state the odometry's noise and memory in the rig file's [noise]",
         stated.velocity,
         stated.yaw_rate,
         stated.velocity_tau,
         stated.yaw_rate_tau,
         w.first_t_us as f64 * 1e-6,
+        first,
         w.first.span_s,
         w.first.translation,
         w.first.heading,
@@ -770,6 +778,7 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
             &navigator.odometry_noise(),
             w,
             stats.phase2_odometry_widenings,
+            stats.phase2_widened_first,
         ));
     }
     if stats.odometry_dropped > 0 {

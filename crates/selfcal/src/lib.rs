@@ -46,7 +46,8 @@ pub use calibrator::{SelfCalibrator, StableRule};
 pub use error::Error;
 pub use observability::structural_trap;
 pub use smoother::{
-    CONSISTENCY_SPANS_S, OdometryConsistency, OdometryWidening, Smoother, SmootherSettings,
-    judge_odometry, long_run_ratio, trajectory_consistency, widened_odometry_covariance,
+    CONSISTENCY_SPANS_S, OdometryConsistency, OdometryStep, OdometryWidening, STRONG_HEADING_LIMIT,
+    Smoother, SmootherSettings, heading_strongly_worse, judge_odometry, long_run_ratio,
+    trajectory_consistency, widened_odometry_covariance,
 };
 pub use solve::{Calibration, SolveStatus, SolverSettings, calibrate};

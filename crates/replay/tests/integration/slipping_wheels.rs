@@ -35,10 +35,14 @@ struct Run {
 }
 
 fn run(sc: &sim::Scenario, seed: u64, tag: &str) -> Run {
+    run_with(sc, seed, tag, &NavSettings::default())
+}
+
+fn run_with(sc: &sim::Scenario, seed: u64, tag: &str, settings: &NavSettings) -> Run {
     let sim_run = sim::simulate(&sc.clone().with_seed(seed), sim::Mode::Fast).unwrap();
     let log = std::env::temp_dir().join(format!("slip-{tag}-{seed}-{}.mcap", std::process::id()));
     sim_run.write_log(&log).unwrap();
-    let replay = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
+    let replay = replay::replay_log(&log, None, settings, &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log).ok();
     let (near, inside) = eval::landmarks_against_lamps(
         replay.landmarks.iter().map(|l| (l.position, l.covariance)),
@@ -249,13 +253,58 @@ fn slow_slipping_wheels_over_many_seeds() {
 }
 
 /// `sim::hall`'s hall 18 (lamps every 2.5 m, no dark stretch) through `lens`, its odometry's
-/// errors of 0.6 s memory unstated in the rig file, replayed with no flags.
-fn dense_hall_silent(lens: sim::hall::HallLens) -> Run {
+/// errors of 0.6 s memory unstated in the rig file, replayed with `settings`.
+fn dense_hall_silent_with(lens: sim::hall::HallLens, settings: &NavSettings) -> Run {
     let mut spec = sim::hall::HallSpec::draw(18);
     spec.lens = lens;
     let mut sc = sim::hall::scenario(&spec, 18).unwrap();
     (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
-    run(&silent(sc), 18, &format!("dense-{lens:?}"))
+    let tag = format!("dense-{lens:?}-{}", settings.phase1.max_frames);
+    run_with(&silent(sc), 18, &tag, settings)
+}
+
+/// The same, replayed with no flags.
+fn dense_hall_silent(lens: sim::hall::HallLens) -> Run {
+    dense_hall_silent_with(lens, &NavSettings::default())
+}
+
+/// The dense hall again, phase 1 cut to 150 frames (`stereonav replay --phase1-frames 150`):
+/// it hands over at 8.5 s, before the batch's check had the 8 one-second windows a marginal
+/// ratio needs. The model was never widened and the run was confidently wrong (27.8 m, the
+/// yaw scale at 149 %). The heading's ratio (59 over 4 windows at 5 s, where odometry as
+/// stated gives about 1) is now strong evidence on its own: the batch widens then, and
+/// phase 2 goes on checking from the batch's trajectory.
+#[test]
+fn a_short_phase_1_still_sees_the_odometry_s_memory() {
+    let mut settings = NavSettings::default();
+    settings.phase1.max_frames = 150;
+    let r = dense_hall_silent_with(sim::hall::HallLens::Radtan, &settings);
+    assert!(
+        r.replay.phase_switch_t_us.is_some_and(|t| t < 9_000_000),
+        "{:?}",
+        r.replay.phase_switch_t_us
+    );
+    let w = r.replay.odometry.unwrap().widened.expect("widened");
+    assert!(
+        w.t_us < 8_000_000 && w.variance_factors.iter().all(|&k| k >= 50.0),
+        "{w:?}"
+    );
+    let t = r.replay.truth.as_ref().unwrap();
+    let d = format!("{t:?}");
+    let total = t.landmarks_matched + t.landmarks_unmatched;
+    assert!(t.lamps_missed * 50 <= total && t.ate_rms <= 0.06, "{d}");
+    for (p, error, sigma) in parameters(&r.replay) {
+        assert!(
+            error.abs() <= 3.0 * sigma,
+            "{p:?}: {error} against sigma {sigma}"
+        );
+    }
+    assert!(
+        10 * r.inside >= 9 * r.near,
+        "{} of {} inside 3 sigma",
+        r.inside,
+        r.near
+    );
 }
 
 /// A dense hall (`sim::hall`'s seed 18: lamps every 2.5 m, no dark stretch) with 0.6 s of

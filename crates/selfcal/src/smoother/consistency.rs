@@ -27,6 +27,10 @@ use rig_model::odometry::{Motion, compose_jacobian_first, compose_jacobian_secon
 use super::Frame;
 use super::factors::odometry_residual;
 
+/// A frame interval's odometry: its motion and the covariance of that motion under the noise
+/// model in use.
+pub type OdometryStep = (Motion, Matrix3<f64>);
+
 /// The spans of the windows compared, seconds: a second, and several time constants of a
 /// real vehicle's wheel slip (0.6 s), over which errors with memory reach 80 % of their
 /// long-run variance rate. The two ratios give the memory's time constant
@@ -99,6 +103,30 @@ pub(crate) const MAX_WIDENING: f64 = 1e4;
 /// span, 24 s over the 3 s one).
 pub(crate) const MIN_WINDOWS: usize = 8;
 
+/// Windows of the short span enough for a first widening on strong evidence
+/// ([`STRONG_HEADING_LIMIT`]): a phase 1 that a short frame budget ends before
+/// [`MIN_WINDOWS`] (150 frames, 7.5 s) must not hand over a white model for odometry whose
+/// errors last 0.6 s.
+pub(crate) const MIN_STRONG_WINDOWS: usize = 4;
+
+/// The heading's ratio over at least [`MIN_STRONG_WINDOWS`] windows that widens the model
+/// before the span has [`MIN_WINDOWS`]: odometry as good as stated makes each window's
+/// normalised square a chi-square variable of one degree of freedom, whose clipped mean over
+/// four windows exceeds 8 times its own with a probability below 1e-5; 0.6 s of memory stated
+/// as white gives 40 to 110 against the batch's trajectory. Against phase 2's filter, whose
+/// relative headings are coarser, the white Monte Carlos gave at most 2.8 (docs/vehicle.md).
+pub const STRONG_HEADING_LIMIT: f64 = 8.0;
+
+/// Whether a span with at least [`MIN_STRONG_WINDOWS`] windows shows the heading's errors
+/// more than [`STRONG_HEADING_LIMIT`] times the model's variance: the only first judgement
+/// made before [`MIN_WINDOWS`], and the only one phase 2's filter makes on its own.
+pub fn heading_strongly_worse(spans: &[Option<OdometryConsistency>; 2]) -> bool {
+    spans
+        .iter()
+        .flatten()
+        .any(|c| c.windows >= MIN_STRONG_WINDOWS && c.heading > STRONG_HEADING_LIMIT)
+}
+
 /// The variance factors `(translation, heading)` to widen the odometry's model by after a
 /// solve whose consistency over the two spans is `spans`, given the widening so far, and the
 /// widening after it (`None` when nothing changes). An axis is judged on the largest of its
@@ -117,6 +145,9 @@ pub fn judge(
 ) -> Option<((f64, f64), OdometryWidening)> {
     let usable = |c: Option<OdometryConsistency>| c.filter(|c| c.windows >= MIN_WINDOWS);
     let [short, long] = spans.map(usable);
+    // Strong evidence is not made to wait for the windows a marginal ratio needs.
+    let early = so_far.is_none() && short.is_none() && heading_strongly_worse(&spans);
+    let short = if early { spans[0].or(spans[1]) } else { short };
     let first = short.or(long)?;
     // The look a long span of `n` windows is: 1 at 8, 2 at 16, 3 at 32.
     let look_of = |n: usize| (usize::BITS - (n / MIN_WINDOWS).leading_zeros()).min(MAX_LOOKS);
@@ -246,11 +277,18 @@ pub(super) fn odometry_consistency<const N: usize>(
     v: &Vehicle,
     spans_s: [f64; N],
 ) -> [Option<OdometryConsistency>; N] {
+    let (poses, steps) = track(frames, v);
+    spans_s.map(|span_s| trajectory_consistency(&poses, &steps, span_s))
+}
+
+/// `frames`' poses and the odometry's motion between each and the next, with its covariance,
+/// for the vehicle `v` ([`trajectory_consistency`]'s input).
+pub(super) fn track(frames: &[Frame], v: &Vehicle) -> (Vec<Pose2>, Vec<Option<OdometryStep>>) {
     let poses: Vec<Pose2> = frames.iter().map(|f| f.pose).collect();
     // The factor's covariance is in the reported odometry's units; D = diag(odom_scale,
     // odom_scale, odom_yaw_scale) is within a few per cent of 1, well inside what the ratio
     // is compared with.
-    let steps: Vec<Option<(Motion, Matrix3<f64>)>> = frames
+    let steps = frames
         .iter()
         .skip(1)
         .map(|f| {
@@ -259,7 +297,7 @@ pub(super) fn odometry_consistency<const N: usize>(
                 .map(|(o, _)| (o.motion_for(v), o.covariance))
         })
         .collect();
-    spans_s.map(|span_s| trajectory_consistency(&poses, &steps, span_s))
+    (poses, steps)
 }
 
 /// The consistency of a trajectory's odometry with its poses over windows of `span_s` (see the
@@ -269,7 +307,7 @@ pub(super) fn odometry_consistency<const N: usize>(
 /// ends uncounted). `None` without a single window.
 pub fn trajectory_consistency(
     poses: &[Pose2],
-    steps: &[Option<(Motion, Matrix3<f64>)>],
+    steps: &[Option<OdometryStep>],
     span_s: f64,
 ) -> Option<OdometryConsistency> {
     let (mut long_t, mut long_h, mut frame_t, mut frame_h) =
@@ -541,14 +579,57 @@ mod tests {
     }
 
     #[test]
+    fn strong_evidence_widens_before_the_span_has_its_windows_and_only_strong_evidence() {
+        // Four one-second windows whose heading's ratio is far beyond what odometry as stated
+        // gives (0.6 s of memory stated as white, about 60 over a second): widened now, both
+        // axes judged, the translation's bound from the four windows (+50 %).
+        let ((kt, kh), w) = judge(
+            spans(MIN_STRONG_WINDOWS, (60.0, 58.0), None),
+            None,
+            5_000_000,
+        )
+        .expect("widened");
+        assert!((kt / (60.0 * 1.5) - 1.0).abs() < 1e-12, "{kt}");
+        assert!(
+            (kh / (58.0 * (1.0 + (0.5f64).sqrt())) - 1.0).abs() < 1e-12,
+            "{kh}"
+        );
+        assert!(w.first_t_us == 5_000_000 && w.looks == 0);
+        // Fewer windows, or a heading's ratio at the limit (the translation's alone is not
+        // strong evidence: phase 2's filter's relative translations are too coarse for it).
+        for (n, ratios) in [
+            (MIN_STRONG_WINDOWS - 1, (60.0, 58.0)),
+            (MIN_STRONG_WINDOWS, (60.0, STRONG_HEADING_LIMIT)),
+            (MIN_WINDOWS - 1, (60.0, 3.0)),
+        ] {
+            assert!(!heading_strongly_worse(&spans(n, ratios, None)));
+            assert_eq!(
+                judge(spans(n, ratios, None), None, 5_000_000),
+                None,
+                "{n} {ratios:?}"
+            );
+        }
+        // A model widened already is refined only as before, when the spans have their windows.
+        assert_eq!(
+            judge(
+                spans(MIN_STRONG_WINDOWS, (60.0, 58.0), None),
+                Some(w),
+                6_000_000
+            ),
+            None
+        );
+    }
+
+    #[test]
     fn the_odometry_is_widened_when_the_batch_disagrees_with_it_and_only_then() {
-        // As stated: nothing; too few windows: nothing.
+        // As stated: nothing; too few windows for anything but strong evidence (the
+        // heading's, `heading_strongly_worse`): nothing.
         assert_eq!(
             judge(spans(20, (1.2, 0.8), Some((1.5, 0.9))), None, 5),
             None
         );
         assert_eq!(
-            judge(spans(MIN_WINDOWS - 1, (100.0, 100.0), None), None, 5),
+            judge(spans(MIN_WINDOWS - 1, (100.0, 6.0), None), None, 5),
             None
         );
         // Errors of 0.6 s memory stated as white, seen over the short span first: widened by

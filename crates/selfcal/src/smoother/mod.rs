@@ -34,8 +34,9 @@ mod settings;
 mod system;
 
 pub use consistency::{
-    OdometryConsistency, OdometryWidening, SPANS_S as CONSISTENCY_SPANS_S, judge as judge_odometry,
-    long_run_ratio, trajectory_consistency, widened as widened_odometry_covariance,
+    OdometryConsistency, OdometryStep, OdometryWidening, SPANS_S as CONSISTENCY_SPANS_S,
+    STRONG_HEADING_LIMIT, heading_strongly_worse, judge as judge_odometry, long_run_ratio,
+    trajectory_consistency, widened as widened_odometry_covariance,
 };
 pub use settings::SmootherSettings;
 
@@ -268,6 +269,17 @@ impl Smoother {
         self.widening
     }
 
+    /// Takes a widening judged elsewhere (phase 2's check of the filter's trajectory, whose
+    /// spans this smoother's window is too short for): every stored odometry factor's
+    /// variance widened by `translation` and `heading` (variance factors, at least 1), and
+    /// `widening` the model from now on.
+    pub fn widen_odometry(&mut self, translation: f64, heading: f64, widening: OdometryWidening) {
+        if translation > 1.0 || heading > 1.0 {
+            consistency::widen(&mut self.frames, translation.max(1.0), heading.max(1.0));
+        }
+        self.widening = Some(widening);
+    }
+
     /// After a solve: judges the odometry against it and widens every stored odometry
     /// factor's variance when the check says so ([`consistency::judge`]). Returns whether it
     /// widened.
@@ -282,6 +294,14 @@ impl Smoother {
         }
         consistency::widen(&mut self.frames, kt, kh);
         true
+    }
+
+    /// The buffered frames' poses and the odometry's motion between each and the next with its
+    /// covariance under the model in use (`steps[i]` from `poses[i]` to `poses[i + 1]`;
+    /// `None` without odometry): what [`trajectory_consistency`] judges, for a check that goes
+    /// on after the smoother stops.
+    pub fn odometry_track(&self) -> (Vec<Pose2>, Vec<Option<OdometryStep>>) {
+        consistency::track(&self.frames, &self.camera.vehicle)
     }
 
     /// Frames buffered.
