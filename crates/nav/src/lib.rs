@@ -267,8 +267,8 @@ pub struct NavStats {
     /// the filter over the landmarks near the vehicle (a landmark observed that it did not
     /// carry, its budget full, a merge).
     pub phase2_smoother_restarts: u64,
-    /// Times phase 2's own odometry check widened the model after the smoother stopped
-    /// ([`Navigator::check_phase2_odometry`]).
+    /// Times phase 2's own odometry check widened the model, the first widening included
+    /// when it was phase 2's ([`Navigator::check_phase2_odometry`]).
     pub phase2_odometry_widenings: u64,
     /// Whether phase 2's check widened the model first (the batch had not): from the
     /// heading's ratio alone ([`selfcal::heading_strongly_worse`]).
@@ -360,8 +360,8 @@ pub struct Navigator {
     /// motion from the frame before and its covariance under the model in use; the last
     /// [`PHASE2_TRACK_FRAMES`].
     phase2_track: Vec<(Pose2, Option<OdometryStep>)>,
-    /// The smoother's widening last taken ([`Navigator::sync_odometry`]): phase 2's own check
-    /// may have widened further since.
+    /// The smoother's widening last taken ([`Navigator::sync_odometry`]) or given to it by
+    /// phase 2's own check ([`Navigator::check_phase2_odometry`]).
     smoother_widening: Option<selfcal::OdometryWidening>,
 }
 
@@ -577,6 +577,8 @@ impl Navigator {
         if self.smoother.finish().is_none() {
             return Ok(false);
         }
+        // The last solve may have widened the odometry's model.
+        self.sync_odometry();
         self.switch(t)?;
         Ok(true)
     }
@@ -645,7 +647,8 @@ impl Navigator {
     /// the hand-over (phase 1's batch's before it) against the odometry over the batch's spans
     /// ([`selfcal::trajectory_consistency`], judged as the batch judges its own,
     /// [`selfcal::judge_odometry`]), every [`PHASE2_ODOMETRY_CHECK_FRAMES`] frames. Phase 2's
-    /// smoother cannot judge it: its window (5 s) holds fewer than the first span's windows.
+    /// smoother does not judge it: its window (5 s) holds fewer than the first span's eight
+    /// windows, and it looks too often for a first widening on a few.
     ///
     /// A model the batch has widened already is refined: a phase 1 that handed over early (its
     /// landmark budget full in a dense hall after 14 s) widened it from the one-second span
@@ -661,8 +664,9 @@ impl Navigator {
     /// over a second are too coarse for a first judgement (their ratio reaches 46 with odometry
     /// as good as stated), its relative headings are not (at most 2.8 on the white Monte
     /// Carlos, 43 to 110 with 0.6 s of memory stated as white). Once the heading has shown
-    /// it, both axes are judged as the batch judges them. A widening reaches the smoother's
-    /// stored factors while it runs ([`Smoother::widen_odometry`]).
+    /// it, both axes are judged as the batch judges them (the translation then widened by its
+    /// ratio against the filter, which may be several times too much: honest, not accurate).
+    /// A widening reaches the smoother's stored factors ([`Smoother::widen_odometry`]).
     fn check_phase2_odometry(&mut self, t_us: u64, step: Option<OdometryStep>) {
         let Some(ekf) = self.ekf.as_ref() else {
             return;
@@ -695,14 +699,14 @@ impl Navigator {
         if so_far.is_none() && !selfcal::heading_strongly_worse(&spans) {
             return;
         }
-        let Some(((kt, kh), w)) = selfcal::judge_odometry(spans, so_far, t_us) else {
+        let Some(((kt, kh), w)) = selfcal::judge_odometry(spans, so_far, t_us, true) else {
             return;
         };
         self.stats.odometry_widened = Some(w);
-        if self.smoother.is_mapping() {
-            self.smoother.widen_odometry(kt, kh, w);
-            self.smoother_widening = Some(w);
-        }
+        // The smoother takes it too, running or not: started again later, it must judge on
+        // from this model, not from the one it last saw.
+        self.smoother.widen_odometry(kt, kh, w);
+        self.smoother_widening = Some(w);
         if kt <= 1.0 && kh <= 1.0 {
             return;
         }

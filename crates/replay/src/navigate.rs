@@ -680,7 +680,7 @@ fn odometry_model(navigator: &Navigator) -> estimates_log::OdometryModel {
 /// The warning for an odometry noise model the navigator widened (issue 36): what the rig file
 /// stated, what the first widening's residuals showed (the batch's, or phase 2's filter's when
 /// `phase2_first`), what was used, and how many times phase 2's own check widened it after
-/// the smoother stopped (`phase2_widenings`).
+/// the hand-over (`phase2_widenings`, the first widening included when it was phase 2's).
 pub(crate) fn odometry_widened_warning(
     stated: &rig_model::Noise,
     used: &rig_model::Noise,
@@ -698,7 +698,7 @@ pub(crate) fn odometry_widened_warning(
     };
     let phase2 = match phase2_widenings {
         0 => String::new(),
-        n => format!(" ({n} time(s) by phase 2's filter after the smoother stopped)"),
+        n => format!(" ({n} time(s) by phase 2's own check of its filter's trajectory)"),
     };
     let first = if phase2_first {
         "the phase-2 filter"
@@ -1207,4 +1207,48 @@ fn aligned_rms(pairs: &[([f64; 3], [f64; 3])]) -> f64 {
         .map(|(e, t)| distance(fit.apply(*e), *t).powi(2))
         .sum();
     (sq / pairs.len() as f64).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_widening_warning_names_who_widened_first_and_how_often_phase_2_did() {
+        let stated = rig_model::Noise::white(0.5, 0.02, 0.01);
+        let used = rig_model::Noise::white(0.5, 0.2, 0.1);
+        let w = selfcal::OdometryWidening {
+            first_t_us: 5_000_000,
+            first: selfcal::OdometryConsistency {
+                windows: 4,
+                span_s: 1.0,
+                translation: 62.3,
+                heading: 58.6,
+                frame_translation: 1.0,
+                frame_heading: 1.0,
+            },
+            factors: (100.0, 100.0),
+            time_constants_s: (0.0, 0.6),
+            looks: 1,
+        };
+        let batch = odometry_widened_warning(&stated, &used, &w, 0, false);
+        assert!(
+            batch.contains("from 5.0 s on, the batch's trajectory disagreed"),
+            "{batch}"
+        );
+        assert!(
+            batch.contains("heading errors last about 0.60 s"),
+            "{batch}"
+        );
+        assert!(!batch.contains("phase 2's own check"), "{batch}");
+        let filter = odometry_widened_warning(&stated, &used, &w, 2, true);
+        assert!(
+            filter.contains("the phase-2 filter's trajectory disagreed"),
+            "{filter}"
+        );
+        assert!(
+            filter.contains("(2 time(s) by phase 2's own check"),
+            "{filter}"
+        );
+    }
 }

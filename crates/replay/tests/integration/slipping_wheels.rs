@@ -146,6 +146,13 @@ fn odometry_as_good_as_stated_is_not_widened() {
         let r = run(&sc, seed, "white");
         assert_eq!(r.replay.odometry.unwrap().widened, None, "seed {seed}");
     }
+    // Nor from a short phase 1, whose batch and phase 2's own check see a few windows only
+    // (the dense hall of `a_short_phase_1_still_sees_the_odometry_s_memory`, white).
+    let mut settings = NavSettings::default();
+    settings.phase1.max_frames = 150;
+    let sc = sim::hall::scenario(&sim::hall::HallSpec::draw(18), 18).unwrap();
+    let r = run_with(&sc, 18, "white-short", &settings);
+    assert_eq!(r.replay.odometry.unwrap().widened, None);
 }
 
 /// A vehicle that stands for 20 s before it drives, with a rig that estimates only what a

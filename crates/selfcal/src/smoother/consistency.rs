@@ -10,10 +10,10 @@
 //! odometry's residual over such a span, squared and divided by the variance the noise model
 //! gives it, is about 1 when the model is right and far above it when it is not.
 //!
-//! The statistic is the median of those normalised squares over non-overlapping windows,
-//! divided by the median the squares have when the model is right (a chi-square variable of
-//! one degree of freedom for the heading, 0.455; the mean of two for the translation's `dx`
-//! and `dy`, ln 2), so that
+//! The statistic is the mean of those normalised squares over non-overlapping windows, each
+//! clipped at ten times their median, divided by the same clipped mean of the squares when the
+//! model is right (a chi-square variable of one degree of freedom for the heading; the mean of
+//! two for the translation's `dx` and `dy`), so that
 //! a few windows over an odometry gap or a slip the model covers do not move it; over single
 //! frame intervals the same ratio tells errors that are larger than stated (both ratios
 //! high) from errors with memory (the long span's ratio well above the single frame's).
@@ -142,11 +142,13 @@ pub fn judge(
     spans: [Option<OdometryConsistency>; 2],
     so_far: Option<OdometryWidening>,
     t_us: u64,
+    strong_first: bool,
 ) -> Option<((f64, f64), OdometryWidening)> {
     let usable = |c: Option<OdometryConsistency>| c.filter(|c| c.windows >= MIN_WINDOWS);
     let [short, long] = spans.map(usable);
     // Strong evidence is not made to wait for the windows a marginal ratio needs.
-    let early = so_far.is_none() && short.is_none() && heading_strongly_worse(&spans);
+    let early =
+        strong_first && so_far.is_none() && short.is_none() && heading_strongly_worse(&spans);
     let short = if early { spans[0].or(spans[1]) } else { short };
     let first = short.or(long)?;
     // The look a long span of `n` windows is: 1 at 8, 2 at 16, 3 at 32.
@@ -540,6 +542,7 @@ mod tests {
             ],
             None,
             9_000_000,
+            true,
         )
         .unwrap()
         .1;
@@ -552,6 +555,7 @@ mod tests {
             [Some(rescaled(short)), Some(rescaled(long))],
             Some(first),
             60_000_000,
+            true,
         )
         .unwrap();
         assert!(kt > 1.0 && kh > 1.0, "{kt} {kh}");
@@ -587,6 +591,7 @@ mod tests {
             spans(MIN_STRONG_WINDOWS, (60.0, 58.0), None),
             None,
             5_000_000,
+            true,
         )
         .expect("widened");
         assert!((kt / (60.0 * 1.5) - 1.0).abs() < 1e-12, "{kt}");
@@ -604,17 +609,28 @@ mod tests {
         ] {
             assert!(!heading_strongly_worse(&spans(n, ratios, None)));
             assert_eq!(
-                judge(spans(n, ratios, None), None, 5_000_000),
+                judge(spans(n, ratios, None), None, 5_000_000, true),
                 None,
                 "{n} {ratios:?}"
             );
         }
-        // A model widened already is refined only as before, when the spans have their windows.
+        // A model widened already is refined only as before, when the spans have their windows;
+        // and without `strong_first` (phase 2's smoother) nothing is widened before them.
         assert_eq!(
             judge(
                 spans(MIN_STRONG_WINDOWS, (60.0, 58.0), None),
                 Some(w),
-                6_000_000
+                6_000_000,
+                true,
+            ),
+            None
+        );
+        assert_eq!(
+            judge(
+                spans(MIN_WINDOWS - 1, (60.0, 58.0), None),
+                None,
+                5_000_000,
+                false,
             ),
             None
         );
@@ -625,18 +641,18 @@ mod tests {
         // As stated: nothing; too few windows for anything but strong evidence (the
         // heading's, `heading_strongly_worse`): nothing.
         assert_eq!(
-            judge(spans(20, (1.2, 0.8), Some((1.5, 0.9))), None, 5),
+            judge(spans(20, (1.2, 0.8), Some((1.5, 0.9))), None, 5, true),
             None
         );
         assert_eq!(
-            judge(spans(MIN_WINDOWS - 1, (100.0, 6.0), None), None, 5),
+            judge(spans(MIN_WINDOWS - 1, (100.0, 6.0), None), None, 5, true),
             None
         );
         // Errors of 0.6 s memory stated as white, seen over the short span first: widened by
         // its ratio's one-sigma upper bound (8 windows: the translation's +35 %), the memory
         // not yet seen.
         let short = 120.0 * memory_fraction(1.0, 0.6);
-        let ((kt, kh), w) = judge(spans(8, (short, 3.0), None), None, 9_000_000).unwrap();
+        let ((kt, kh), w) = judge(spans(8, (short, 3.0), None), None, 9_000_000, true).unwrap();
         assert!((kt / (short * (1.0 + (1.0f64 / 8.0).sqrt())) - 1.0).abs() < 1e-12);
         assert_eq!(kh, 1.0);
         assert!(w.looks == 0 && w.first_t_us == 9_000_000);
@@ -648,7 +664,7 @@ mod tests {
             (after(120.0, 0.6, 1.0), 1.0),
             Some((after(120.0, 0.6, 3.0), 1.0)),
         );
-        let ((k2, kh), w) = judge(seen, Some(w), 24_000_000).unwrap();
+        let ((k2, kh), w) = judge(seen, Some(w), 24_000_000, true).unwrap();
         let upper = 1.0 + (1.0f64 / 24.0).sqrt();
         assert!((k2 * kt / (120.0 * upper) - 1.0).abs() < 1e-6, "{k2}");
         assert_eq!(kh, 1.0);
@@ -657,21 +673,36 @@ mod tests {
         // That look taken (24 windows): ratios of 2 are not widened again until the long span
         // has twice the windows (only above RATIO_LIMIT meanwhile).
         assert_eq!(
-            judge(spans(30, (2.0, 1.0), Some((3.0, 1.0))), Some(w), 30_000_000),
+            judge(
+                spans(30, (2.0, 1.0), Some((3.0, 1.0))),
+                Some(w),
+                30_000_000,
+                true
+            ),
             None
         );
         // The third and last look, at 32 windows.
-        let ((k3, _), w) =
-            judge(spans(32, (1.2, 1.0), Some((1.1, 1.0))), Some(w), 40_000_000).unwrap();
+        let ((k3, _), w) = judge(
+            spans(32, (1.2, 1.0), Some((1.1, 1.0))),
+            Some(w),
+            40_000_000,
+            true,
+        )
+        .unwrap();
         assert!((k3 / (1.2 * (1.0 + (1.0f64 / 32.0).sqrt())) - 1.0).abs() < 1e-12);
         assert_eq!(w.looks, MAX_LOOKS);
         assert_eq!(
-            judge(spans(64, (1.2, 1.0), Some((1.1, 1.0))), Some(w), 80_000_000),
+            judge(
+                spans(64, (1.2, 1.0), Some((1.1, 1.0))),
+                Some(w),
+                80_000_000,
+                true
+            ),
             None
         );
         // A widening never goes past MAX_WIDENING in all.
-        let ((kt, _), w) = judge(spans(8, (1e6, 1.0), None), None, 1).unwrap();
+        let ((kt, _), w) = judge(spans(8, (1e6, 1.0), None), None, 1, true).unwrap();
         assert_eq!((kt, w.factors.0), (MAX_WIDENING, MAX_WIDENING));
-        assert_eq!(judge(spans(8, (1e6, 1.0), None), Some(w), 2), None);
+        assert_eq!(judge(spans(8, (1e6, 1.0), None), Some(w), 2, true), None);
     }
 }

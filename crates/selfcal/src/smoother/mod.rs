@@ -269,9 +269,11 @@ impl Smoother {
         self.widening
     }
 
-    /// Takes a widening judged elsewhere (phase 2's check of the filter's trajectory, whose
-    /// spans this smoother's window is too short for): every stored odometry factor's
-    /// variance widened by `translation` and `heading` (variance factors, at least 1), and
+    /// Takes a widening judged elsewhere (phase 2's check of the filter's trajectory: this
+    /// smoother's window of 5 s holds fewer than the eight windows of the short span a judgement
+    /// needs, and it takes no first widening on strong evidence, [`judge_odometry`]):
+    /// every stored odometry factor's variance widened by `translation` and `heading`
+    /// (variance factors, at least 1; none while it is stopped, when it holds no frames), and
     /// `widening` the model from now on.
     pub fn widen_odometry(&mut self, translation: f64, heading: f64, widening: OdometryWidening) {
         if translation > 1.0 || heading > 1.0 {
@@ -285,7 +287,12 @@ impl Smoother {
     /// widened.
     fn check_odometry(&mut self, t_us: u64) -> bool {
         let spans = self.odometry_consistency();
-        let Some(((kt, kh), w)) = consistency::judge(spans, self.widening, t_us) else {
+        // Strong evidence on a few windows is taken by phase 1's batch, which looks once
+        // against a trajectory good to a millimetre; not by phase 2's smoother, which looks at
+        // its short window every few frames (the navigator's check takes it there).
+        let strong_first = !self.mapping;
+        let Some(((kt, kh), w)) = consistency::judge(spans, self.widening, t_us, strong_first)
+        else {
             return false;
         };
         self.widening = Some(w);
@@ -298,8 +305,8 @@ impl Smoother {
 
     /// The buffered frames' poses and the odometry's motion between each and the next with its
     /// covariance under the model in use (`steps[i]` from `poses[i]` to `poses[i + 1]`;
-    /// `None` without odometry): what [`trajectory_consistency`] judges, for a check that goes
-    /// on after the smoother stops.
+    /// `None` without odometry): what [`trajectory_consistency`] judges. At the hand-over,
+    /// phase 2's check of the odometry begins with it.
     pub fn odometry_track(&self) -> (Vec<Pose2>, Vec<Option<OdometryStep>>) {
         consistency::track(&self.frames, &self.camera.vehicle)
     }
