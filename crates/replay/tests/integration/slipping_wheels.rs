@@ -56,6 +56,16 @@ fn run_with(sc: &sim::Scenario, seed: u64, tag: &str, settings: &NavSettings) ->
     }
 }
 
+/// At least 90 % of the landmarks near a lamp inside 3 sigma of it.
+fn assert_nine_in_ten_inside(r: &Run) {
+    assert!(
+        10 * r.inside >= 9 * r.near,
+        "{} of {} inside 3 sigma",
+        r.inside,
+        r.near
+    );
+}
+
 /// Each estimated parameter's error, its sigma, and whether it is inside 3 sigma.
 fn parameters(r: &estimates_log::Replay) -> Vec<(Param, f64, f64)> {
     let t = r.truth.as_ref().unwrap();
@@ -124,12 +134,7 @@ fn slipping_wheels_the_rig_file_is_silent_about_are_seen_and_said() {
     let d = format!("{t:?}");
     assert_eq!(t.lamps_missed, 0, "{d}");
     assert!(t.landmarks_unmatched * 20 <= t.landmarks_matched, "{d}");
-    assert!(
-        10 * r.inside >= 9 * r.near,
-        "{} of {} inside 3 sigma",
-        r.inside,
-        r.near
-    );
+    assert_nine_in_ten_inside(&r);
     let baseline = parameters(&r.replay)
         .into_iter()
         .find(|(p, _, _)| *p == Param::Baseline)
@@ -306,12 +311,7 @@ fn a_short_phase_1_still_sees_the_odometry_s_memory() {
             "{p:?}: {error} against sigma {sigma}"
         );
     }
-    assert!(
-        10 * r.inside >= 9 * r.near,
-        "{} of {} inside 3 sigma",
-        r.inside,
-        r.near
-    );
+    assert_nine_in_ten_inside(&r);
 }
 
 /// A dense hall (`sim::hall`'s seed 18: lamps every 2.5 m, no dark stretch) with 0.6 s of
@@ -337,12 +337,7 @@ fn a_dense_hall_silent_about_the_memory_is_widened_to_its_long_run() {
         t.lamps_missed * 50 <= total && t.landmarks_unmatched * 50 <= total,
         "{d}"
     );
-    assert!(
-        10 * r.inside >= 9 * r.near,
-        "{} of {} inside 3 sigma",
-        r.inside,
-        r.near
-    );
+    assert_nine_in_ten_inside(&r);
 }
 
 /// The same hall through a fisheye: its 48-landmark budget filled in 8.8 s, before the
@@ -361,12 +356,7 @@ fn a_dense_fisheye_hall_hands_over_only_once_the_odometry_is_checked() {
     let t = r.replay.truth.as_ref().unwrap();
     let d = format!("{t:?}");
     assert!(t.ate_rms <= 0.06 && t.landmarks_duplicate == 0, "{d}");
-    assert!(
-        10 * r.inside >= 9 * r.near,
-        "{} of {} inside 3 sigma",
-        r.inside,
-        r.near
-    );
+    assert_nine_in_ten_inside(&r);
     for (p, error, sigma) in parameters(&r.replay) {
         assert!(
             error.abs() <= 3.0 * sigma,
