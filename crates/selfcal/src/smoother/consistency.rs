@@ -149,7 +149,8 @@ pub fn judge(
     // Strong evidence is not made to wait for the windows a marginal ratio needs.
     let early =
         strong_first && so_far.is_none() && short.is_none() && heading_strongly_worse(&spans);
-    let short = if early { spans[0].or(spans[1]) } else { short };
+    // (Only the short span can be early: a long span of 4 windows has a short one of 12.)
+    let short = if early { spans[0] } else { short };
     let first = short.or(long)?;
     // The look a long span of `n` windows is: 1 at 8, 2 at 16, 3 at 32.
     let look_of = |n: usize| (usize::BITS - (n / MIN_WINDOWS).leading_zeros()).min(MAX_LOOKS);

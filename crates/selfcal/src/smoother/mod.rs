@@ -269,12 +269,12 @@ impl Smoother {
         self.widening
     }
 
-    /// Takes a widening judged elsewhere (phase 2's check of the filter's trajectory: this
-    /// smoother's window of 5 s holds fewer than the eight windows of the short span a judgement
-    /// needs, and it takes no first widening on strong evidence, [`judge_odometry`]):
-    /// every stored odometry factor's variance widened by `translation` and `heading`
-    /// (variance factors, at least 1; none while it is stopped, when it holds no frames), and
-    /// `widening` the model from now on.
+    /// Takes a widening, its own (after a solve) or one judged elsewhere (phase 2's check of
+    /// the filter's trajectory: this smoother's window of 5 s holds fewer than the eight
+    /// windows of the short span a judgement needs, and it takes no first widening on strong
+    /// evidence, [`judge_odometry`]): every stored odometry factor's variance widened by
+    /// `translation` and `heading` (variance factors, at least 1; none while it is stopped,
+    /// when it holds no frames), and `widening` the model from now on.
     pub fn widen_odometry(&mut self, translation: f64, heading: f64, widening: OdometryWidening) {
         if translation > 1.0 || heading > 1.0 {
             consistency::widen(&mut self.frames, translation.max(1.0), heading.max(1.0));
@@ -295,12 +295,8 @@ impl Smoother {
         else {
             return false;
         };
-        self.widening = Some(w);
-        if kt <= 1.0 && kh <= 1.0 {
-            return false;
-        }
-        consistency::widen(&mut self.frames, kt, kh);
-        true
+        self.widen_odometry(kt, kh, w);
+        kt > 1.0 || kh > 1.0
     }
 
     /// The buffered frames' poses and the odometry's motion between each and the next with its
