@@ -626,8 +626,8 @@ impl Filter {
     }
 
     /// `(z (4,), H (4, n))`: the Jacobian `predict_measurement`'s `S` is formed with, dense:
-    /// `measurement_jacobian`'s but for the heading's and the baseline's columns, from the
-    /// observability constraints at the landmark's linearisation point.
+    /// `measurement_jacobian`'s but for the heading's column, from the observability
+    /// constraint at the landmark's linearisation point.
     fn prediction_jacobian<'py>(&self, py: Python<'py>, id: u64) -> PyResult<PredictedTuple<'py>> {
         dense_jacobian(py, self.locked().ekf.prediction_jacobian(LandmarkId(id)))
     }

@@ -48,15 +48,14 @@ pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 
 /// First-estimates Jacobians (the FEJ-EKF of Huang, Mourikis and Roumeliotis, ICRA 2008): the
 /// update's Jacobians of a landmark's observation are taken at a fixed linearisation point of
-/// that landmark (the pose's and the landmark's columns; the camera's at the estimate: the
-/// baseline's at the first estimate too, in the scale's direction, left hall 26's baseline
-/// sigma as it was), which follows the landmark's estimate until its largest position sigma
-/// is below this, metres, and the camera is learned ([`FEJ_CAMERA_RELATIVE`]), and then
-/// stays; a joint estimate from the smoother (`Ekf::set_joint`) is a new linearisation point,
-/// and the iterated update relinearises at the estimate but for the heading's and the
-/// baseline's columns (the observability constraints at this point:
-/// `Ekf::observation_model_constrained`). Jacobians at each update's estimate gave the filter
-/// information on its global heading from lamps seen for the first time: on a loop (5.6
+/// that landmark (the pose's and the landmark's columns; the camera's at the estimate, as
+/// they are not in the unobservable directions), which follows the landmark's estimate until
+/// its largest position sigma is below this, metres, and the camera is learned
+/// ([`FEJ_CAMERA_RELATIVE`]), and then stays; a joint estimate from the smoother
+/// (`Ekf::set_joint`) is a new linearisation point, and the iterated update relinearises at
+/// the estimate but for the heading's column (the observability constraint at this point:
+/// `Ekf::observation_model_constrained`). Jacobians at each
+/// update's estimate gave the filter information on its global heading from lamps seen for the first time: on a loop (5.6
 /// degrees of heading sigma became 0.4 within a second, docs/halls.md "Loops") and after
 /// every dark stretch of the generated halls (the heading's sigma halved by new lamps while
 /// its error grew to 0.5 degrees, 3 sigma; docs/benchmarks.md, "Halls with LED panels and
@@ -322,11 +321,6 @@ pub struct Ekf {
     /// Process noise accumulated on the pose since [`Ekf::take_motion_covariance`], in the
     /// current pose's frame: the relative pose uncertainty between two frames.
     pub(crate) motion_covariance: Matrix3<f64>,
-    /// The pose's position corrections (updates, joint estimates) summed up to the last
-    /// prediction ([`Ekf::pose_corrections`]).
-    pub(crate) corrections: nalgebra::Vector2<f64>,
-    /// The pose's position as the last prediction left it.
-    pub(crate) last_predicted: Option<nalgebra::Vector2<f64>>,
     pub(crate) workspace: Workspace,
     /// Estimated camera parameters held this frame ([`Ekf::set_held`]), by [`Param::index`].
     pub(crate) held: [bool; N_PARAMS],
@@ -344,15 +338,6 @@ pub(crate) fn check_finite(what: &'static str, value: f64) -> Result<(), Error> 
 }
 
 impl Ekf {
-    /// Every correction of the pose's position since the filter started: what updates and
-    /// joint estimates moved it by, the predictions' motions left out.
-    pub(crate) fn pose_corrections(&self) -> nalgebra::Vector2<f64> {
-        match self.last_predicted {
-            Some(at) => self.corrections + nalgebra::Vector2::new(self.x[0], self.x[1]) - at,
-            None => self.corrections,
-        }
-    }
-
     /// The noise model (rig file `[noise]`).
     pub fn noise(&self) -> &Noise {
         &self.noise
@@ -441,7 +426,6 @@ impl Ekf {
 #[allow(clippy::unwrap_used, clippy::expect_used)]
 pub(crate) mod tests {
     use super::*;
-    use crate::state::StateLayout;
     use nalgebra::Vector3;
     use rig_model::camera::{Mount, wrap_angle};
     use rig_model::{Measurement, Pose2, Rig};
@@ -560,78 +544,6 @@ pub(crate) mod tests {
             (7.0, 7.0 - 2.0 * PI),
         ] {
             assert!((wrap_angle(a) - w).abs() < 1e-12, "{a}: {}", wrap_angle(a));
-        }
-    }
-
-    /// The iterated update's and the gate's columns (`Ekf::observation_model_constrained`)
-    /// leave the map's scale unobservable but for the mount's lever arm: with the camera above
-    /// the odometry's reference point, scaling the poses, each landmark's linearisation point
-    /// and the baseline together changes no prediction, wherever the landmark's estimate has
-    /// moved since. The point is the landmark's first estimate, carried with the pose's
-    /// corrections since when that is nearer its estimate (a lamp mapped from a pose
-    /// corrected since, which moved with it), else as it was (a lamp the pose was corrected
-    /// toward). The columns at the estimate do not leave that direction alone: on a turn in
-    /// place they told the filter the scale (docs/halls.md, "The scale told by a turn in
-    /// place").
-    #[test]
-    fn the_constrained_columns_leave_the_scale_and_the_heading_unobservable() {
-        // (the landmark's move since its first estimate, the pose's correction, whether the
-        // linearisation point is carried with the correction)
-        let cases = [
-            (Vector3::new(0.12, -0.08, 0.25), (0.10, -0.05), true),
-            (Vector3::new(0.01, 0.02, 0.25), (0.10, -0.05), false),
-        ];
-        for (moved, correction, carried) in cases {
-            let rig = rig();
-            let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
-            let point = Vector3::new(0.5, 0.2, 3.0);
-            let z = rig_model::project(&rig.nominal, &Pose2::default(), &point).unwrap();
-            let id = ekf.add_landmark(&z).unwrap();
-            ekf.predict(0.5, 0.0, 0.1, 0.1).unwrap();
-            let s = ekf.slot(id).unwrap();
-            let first = ekf.landmarks[s].first.unwrap();
-            let li = StateLayout::landmark(s);
-            for k in 0..3 {
-                ekf.x[li + k] += moved[k];
-            }
-            ekf.x[0] += correction.0;
-            ekf.x[1] += correction.1;
-            let (_, h) = ekf.prediction_jacobian(id).unwrap();
-            let (_, at_estimate) = ekf.measurement_jacobian(id).unwrap();
-
-            // Scaling about the camera's height (the floor-plane centre is free: translations
-            // change no prediction).
-            let anchor = if carried {
-                first + Vector3::new(correction.0, correction.1, 0.0)
-            } else {
-                first
-            };
-            let n = ekf.x.len();
-            let mut scale = DVector::<f64>::zeros(n);
-            scale[0] = ekf.x[0];
-            scale[1] = ekf.x[1];
-            scale[li] = anchor.x;
-            scale[li + 1] = anchor.y;
-            scale[li + 2] = anchor.z - rig.nominal.mount.z;
-            scale[ekf.camera_offset()] = ekf.camera().baseline;
-            let residual = (&h * &scale).norm();
-            let bound = 1e-9 * h.norm() * scale.norm();
-            assert!(
-                residual < bound,
-                "carried {carried}: H N_scale {residual:e}"
-            );
-            // At the estimate the same direction is seen: that is the information it gave.
-            assert!((&at_estimate * &scale).norm() > 1e-3 * at_estimate.norm() * scale.norm());
-
-            // The heading's direction, at the landmark's own linearisation point.
-            let mut turn = DVector::<f64>::zeros(n);
-            (turn[0], turn[1], turn[2]) = (-ekf.x[1], ekf.x[0], 1.0);
-            (turn[li], turn[li + 1]) = (-first.y, first.x);
-            let residual = (&h * &turn).norm();
-            assert!(
-                residual < 1e-9 * h.norm() * turn.norm(),
-                "H N_turn {residual:e}"
-            );
         }
     }
 }

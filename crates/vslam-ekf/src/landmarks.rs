@@ -44,8 +44,6 @@ pub(crate) struct Slot {
     /// position when added, following its estimate until `settled`; `None` for the
     /// landmarks handed over by phase 1.
     pub(crate) first: Option<Vector3<f64>>,
-    /// [`Ekf::pose_corrections`] when `first` was last set.
-    pub(crate) first_corrections: nalgebra::Vector2<f64>,
     pub(crate) observations: u64,
     pub(crate) rejections_in_a_row: u32,
     /// Whether `first` is frozen: it follows the estimate until the landmark is known to
@@ -370,7 +368,6 @@ impl Ekf {
     /// (after a joint estimate from outside: `Ekf::set_joint`, `Ekf::replace_marginal`); the
     /// landmarks handed over by phase 1 have none and keep none.
     pub(crate) fn relinearise_landmarks(&mut self) {
-        let c = self.pose_corrections();
         for k in 0..self.landmarks.len() {
             let at = self
                 .x
@@ -380,7 +377,6 @@ impl Ekf {
                 && slot.first.is_some()
             {
                 slot.first = Some(at);
-                slot.first_corrections = c;
             }
         }
     }
@@ -463,7 +459,6 @@ impl Ekf {
         self.landmarks.push(Slot {
             id,
             first: Some(position),
-            first_corrections: self.pose_corrections(),
             observations: 1,
             rejections_in_a_row: 0,
             settled: false,

@@ -105,14 +105,12 @@ impl Ekf {
     }
 
     /// The iterated update's linearisation (`Ekf::update` on an uncertain pose): `H` at the
-    /// current estimate, but for the heading's and the baseline's columns, which come from
-    /// the observability constraints at the landmark's linearisation point (the OC-EKF of
-    /// Huang, Mourikis and Roumeliotis, IEEE T-RO 2010). A rotation of the whole world about
-    /// its origin, `dp = J p`, `dtheta = 1`, `dL = J L` with `J` the planar quarter turn,
-    /// changes no prediction, `H_p J p + H_theta + H_L J L = 0`; `h` depends on `L - p`
-    /// horizontally, so `H_theta = H_L J (p - L)`, with `L` where the filter's covariance ties
-    /// the landmark to the heading. The scale is the other such direction
-    /// ([`Self::constrain_scale`]).
+    /// current estimate, but for the heading's column, which comes from the observability
+    /// constraint at the landmark's linearisation point (the OC-EKF of Huang, Mourikis and
+    /// Roumeliotis, IEEE T-RO 2010). A rotation of the whole world about its origin, `dp = J
+    /// p`, `dtheta = 1`, `dL = J L` with `J` the planar quarter turn, changes no prediction,
+    /// `H_p J p + H_theta + H_L J L = 0`; `h` depends on `L - p` horizontally, so `H_theta =
+    /// H_L J (p - L)`, with `L` where the filter's covariance ties the landmark to the heading.
     /// The other columns at the estimate keep Gauss-Newton's steps right where a landmark's
     /// first estimate is far from it (a linearisation point that had settled 0.25 m off made
     /// the closure of hall 11's loop out of a dark stretch undo itself in the next frame);
@@ -131,64 +129,8 @@ impl Ekf {
             for row in &mut h.h {
                 row[2] = -dy * row[3] + dx * row[4];
             }
-            self.constrain_scale(s, first, camera.baseline, &mut h);
         }
         Ok((predicted, Obs::new(&h)))
-    }
-
-    /// The baseline's column of [`Self::observation_model_constrained`], from the scale's
-    /// observability constraint. Scaling the world about the cameras' height (the poses'
-    /// positions, the landmarks' and the baseline together, the mount's lever arm not)
-    /// changes a prediction only through the lever arm: the projection depends on `L - c`,
-    /// `c` the camera, and `b` alone, homogeneously, so `H_b b = -H_L (L - c)`. At the
-    /// estimate, `L` is the landmark's estimate of the moment, which moves as its depth is
-    /// refined: the iterated update then saw a different scale direction at each frame, and a
-    /// turn in place under three lamps told the filter the scale (hall 26 through the radtan
-    /// lens: the baseline 0.3 mm off in a second at a sigma of 0.12 mm, where the batch over
-    /// every frame has 0.18; docs/halls.md, "The scale told by a turn in place"). So `L` is
-    /// the landmark's linearisation point, as the heading's, `H_b += -H_L (L_first -
-    /// L_estimate) / b`: with it the columns leave that direction unobservable whatever the
-    /// estimate, but for the lever arm's information.
-    ///
-    /// The point is carried with the pose's corrections since it was set
-    /// ([`Ekf::pose_corrections`]) when that is nearer the landmark's estimate: a lamp mapped
-    /// from a pose an update corrected since moved with it (in the linearised system its
-    /// point is where the uncorrected pose put it), and the point as it was is half a metre
-    /// off after a dark stretch (hall 16 with odometry of 0.6 s memory: the baseline 3.6 mm
-    /// off at a sigma of 0.06). A lamp the pose was corrected toward (a loop closed) did not
-    /// move, and keeps its point.
-    fn constrain_scale(&self, s: usize, first: Vector3<f64>, baseline: f64, h: &mut HColumns) {
-        let Some(slot) = self.landmarks.get(s) else {
-            return;
-        };
-        let c0 = self.layout().camera_start();
-        let Some(t) = (POSE_DIM + LANDMARK_DIM..h.len).find(|&t| {
-            h.cols[t]
-                .checked_sub(c0)
-                .and_then(|k| self.estimated.get(k))
-                .is_some_and(|p| *p == Param::Baseline)
-        }) else {
-            return;
-        };
-        if baseline <= 0.0 {
-            return;
-        }
-        let estimate = self
-            .x
-            .fixed_rows::<3>(StateLayout::landmark(s))
-            .into_owned();
-        let as_set = first - estimate;
-        let moved = self.pose_corrections() - slot.first_corrections;
-        let carried = as_set + Vector3::new(moved.x, moved.y, 0.0);
-        let d = if carried.norm() < as_set.norm() {
-            carried
-        } else {
-            as_set
-        };
-        // Columns 3..6 are the landmark's.
-        for row in &mut h.h {
-            row[t] -= (row[3] * d.x + row[4] * d.y + row[5] * d.z) / baseline;
-        }
     }
 
     /// The predicted measurement and `H`'s non-zero columns ([`Self::observation_model_with`]).
@@ -270,7 +212,7 @@ impl Ekf {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
         // The derivative at the estimate: where the landmark is predicted and how uncertainly
         // (the first-estimates Jacobians are the update's, for its information), but for the
-        // heading's and the baseline's columns, constrained as the iterated update's: where the landmark's
+        // heading's column, constrained as the iterated update's: where the landmark's
         // estimate has moved from the point its covariance ties it to the heading at (lamps
         // mapped out of a dark stretch, half a metre in depth), the derivative's heading column
         // measured the heading's spread with a lever the covariance does not have, and map
@@ -302,9 +244,9 @@ impl Ekf {
 
     /// The predicted measurement of a landmark and the `4 x n` matrix `H` that
     /// [`Self::predict_measurement`]'s innovation covariance is formed with, dense:
-    /// [`Self::measurement_jacobian`] but for the heading's and the baseline's columns, from
-    /// the observability constraints at the landmark's linearisation point (as the iterated
-    /// update's). For tests and tools.
+    /// [`Self::measurement_jacobian`] but for the heading's column, from the observability
+    /// constraint at the landmark's linearisation point (as the iterated update's). For tests
+    /// and tools.
     pub fn prediction_jacobian(
         &self,
         id: LandmarkId,

@@ -137,7 +137,6 @@ impl Ekf {
             }
         }
         let theta = self.x[2];
-        self.corrections = self.pose_corrections();
         let (pose, f, q) = inc.apply(&self.pose());
         // G's columns for the estimated vehicle parameters: (state index, d pose' / dV_k).
         let rot = compose_jacobian_second(theta);
@@ -158,7 +157,6 @@ impl Ekf {
         self.x[0] = pose.x;
         self.x[1] = pose.y;
         self.x[2] = wrap_angle(pose.theta);
-        self.last_predicted = Some(nalgebra::Vector2::new(pose.x, pose.y));
         match self.local.as_deref_mut() {
             None => predict_covariance(&mut self.p, &f, &q, &g),
             Some(l) => {

@@ -148,8 +148,6 @@ impl Ekf {
             next_id: 0,
             health: HealthState::new(settings.nis_window),
             motion_covariance: Matrix3::zeros(),
-            corrections: nalgebra::Vector2::zeros(),
-            last_predicted: None,
             workspace: Workspace::default(),
             held: [false; N_PARAMS],
             local: None,
@@ -257,7 +255,6 @@ impl Ekf {
             ekf.landmarks.push(Slot {
                 id,
                 first: None,
-                first_corrections: nalgebra::Vector2::zeros(),
                 observations: l.observations,
                 rejections_in_a_row: 0,
                 settled: true,

@@ -420,10 +420,8 @@ impl Ekf {
             let i = StateLayout::landmark(s);
             let b = self.block3(i);
             let at = self.x.fixed_rows::<3>(i).into_owned();
-            let c = self.pose_corrections();
             if let Some(slot) = self.landmarks.get_mut(s) {
                 slot.first = Some(at);
-                slot.first_corrections = c;
                 if b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M && camera_learned {
                     slot.settled = true;
                 }
@@ -625,8 +623,7 @@ impl Ekf {
         let mut nis: Vec<f64> = alloc::vec![f64::INFINITY; batch.len()];
         let mut projected: Vec<usize> = Vec::with_capacity(batch.len());
         // An update that will be iterated is Gauss-Newton on the measurement model from its
-        // first pass on, its heading's and baseline's columns constrained
-        // (`observation_model_constrained`).
+        // first pass on, its heading's column constrained (`observation_model_constrained`).
         // Only a batch with a settled landmark is iterated: new landmarks were placed from
         // this pose, their projections are as linear in it as the pixels can tell, and
         // iterated alone they only drifted the heading (hall 11 out of its dark stretch:
@@ -889,8 +886,7 @@ impl Ekf {
             .iter()
             .filter_map(|&(j, _)| obs.get(j).copied())
             .collect();
-        // Each pass relinearised at the estimate (the heading's and the baseline's columns
-        // constrained): the
+        // Each pass relinearised at the estimate (the heading's column constrained): the
         // iterated update is Gauss-Newton on the measurement model of the settled landmarks;
         // a landmark not settled keeps its first pass's linearisation.
         for _ in 1..ITERATE_MAX_PASSES {

@@ -548,12 +548,10 @@ class Filter:
 
     def prediction_jacobian(self, id: int) -> tuple[_F64, _F64]:
         """``(z (4,), H (4, n))``: the Jacobian :meth:`predict_measurement`'s ``S`` is formed
-        with, dense: :meth:`measurement_jacobian`'s but for the heading's column (index 2)
-        and the baseline's, which come from the observability constraints at the landmark's
-        linearisation point (so that turning the whole world, or scaling it with the
-        baseline, changes no prediction as the covariance has it; docs/vehicle.md, "Dark
-        stretches", and docs/halls.md, "The scale told by a turn in place"). Raises as
-        :meth:`predict_measurement`."""
+        with, dense: :meth:`measurement_jacobian`'s but for the heading's column (index 2),
+        which comes from the observability constraint at the landmark's linearisation point
+        (so that turning the whole world changes no prediction as the covariance has it;
+        docs/vehicle.md, "Dark stretches"). Raises as :meth:`predict_measurement`."""
         return self._native.prediction_jacobian(_id("id", id))
 
     @property
