@@ -85,3 +85,47 @@ fn without_estimating_v_the_same_drive_is_seen_to_have_worse_odometry() {
     );
     std::fs::remove_file(&log).ok();
 }
+
+/// `sim::hall`'s hall 26 (45 m aisles, lamps every 4.5 m 6.2 m up) through the radtan lens,
+/// the odometry as good as stated, replayed with no flags. At the end of its third aisle the
+/// vehicle turns in place under two or three lamps, its camera 0.5 m ahead of the axle
+/// sweeping an arc, the pose's sigma just above 0.1 m so that the update iterates. That turn
+/// tells the filter the map's scale: the baseline moves 0.3 mm in 1.5 s while its sigma falls
+/// from 0.176 to 0.115 mm, and the map ends with the baseline 2.9 sigma off, the odometry's
+/// scale 3.1 sigma off and 41 of 78 landmarks inside 3 sigma (the batch over every frame: the
+/// baseline's sigma 0.18 mm). The baseline's column constrained in the iterated update fixed
+/// this hall but not the radtan hall with odometry memory (docs/halls.md, "The scale told by
+/// a turn in place").
+#[test]
+#[ignore = "unfinished: the iterated update takes the map's scale from a turn in place (docs/halls.md)"]
+fn a_turn_in_place_does_not_tell_the_filter_the_map_s_scale() {
+    let mut spec = sim::hall::HallSpec::draw(26);
+    spec.lens = sim::hall::HallLens::Radtan;
+    let sc = sim::hall::scenario(&spec, 26).unwrap();
+    let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
+    let log = std::env::temp_dir().join(format!("hall-26-scale-{}.mcap", std::process::id()));
+    run.write_log(&log).unwrap();
+    let r = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
+    std::fs::remove_file(&log).ok();
+    let t = r.truth.as_ref().unwrap();
+    let d = format!("{t:?}");
+    for c in r.final_camera.iter().filter(|c| c.sigma > 0.0) {
+        let error = t.camera.iter().find(|(q, _)| *q == c.param).unwrap().1;
+        assert!(
+            error.abs() <= 3.0 * c.sigma,
+            "{}: error {error} outside 3 sigma {}; {d}",
+            c.param,
+            c.sigma
+        );
+    }
+    let (near, inside) = eval::landmarks_against_lamps(
+        r.landmarks.iter().map(|l| (l.position, l.covariance)),
+        &run.landmarks,
+        0.1,
+    );
+    assert!(
+        10 * inside >= 9 * near,
+        "{inside} of {near} inside 3 sigma; {d}"
+    );
+    assert_eq!(t.landmarks_duplicate, 0, "{d}");
+}
