@@ -26,3 +26,54 @@ fn scenario(name: &str) -> sim::Scenario {
         .join(name);
     sim::Scenario::load(&path).unwrap()
 }
+
+/// A simulated drive replayed with `settings`, and its landmarks against the lamps.
+struct Run {
+    replay: estimates_log::Replay,
+    /// Landmarks within 10 cm of a lamp, and of them those inside the 3-D chi-square bound
+    /// of 3 sigma (`eval::landmarks_against_lamps`).
+    near: usize,
+    inside: usize,
+}
+
+/// `sc` simulated as it is (its own seed), written to a log named after `tag` and replayed.
+fn replayed_run(sc: &sim::Scenario, tag: &str, settings: &replay::NavSettings) -> Run {
+    let sim_run = sim::simulate(sc, sim::Mode::Fast).unwrap();
+    let log = std::env::temp_dir().join(format!("{tag}-{}.mcap", std::process::id()));
+    sim_run.write_log(&log).unwrap();
+    let replay = replay::replay_log(&log, None, settings, &mut |_, _| {}).unwrap();
+    std::fs::remove_file(&log).ok();
+    let (near, inside) = eval::landmarks_against_lamps(
+        replay.landmarks.iter().map(|l| (l.position, l.covariance)),
+        &sim_run.landmarks,
+        0.1,
+    );
+    Run {
+        replay,
+        near,
+        inside,
+    }
+}
+
+/// At least 90 % of the landmarks near a lamp inside 3 sigma of it.
+fn assert_nine_in_ten_inside(r: &Run) {
+    assert!(
+        10 * r.inside >= 9 * r.near,
+        "{} of {} inside 3 sigma",
+        r.inside,
+        r.near
+    );
+}
+
+/// Each estimated parameter's error and its sigma.
+fn parameters(r: &estimates_log::Replay) -> Vec<(rig_model::Param, f64, f64)> {
+    let t = r.truth.as_ref().unwrap();
+    r.final_camera
+        .iter()
+        .filter(|c| c.sigma > 0.0)
+        .map(|c| {
+            let error = t.camera.iter().find(|(q, _)| *q == c.param).unwrap().1;
+            (c.param, error, c.sigma)
+        })
+        .collect()
+}

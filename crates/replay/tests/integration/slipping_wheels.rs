@@ -10,7 +10,7 @@
 
 use replay::NavSettings;
 
-use crate::scenario;
+use crate::{Run, assert_nine_in_ten_inside, parameters, replayed_run, scenario};
 use rig_model::Param;
 
 /// The rig file silent about the odometry's memory (its time constants 0).
@@ -26,57 +26,16 @@ fn one_pass(mut sc: sim::Scenario) -> sim::Scenario {
     sc
 }
 
-struct Run {
-    replay: estimates_log::Replay,
-    /// Landmarks within 10 cm of a lamp, and of them those inside the 3-D chi-square bound
-    /// of 3 sigma (`eval::landmarks_against_lamps`).
-    near: usize,
-    inside: usize,
-}
-
 fn run(sc: &sim::Scenario, seed: u64, tag: &str) -> Run {
     run_with(sc, seed, tag, &NavSettings::default())
 }
 
 fn run_with(sc: &sim::Scenario, seed: u64, tag: &str, settings: &NavSettings) -> Run {
-    let sim_run = sim::simulate(&sc.clone().with_seed(seed), sim::Mode::Fast).unwrap();
-    let log = std::env::temp_dir().join(format!("slip-{tag}-{seed}-{}.mcap", std::process::id()));
-    sim_run.write_log(&log).unwrap();
-    let replay = replay::replay_log(&log, None, settings, &mut |_, _| {}).unwrap();
-    std::fs::remove_file(&log).ok();
-    let (near, inside) = eval::landmarks_against_lamps(
-        replay.landmarks.iter().map(|l| (l.position, l.covariance)),
-        &sim_run.landmarks,
-        0.1,
-    );
-    Run {
-        replay,
-        near,
-        inside,
-    }
-}
-
-/// At least 90 % of the landmarks near a lamp inside 3 sigma of it.
-fn assert_nine_in_ten_inside(r: &Run) {
-    assert!(
-        10 * r.inside >= 9 * r.near,
-        "{} of {} inside 3 sigma",
-        r.inside,
-        r.near
-    );
-}
-
-/// Each estimated parameter's error, its sigma, and whether it is inside 3 sigma.
-fn parameters(r: &estimates_log::Replay) -> Vec<(Param, f64, f64)> {
-    let t = r.truth.as_ref().unwrap();
-    r.final_camera
-        .iter()
-        .filter(|c| c.sigma > 0.0)
-        .map(|c| {
-            let error = t.camera.iter().find(|(q, _)| *q == c.param).unwrap().1;
-            (c.param, error, c.sigma)
-        })
-        .collect()
+    replayed_run(
+        &sc.clone().with_seed(seed),
+        &format!("slip-{tag}-{seed}"),
+        settings,
+    )
 }
 
 #[test]
@@ -382,30 +341,18 @@ fn the_radtan_hall_with_slipping_wheels_stays_mapped() {
         if stated {
             (sc.rig.noise.velocity_tau, sc.rig.noise.yaw_rate_tau) = (0.6, 0.6);
         }
-        let sim_run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-        let log = std::env::temp_dir().join(format!(
-            "slip-hall-radtan-{stated}-{}.mcap",
-            std::process::id()
-        ));
-        sim_run.write_log(&log).unwrap();
-        let replay =
-            replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
-        std::fs::remove_file(&log).ok();
-        let (near, inside) = eval::landmarks_against_lamps(
-            replay.landmarks.iter().map(|l| (l.position, l.covariance)),
-            &sim_run.landmarks,
-            0.1,
+        let r = replayed_run(
+            &sc,
+            &format!("slip-hall-radtan-{stated}"),
+            &NavSettings::default(),
         );
-        let t = replay.truth.as_ref().unwrap();
+        let t = r.replay.truth.as_ref().unwrap();
         let d = format!("stated {stated}: {t:?}");
         assert!(t.lamps_missed <= 2, "{d}");
         assert_eq!(t.landmarks_duplicate, 0, "{d}");
         assert!(t.landmark_rms <= 0.025 && t.ate_rms <= 0.06, "{d}");
-        assert!(
-            10 * inside >= 9 * near,
-            "{inside} of {near} inside 3 sigma; {d}"
-        );
-        for (p, error, sigma) in parameters(&replay) {
+        assert_nine_in_ten_inside(&r);
+        for (p, error, sigma) in parameters(&r.replay) {
             assert!(
                 error.abs() <= 3.0 * sigma,
                 "{p}: {error} against sigma {sigma}; {d}"

@@ -9,7 +9,7 @@
 use replay::NavSettings;
 use rig_model::Param;
 
-use crate::scenario;
+use crate::{assert_nine_in_ten_inside, parameters, replayed_run, scenario};
 
 #[test]
 fn a_forklift_with_odometry_errors_and_a_clock_offset_is_calibrated() {
@@ -102,30 +102,15 @@ fn a_turn_in_place_does_not_tell_the_filter_the_map_s_scale() {
     let mut spec = sim::hall::HallSpec::draw(26);
     spec.lens = sim::hall::HallLens::Radtan;
     let sc = sim::hall::scenario(&spec, 26).unwrap();
-    let run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-    let log = std::env::temp_dir().join(format!("hall-26-scale-{}.mcap", std::process::id()));
-    run.write_log(&log).unwrap();
-    let r = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
-    std::fs::remove_file(&log).ok();
-    let t = r.truth.as_ref().unwrap();
+    let r = replayed_run(&sc, "hall-26-scale", &NavSettings::default());
+    let t = r.replay.truth.as_ref().unwrap();
     let d = format!("{t:?}");
-    for c in r.final_camera.iter().filter(|c| c.sigma > 0.0) {
-        let error = t.camera.iter().find(|(q, _)| *q == c.param).unwrap().1;
+    for (p, error, sigma) in parameters(&r.replay) {
         assert!(
-            error.abs() <= 3.0 * c.sigma,
-            "{}: error {error} outside 3 sigma {}; {d}",
-            c.param,
-            c.sigma
+            error.abs() <= 3.0 * sigma,
+            "{p}: error {error} outside 3 sigma {sigma}; {d}"
         );
     }
-    let (near, inside) = eval::landmarks_against_lamps(
-        r.landmarks.iter().map(|l| (l.position, l.covariance)),
-        &run.landmarks,
-        0.1,
-    );
-    assert!(
-        10 * inside >= 9 * near,
-        "{inside} of {near} inside 3 sigma; {d}"
-    );
+    assert_nine_in_ten_inside(&r);
     assert_eq!(t.landmarks_duplicate, 0, "{d}");
 }
