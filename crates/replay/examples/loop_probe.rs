@@ -7,7 +7,7 @@
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
 //! [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
-//! [--nees-at T_S [--worst N]]`:
+//! [--nees-at T_S [--worst N]] [--cov-at T_S]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
 //! smoother; `--rig` runs on that rig instead of the log's; `--field` and `--max-in-view` set
@@ -16,7 +16,11 @@
 //! follows one lamp's stereo match and track while it is in view; `--nees-at T` prints the
 //! map's NEES and its widest common modes at `T` seconds ([`print_map_nees`]), and with
 //! `--worst N` the `N` landmarks that add the most to it (a landmark off relative to the others
-//! it is correlated with shows there even when its own sigmas cover its error). Every 100th
+//! it is correlated with shows there even when its own sigmas cover its error); `--cov-at T`
+//! prints, every frame for half a second from `T` seconds, the covariance's structure
+//! ([`print_cov`]: the heading's sigma given the map, the common turn of the landmarks near
+//! the vehicle, and every twin pair's difference against the heading) and, at phase 1's
+//! hand-over, each landmark handed over with when it was first seen. Every 100th
 //! frame is printed too (the drift in between).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
@@ -39,6 +43,110 @@ const LAMP_PX: f64 = 3.0;
 /// the error along each in its sigmas: a map whose common modes (its shift and turn
 /// against the first frame's world) have gained spurious information shows a NEES far above
 /// its degrees of freedom and errors of many sigmas along its widest modes.
+/// The covariance's structure at one frame (`--cov-at T`, every frame for half a second):
+/// the pose's sigmas; the heading's sigma given every landmark's horizontal position (how
+/// well the pose's heading is known relative to the map); the sigma of the common turn of
+/// the landmarks within 20 m about their centroid (how well the map's block is known against
+/// the first frame's world); and for every pair of landmarks closer than 0.1 m (twins the
+/// merge guard may join), the sigma of their difference and its correlation with the heading.
+fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
+    let p = ekf.covariance();
+    let pose = ekf.pose();
+    let ls: Vec<(vslam_ekf::LandmarkId, Vector3<f64>, usize)> = ekf
+        .landmarks()
+        .filter_map(|l| Some((l.id, l.position, ekf.landmark_state_index(l.id)?)))
+        .collect();
+    let idx: Vec<usize> = ls.iter().flat_map(|&(_, _, i)| [i, i + 1]).collect();
+    let k = idx.len();
+    let pll = nalgebra::DMatrix::from_fn(k, k, |a, b| p[(idx[a], idx[b])]);
+    let ptl = nalgebra::DMatrix::from_fn(1, k, |_, b| p[(2, idx[b])]);
+    let cond = pll.clone().cholesky().map(|c| {
+        let x = c.solve(&ptl.transpose());
+        (p[(2, 2)] - (&ptl * x)[(0, 0)]).max(0.0).sqrt()
+    });
+    // The common turn of the block about its centroid, least squares over the landmarks.
+    let near: Vec<usize> = (0..ls.len())
+        .filter(|&j| (ls[j].1.x - pose.x).hypot(ls[j].1.y - pose.y) < 20.0)
+        .collect();
+    let mut turn = f64::NAN;
+    if near.len() >= 2 {
+        let (mut cx, mut cy) = (0.0, 0.0);
+        for &j in &near {
+            cx += ls[j].1.x;
+            cy += ls[j].1.y;
+        }
+        cx /= near.len() as f64;
+        cy /= near.len() as f64;
+        let mut a = nalgebra::DVector::<f64>::zeros(k);
+        let mut norm = 0.0;
+        for &j in &near {
+            let (dx, dy) = (ls[j].1.x - cx, ls[j].1.y - cy);
+            a[2 * j] = -dy;
+            a[2 * j + 1] = dx;
+            norm += dx * dx + dy * dy;
+        }
+        a /= norm;
+        turn = (a.transpose() * &pll * &a)[(0, 0)].max(0.0).sqrt();
+    }
+    println!(
+        "  cov {t_s:.2}: pose sigma ({:.3} m, {:.3} m, {:.3} deg); heading given the map {}; the turn of {} landmarks within 20 m {:.3} deg",
+        p[(0, 0)].sqrt(),
+        p[(1, 1)].sqrt(),
+        p[(2, 2)].sqrt().to_degrees(),
+        cond.map_or("n/a".to_string(), |v| format!("{:.3} deg", v.to_degrees())),
+        near.len(),
+        turn.to_degrees(),
+    );
+    for a in 0..ls.len() {
+        for b in a + 1..ls.len() {
+            let (ia, ib) = (ls[a].2, ls[b].2);
+            if (ls[a].1 - ls[b].1).norm() > 0.1 {
+                continue;
+            }
+            let var =
+                |u: usize| p[(ia + u, ia + u)] + p[(ib + u, ib + u)] - 2.0 * p[(ia + u, ib + u)];
+            let cov_t = |u: usize| p[(ia + u, 2)] - p[(ib + u, 2)];
+            let (vx, vy) = (var(0), var(1));
+            let sm = nalgebra::Matrix3::from_fn(|r, c| {
+                p[(ia + r, ia + c)] + p[(ib + r, ib + c)]
+                    - p[(ia + r, ib + c)]
+                    - p[(ib + r, ia + c)]
+            });
+            let ct = Vector3::from_fn(|r, _| cov_t(r));
+            let r2 = sm
+                .cholesky()
+                .map_or(f64::NAN, |c| ct.dot(&c.solve(&ct)) / p[(2, 2)]);
+            let e = sm.symmetric_eigen();
+            for j in 0..3 {
+                let v = e.eigenvectors.column(j);
+                let sd = e.eigenvalues[j].max(0.0).sqrt();
+                println!(
+                    "    twins' difference along ({:+.2}, {:+.2}, {:+.2}): sigma {:.4} m, correlation with the heading {:+.3}",
+                    v[0],
+                    v[1],
+                    v[2],
+                    sd,
+                    v.dot(&ct) / (sd * p[(2, 2)].sqrt())
+                );
+            }
+            println!(
+                "    twins: z difference sigma {:.3} m, its correlation with the heading {:+.2}; the heading's share explained by the difference {r2:.3}",
+                var(2).sqrt(),
+                cov_t(2) / (var(2) * p[(2, 2)]).sqrt()
+            );
+            println!(
+                "    twins {:?} {:?}: difference sigma ({:.3}, {:.3}) m, correlation with the heading ({:+.2}, {:+.2})",
+                ls[a].0,
+                ls[b].0,
+                vx.sqrt(),
+                vy.sqrt(),
+                cov_t(0) / (vx * p[(2, 2)]).sqrt(),
+                cov_t(1) / (vy * p[(2, 2)]).sqrt()
+            );
+        }
+    }
+}
+
 fn print_map_nees(
     t_s: f64,
     ekf: &vslam_ekf::Ekf,
@@ -142,11 +250,12 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut every_frame = false;
     let mut nees_at: Option<f64> = None;
+    let mut cov_at: Option<(f64, f64)> = None;
     let mut worst: usize = 0;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -162,6 +271,12 @@ fn run() -> Result<(), String> {
                         .parse()
                         .map_err(|e| format!("--nees-at: {e}"))?,
                 );
+            }
+            "--cov-at" => {
+                let a: f64 = value("--cov-at")?
+                    .parse()
+                    .map_err(|e| format!("--cov-at: {e}"))?;
+                cov_at = Some((a, a + 0.5));
             }
             "--worst" => {
                 worst = value("--worst")?
@@ -329,6 +444,28 @@ fn run() -> Result<(), String> {
         let outcome = nav
             .push_frame(f.t_us, &f.left, &f.right)
             .map_err(|e| e.to_string())?;
+        if outcome.switched
+            && cov_at.is_some()
+            && let Some(h) = nav.smoother().handover()
+        {
+            let frame_t: Vec<f64> = nav
+                .phase1_trajectory()
+                .iter()
+                .map(|(t, _)| (*t - first_t) as f64 * 1e-6)
+                .collect();
+            for (j, l) in h.landmarks.iter().enumerate() {
+                println!(
+                    "  handed over L{j} at ({:+.2}, {:+.2}, {:.2}): first seen at {} s, {} observations",
+                    l.position.x,
+                    l.position.y,
+                    l.position.z,
+                    frame_t
+                        .get(l.first_frame)
+                        .map_or("?".to_string(), |t| format!("{t:.2}")),
+                    l.observations
+                );
+            }
+        }
         // --held-at T: every track's lamp (the lamp whose rectified projection is nearest
         // its last measurement), and at T the lamps held while lost against the truth.
         if let (Some(at), Some(pose)) =
@@ -449,6 +586,12 @@ fn run() -> Result<(), String> {
             && t_s < at + 0.03
         {
             print_map_nees(t_s, ekf, &lamps, worst);
+        }
+        if let Some((a, b)) = cov_at
+            && t_s >= a
+            && t_s < b
+        {
+            print_cov(t_s, ekf);
         }
         let pose = ekf.pose();
         let jump = previous.map_or(0.0, |p| {

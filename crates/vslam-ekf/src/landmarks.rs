@@ -36,6 +36,17 @@ pub struct LandmarkEstimate {
     pub observations: u64,
 }
 
+/// How far apart the merge guard's two landmarks of one lamp may be, one sigma on each axis,
+/// metres ([`Ekf::merge_landmarks`]): a lamp is not a point, and its two landmarks may come
+/// from different views of it, one through the lens's edge. As an exact constraint, the
+/// merge of a twin pair phase 1 handed over (one landmark seen ahead, the other 7 s later 57
+/// degrees off the axis) read their difference across the ray, known to 2.6 mm and 89 %
+/// correlated with the odometry's held yaw bias, as the heading of the whole map beyond a
+/// dark stretch: the heading's sigma from 3.9 to 1.6 degrees in one merge, with the map 3.4
+/// degrees off (hall 17 of `hall_mc 8 11 --lens radtan --odometry-tau 0.6`; docs/vehicle.md,
+/// "Dark stretches").
+pub const MERGE_POINT_SIGMA_M: f64 = 0.02;
+
 /// Per-landmark bookkeeping, in state order.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Slot {
@@ -178,9 +189,10 @@ impl Ekf {
     }
 
     /// Merges landmark `drop` into `keep`, two estimates of one point (a lamp mapped twice):
-    /// the constraint `x_keep - x_drop = 0` applied as an exact measurement (a Kalman update
-    /// with `H = [.. I .. -I ..]` and no noise), which moves `keep`, the pose, the camera and
-    /// every correlated landmark by what `drop` knew and shrinks their covariance accordingly;
+    /// the constraint `x_keep - x_drop = 0` applied as a measurement (a Kalman update with
+    /// `H = [.. I .. -I ..]` and the noise [`MERGE_POINT_SIGMA_M`] on each axis), which moves
+    /// `keep`, the pose, the camera and every correlated landmark by what `drop` knew and
+    /// shrinks their covariance accordingly;
     /// then `drop`, now a copy of `keep`, leaves the state. Returns the squared Mahalanobis
     /// distance the two were apart ([`Ekf::landmark_pair_distance`]); the caller gates on it.
     /// `O(n^2)` in the state's length.
@@ -189,7 +201,12 @@ impl Ekf {
             return Err(Error::MergeIntoItself { id: keep });
         }
         let PairDifference { ia, ib, d, c, d2 } = self.pair_difference(keep, drop, false)?;
-        if self.local.is_some() && !self.local_merge(ia, ib, &d)? {
+        // The constraint's noise: one point to within what one lamp's features are.
+        let noise = MERGE_POINT_SIGMA_M * MERGE_POINT_SIGMA_M;
+        let c = (c.l() * c.l().transpose() + Matrix3::identity() * noise)
+            .cholesky()
+            .ok_or(Error::PairNotPositiveDefinite { a: keep, b: drop })?;
+        if self.local.is_some() && !self.local_merge(ia, ib, &d, noise)? {
             self.settle();
         }
         if self.local.is_none() {

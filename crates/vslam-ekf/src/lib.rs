@@ -208,7 +208,7 @@ pub use filter::{
 #[cfg(feature = "alloc")]
 pub use health::Health;
 #[cfg(feature = "alloc")]
-pub use landmarks::{LandmarkEstimate, LandmarkId};
+pub use landmarks::{LandmarkEstimate, LandmarkId, MERGE_POINT_SIGMA_M};
 #[cfg(feature = "alloc")]
 pub use measurement::{HColumns, measurement_jacobian_columns};
 #[cfg(feature = "alloc")]

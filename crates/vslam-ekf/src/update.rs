@@ -1130,7 +1130,7 @@ impl Ekf {
     /// active rows (`P_AA H^T`, in `ws.a`), `phi^T H_A^T` (`a_bot`) and `S` (`d x d`, in
     /// `ws.s`): `P_AA` and `x_A` as the dense filter, `phi` and `psi` as the module docs say,
     /// the passive states through `P0_BA0`. With `check`, every active variance must stay
-    /// positive (a merge's exact constraint zeroes the dropped landmark's on purpose).
+    /// positive (a merge's constraint all but zeroes the dropped landmark's on purpose).
     pub(crate) fn local_correct(
         &mut self,
         ws: &mut Workspace,
@@ -1212,13 +1212,14 @@ impl Ekf {
     }
 
     /// [`Ekf::merge_landmarks`]'s constraint `x_a - x_b = 0` (state indices `ia`, `ib`, the
-    /// difference `d`) in the open local session; `false` (nothing done) when either is
-    /// passive.
+    /// difference `d`, the constraint's variance `noise` on each axis) in the open local
+    /// session; `false` (nothing done) when either is passive.
     pub(crate) fn local_merge(
         &mut self,
         ia: usize,
         ib: usize,
         d: &Vector3<f64>,
+        noise: f64,
     ) -> Result<bool, Error> {
         let Some(l) = self.local.as_deref() else {
             return Ok(false);
@@ -1254,6 +1255,7 @@ impl Ekf {
                 ws.s[c * 3 + r] = v;
                 ws.s[r * 3 + c] = v;
             }
+            ws.s[c * 3 + c] += noise;
         }
         let mut a_bot = alloc::vec![0.0; na0 * 3];
         for (c, col) in a_bot.chunks_exact_mut(na0).enumerate() {
