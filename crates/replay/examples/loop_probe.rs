@@ -37,18 +37,14 @@ const JUMP_M: f64 = 0.2;
 /// A feature farther than this from every lamp's raw pixel is clutter, pixels.
 const LAMP_PX: f64 = 3.0;
 
-/// The map's consistency at one frame: the NEES of every landmark's horizontal position
-/// jointly (each against the lamp nearest it, within 1.5 m) with the filter's joint
-/// covariance, and the map's six widest common modes (eigenvectors of that covariance) with
-/// the error along each in its sigmas: a map whose common modes (its shift and turn
-/// against the first frame's world) have gained spurious information shows a NEES far above
-/// its degrees of freedom and errors of many sigmas along its widest modes.
 /// The covariance's structure at one frame (`--cov-at T`, every frame for half a second):
 /// the pose's sigmas; the heading's sigma given every landmark's horizontal position (how
 /// well the pose's heading is known relative to the map); the sigma of the common turn of
 /// the landmarks within 20 m about their centroid (how well the map's block is known against
 /// the first frame's world); and for every pair of landmarks closer than 0.1 m (twins the
-/// merge guard may join), the sigma of their difference and its correlation with the heading.
+/// merge guard may join), the share of the heading's variance their difference explains and,
+/// along each principal direction of the difference, its sigma and correlation with the
+/// heading.
 fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
     let p = ekf.covariance();
     let pose = ekf.pose();
@@ -103,10 +99,7 @@ fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
             if (ls[a].1 - ls[b].1).norm() > 0.1 {
                 continue;
             }
-            let var =
-                |u: usize| p[(ia + u, ia + u)] + p[(ib + u, ib + u)] - 2.0 * p[(ia + u, ib + u)];
             let cov_t = |u: usize| p[(ia + u, 2)] - p[(ib + u, 2)];
-            let (vx, vy) = (var(0), var(1));
             let sm = nalgebra::Matrix3::from_fn(|r, c| {
                 p[(ia + r, ia + c)] + p[(ib + r, ib + c)]
                     - p[(ia + r, ib + c)]
@@ -116,12 +109,16 @@ fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
             let r2 = sm
                 .cholesky()
                 .map_or(f64::NAN, |c| ct.dot(&c.solve(&ct)) / p[(2, 2)]);
+            println!(
+                "    twins {:?} {:?}: the heading's share explained by their difference {r2:.3}",
+                ls[a].0, ls[b].0
+            );
             let e = sm.symmetric_eigen();
             for j in 0..3 {
                 let v = e.eigenvectors.column(j);
                 let sd = e.eigenvalues[j].max(0.0).sqrt();
                 println!(
-                    "    twins' difference along ({:+.2}, {:+.2}, {:+.2}): sigma {:.4} m, correlation with the heading {:+.3}",
+                    "      along ({:+.2}, {:+.2}, {:+.2}): sigma {:.4} m, correlation with the heading {:+.3}",
                     v[0],
                     v[1],
                     v[2],
@@ -129,24 +126,16 @@ fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
                     v.dot(&ct) / (sd * p[(2, 2)].sqrt())
                 );
             }
-            println!(
-                "    twins: z difference sigma {:.3} m, its correlation with the heading {:+.2}; the heading's share explained by the difference {r2:.3}",
-                var(2).sqrt(),
-                cov_t(2) / (var(2) * p[(2, 2)]).sqrt()
-            );
-            println!(
-                "    twins {:?} {:?}: difference sigma ({:.3}, {:.3}) m, correlation with the heading ({:+.2}, {:+.2})",
-                ls[a].0,
-                ls[b].0,
-                vx.sqrt(),
-                vy.sqrt(),
-                cov_t(0) / (vx * p[(2, 2)]).sqrt(),
-                cov_t(1) / (vy * p[(2, 2)]).sqrt()
-            );
         }
     }
 }
 
+/// The map's consistency at one frame: the NEES of every landmark's horizontal position
+/// jointly (each against the lamp nearest it, within 1.5 m) with the filter's joint
+/// covariance, and the map's six widest common modes (eigenvectors of that covariance) with
+/// the error along each in its sigmas: a map whose common modes (its shift and turn
+/// against the first frame's world) have gained spurious information shows a NEES far above
+/// its degrees of freedom and errors of many sigmas along its widest modes.
 fn print_map_nees(
     t_s: f64,
     ekf: &vslam_ekf::Ekf,

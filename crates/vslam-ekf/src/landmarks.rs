@@ -185,7 +185,7 @@ impl Ekf {
             .cholesky()
             .ok_or(Error::PairNotPositiveDefinite { a, b })?;
         let d2 = d.dot(&c.solve(&d));
-        Ok(PairDifference { ia, ib, d, c, d2 })
+        Ok(PairDifference { ia, ib, d, s, d2 })
     }
 
     /// Merges landmark `drop` into `keep`, two estimates of one point (a lamp mapped twice):
@@ -200,10 +200,10 @@ impl Ekf {
         if keep == drop {
             return Err(Error::MergeIntoItself { id: keep });
         }
-        let PairDifference { ia, ib, d, c, d2 } = self.pair_difference(keep, drop, false)?;
+        let PairDifference { ia, ib, d, s, d2 } = self.pair_difference(keep, drop, false)?;
         // The constraint's noise: one point to within what one lamp's features are.
         let noise = MERGE_POINT_SIGMA_M * MERGE_POINT_SIGMA_M;
-        let c = (c.l() * c.l().transpose() + Matrix3::identity() * noise)
+        let c = (s + Matrix3::identity() * noise)
             .cholesky()
             .ok_or(Error::PairNotPositiveDefinite { a: keep, b: drop })?;
         if self.local.is_some() && !self.local_merge(ia, ib, &d, noise)? {
@@ -621,8 +621,8 @@ struct PairDifference {
     ib: usize,
     /// `x_a - x_b`.
     d: Vector3<f64>,
-    /// The Cholesky factor of its covariance.
-    c: nalgebra::Cholesky<f64, nalgebra::U3>,
+    /// Its covariance `S`.
+    s: Matrix3<f64>,
     /// The squared Mahalanobis distance `d^T S^-1 d`.
     d2: f64,
 }

@@ -1,7 +1,7 @@
 //! Merging a landmark into another (issue 35's map-level guard against a lamp mapped twice):
 //! the merge equals the textbook update with the constraint `x_keep - x_drop = 0` (its noise
-//! `MERGE_POINT_SIGMA_M` on each axis) followed by the removal of `drop`; a twin is within the 3-dof gate of its original and two
-//! lamps are not; misuse is an error.
+//! `MERGE_POINT_SIGMA_M` on each axis) followed by the removal of `drop`; a twin is within
+//! the 3-dof gate of its original and two lamps are not; misuse is an error.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use crate::common;
