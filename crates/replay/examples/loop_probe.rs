@@ -93,6 +93,42 @@ fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
         near.len(),
         turn.to_degrees(),
     );
+    // The information along the world's unobservable motions (a turn about the origin, a
+    // shift along x and along y): with a consistent filter it never grows.
+    {
+        let n = p.nrows();
+        let mut dirs = [
+            nalgebra::DVector::<f64>::zeros(n),
+            nalgebra::DVector::<f64>::zeros(n),
+            nalgebra::DVector::<f64>::zeros(n),
+        ];
+        dirs[0][0] = -pose.y;
+        dirs[0][1] = pose.x;
+        dirs[0][2] = 1.0;
+        dirs[1][0] = 1.0;
+        dirs[2][1] = 1.0;
+        for &(_, pos, i) in &ls {
+            dirs[0][i] = -pos.y;
+            dirs[0][i + 1] = pos.x;
+            dirs[1][i] = 1.0;
+            dirs[2][i + 1] = 1.0;
+        }
+        match p.clone().cholesky() {
+            Some(c) => {
+                let s: Vec<f64> = dirs
+                    .iter()
+                    .map(|d| 1.0 / d.dot(&c.solve(d)).sqrt())
+                    .collect();
+                println!(
+                    "  gauge {t_s:.2}: world turn sigma {:.4} deg, shift sigma x {:.4} m y {:.4} m",
+                    s[0].to_degrees(),
+                    s[1],
+                    s[2]
+                );
+            }
+            None => println!("  gauge {t_s:.2}: covariance not positive definite"),
+        }
+    }
     for a in 0..ls.len() {
         for b in a + 1..ls.len() {
             let (ia, ib) = (ls[a].2, ls[b].2);
@@ -127,6 +163,60 @@ fn print_cov(t_s: f64, ekf: &vslam_ekf::Ekf) {
                 );
             }
         }
+    }
+}
+
+/// The information on turning the pose and every landmark newer than `id0` about `c`
+/// (`--partial-from T`): while only those landmarks are seen it is unobservable, and with a
+/// consistent filter its sigma never falls.
+fn print_partial(
+    t_s: f64,
+    ekf: &vslam_ekf::Ekf,
+    id0: u64,
+    c: (f64, f64),
+    truth: Option<(Pose2, &[vehicle_log::TruthLandmark])>,
+) {
+    let p = ekf.covariance();
+    let n = p.nrows();
+    let pose = truth.map_or(ekf.pose(), |(t, _)| t);
+    let mut d = nalgebra::DVector::<f64>::zeros(n);
+    d[0] = -(pose.y - c.1);
+    d[1] = pose.x - c.0;
+    d[2] = 1.0;
+    let mut k = 0;
+    // The first-estimates filter's unobservable turn has each landmark at its linearisation
+    // point (the landmark's estimate where it has none).
+    let fej = std::env::var("PROBE_EST").is_err();
+    for l in ekf.landmarks() {
+        if l.id.0 > id0
+            && let Some(i) = ekf.landmark_state_index(l.id)
+        {
+            let nearest = truth.and_then(|(_, lamps)| {
+                lamps.iter().min_by(|a, b| {
+                    (a.x - l.position.x)
+                        .hypot(a.y - l.position.y)
+                        .total_cmp(&(b.x - l.position.x).hypot(b.y - l.position.y))
+                })
+            });
+            let at = if let Some(t) = nearest {
+                Vector3::new(t.x, t.y, t.z)
+            } else if fej {
+                ekf.linearisation_point(l.id).unwrap_or(l.position)
+            } else {
+                l.position
+            };
+            d[i] = -(at.y - c.1);
+            d[i + 1] = at.x - c.0;
+            k += 1;
+        }
+    }
+    match p.clone().cholesky() {
+        Some(ch) => println!(
+            "  partial {t_s:.2}: turn of the pose and {k} new landmarks sigma {:.4} deg; heading sigma {:.4} deg",
+            (1.0 / d.dot(&ch.solve(&d)).sqrt()).to_degrees(),
+            p[(2, 2)].sqrt().to_degrees()
+        ),
+        None => println!("  partial {t_s:.2}: covariance not positive definite"),
     }
 }
 
@@ -245,6 +335,8 @@ fn run() -> Result<(), String> {
     let mut every_frame = false;
     let mut nees_at: Option<f64> = None;
     let mut cov_at: Option<(f64, f64)> = None;
+    let mut partial_from: Option<f64> = None;
+    let mut partial: Option<(u64, (f64, f64))> = None;
     let mut worst: usize = 0;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -259,6 +351,13 @@ fn run() -> Result<(), String> {
                     value("--nees-at")?
                         .parse()
                         .map_err(|e| format!("--nees-at: {e}"))?,
+                );
+            }
+            "--partial-from" => {
+                partial_from = Some(
+                    value("--partial-from")?
+                        .parse()
+                        .map_err(|e| format!("--partial-from: {e}"))?,
                 );
             }
             "--cov-at" => {
@@ -582,6 +681,23 @@ fn run() -> Result<(), String> {
         {
             print_cov(t_s, ekf);
         }
+        if let Some(a) = partial_from
+            && t_s >= a
+        {
+            let (id0, c) = *partial.get_or_insert_with(|| {
+                let pose = ekf.pose();
+                (
+                    ekf.landmarks().map(|l| l.id.0).max().unwrap_or(0),
+                    (pose.x, pose.y),
+                )
+            });
+            let truth = if std::env::var("PROBE_TRUE").is_ok() {
+                truth_at(f.t_us).map(|t| (t, lamps.as_slice()))
+            } else {
+                None
+            };
+            print_partial(t_s, ekf, id0, c, truth);
+        }
         let pose = ekf.pose();
         let jump = previous.map_or(0.0, |p| {
             ((p.x - pose.x).powi(2) + (p.y - pose.y).powi(2)).sqrt()
@@ -682,6 +798,25 @@ fn run() -> Result<(), String> {
             outcome.rejected.len(),
             outcome.added.len(),
         );
+        if std::env::var("PROBE_ACC").is_ok() {
+            let list: Vec<String> = outcome
+                .accepted
+                .iter()
+                .map(|(id, _)| {
+                    let pos = ekf.landmark_position(*id).unwrap_or_default();
+                    let lp = ekf.linearisation_point(*id);
+                    format!(
+                        "L{} ({:.1},{:.1}) obs {} lp {}",
+                        id.0,
+                        pos.x,
+                        pos.y,
+                        ekf.observations_of(*id).unwrap_or(0),
+                        lp.map_or("none".to_string(), |q| format!("{:.3}", (q - pos).norm()))
+                    )
+                })
+                .collect();
+            println!("        accepted {list:?}");
+        }
         let c = ekf.camera();
         if opts.vehicle {
             let sd: Vec<String> = ekf
@@ -705,7 +840,11 @@ fn run() -> Result<(), String> {
                     ))
                 })
                 .collect();
-            println!("        sd {sd:?} n {}", ekf.state_len());
+            println!(
+                "        sd {sd:?} n {} baseline {:.5} mm",
+                ekf.state_len(),
+                c.baseline * 1e3
+            );
             println!("        V {:?} v {:?}", c.vehicle, outcome.accepted);
         }
     }

@@ -51,14 +51,15 @@ pub const MERGE_POINT_SIGMA_M: f64 = 0.02;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Slot {
     pub(crate) id: LandmarkId,
-    /// The first-estimates Jacobians' linearisation point (`Ekf::observation_model`): its
-    /// position when added, following its estimate until `settled`; `None` for the
-    /// landmarks handed over by phase 1.
+    /// The linearisation point of its observations' Jacobians (`Ekf::observation_model`):
+    /// its estimate where the covariance last took it (placed, handed over, or moved with
+    /// [`Ekf::shear_linearisation_point`]); `None` only for a landmark whose point could
+    /// not be kept.
     pub(crate) first: Option<Vector3<f64>>,
     pub(crate) observations: u64,
     pub(crate) rejections_in_a_row: u32,
-    /// Whether `first` is frozen: it follows the estimate until the landmark is known to
-    /// [`crate::FEJ_SETTLE_SIGMA_M`].
+    /// Whether the landmark is known to [`crate::FEJ_SETTLE_SIGMA_M`] with the camera
+    /// learned: only then does the iterated update relinearise its observation.
     pub(crate) settled: bool,
 }
 
@@ -103,6 +104,14 @@ impl Ekf {
     pub fn observations_of(&self, id: LandmarkId) -> Option<u64> {
         let s = self.slot(id)?;
         self.landmarks.get(s).map(|slot| slot.observations)
+    }
+
+    /// A landmark's linearisation point for the first-estimates Jacobians
+    /// (`crate::FEJ_SETTLE_SIGMA_M`): `None` for an unknown landmark or one without it (a
+    /// landmark handed over by phase 1, linearised at its estimate). For tests and tools.
+    pub fn linearisation_point(&self, id: LandmarkId) -> Option<Vector3<f64>> {
+        let s = self.slot(id)?;
+        self.landmarks.get(s).and_then(|slot| slot.first)
     }
 
     /// Every landmark's estimate, in state order (increasing id).
@@ -381,9 +390,93 @@ impl Ekf {
         self.insert_landmark(*position, &idx, &g, q, noise)
     }
 
-    /// Every landmark's estimate as its linearisation point for the first-estimates Jacobians
-    /// (after a joint estimate from outside: `Ekf::set_joint`, `Ekf::replace_marginal`); the
-    /// landmarks handed over by phase 1 have none and keep none.
+    /// A landmark's linearisation point moved to its estimate, the covariance with it
+    /// ([`Self::shear_linearisation_point`]); nothing moves while the point cannot be (the
+    /// landmark passive in an open local session).
+    pub(crate) fn follow_estimate(&mut self, s: usize) {
+        let at = self
+            .x
+            .fixed_rows::<3>(StateLayout::landmark(s))
+            .into_owned();
+        if let Some(point) = self.landmarks.get(s).and_then(|l| l.first)
+            && point != at
+            && self.shear_linearisation_point(s, &(at - point))
+            && let Some(slot) = self.landmarks.get_mut(s)
+        {
+            slot.first = Some(at);
+        }
+    }
+
+    /// Re-linearises the landmark in slot `s`'s initialisation at a point moved by `d`
+    /// (metres): `P <- T P T^T` with `T = I + (J d) e_theta^T + (d / B) e_B^T` on the
+    /// landmark's rows, `J` the planar quarter turn and `B` the baseline (when it is
+    /// estimated). A landmark placed from the pose and the camera moves with the heading by
+    /// `J (L - p)` and with the baseline by `(L - C) / B` (`C` the camera); the covariance
+    /// took both at the point it was placed at, and the update's Jacobians are taken at the
+    /// linearisation point. Moved without this, the point leaves the covariance's
+    /// unobservable turn of the world (the landmark at `J (L - c)` for a turn about `c`)
+    /// behind the Jacobians', and every update of the landmark told the filter its heading
+    /// (docs/halls.md, "The linearisation point"). `T` is invertible: no information is
+    /// made or lost. Returns whether it was applied (not to a landmark passive in an open
+    /// local session).
+    pub(crate) fn shear_linearisation_point(&mut self, s: usize, d: &Vector3<f64>) -> bool {
+        let i = StateLayout::landmark(s);
+        let mut shears: Vec<(usize, [f64; 3])> = alloc::vec![(2, [-d.y, d.x, 0.0])];
+        if let Some(k) = self
+            .estimated
+            .iter()
+            .position(|p| *p == rig_model::camera::Param::Baseline)
+        {
+            let b = self.camera().baseline;
+            shears.push((self.camera_offset() + k, [d.x / b, d.y / b, d.z / b]));
+        }
+        match self.local.as_deref_mut() {
+            None => {
+                let n = self.p.nrows();
+                for (src, a) in &shears {
+                    let targets = [(i, a[0]), (i + 1, a[1]), (i + 2, a[2])];
+                    shear_rows(self.p.as_mut_slice(), n, &targets, *src);
+                }
+                true
+            }
+            Some(l) => {
+                let place = |c: usize| match l.place.get(c) {
+                    Some(&crate::local::Place::Active(k)) => Some(k),
+                    _ => None,
+                };
+                let (Some(k0), Some(k1), Some(k2)) = (place(i), place(i + 1), place(i + 2)) else {
+                    return false;
+                };
+                let Some(local): Option<Vec<(usize, [f64; 3])>> = shears
+                    .iter()
+                    .map(|(src, a)| place(*src).map(|k| (k, *a)))
+                    .collect()
+                else {
+                    return false;
+                };
+                let na = l.paa.nrows();
+                let na0 = l.n_a0;
+                for (ks, a) in local {
+                    let targets = [(k0, a[0]), (k1, a[1]), (k2, a[2])];
+                    shear_rows(l.paa.as_mut_slice(), na, &targets, ks);
+                    // phi's rows by the same transform (`P_BA`'s share).
+                    for t in 0..na0 {
+                        let src = l.phit.get(ks * na0 + t).copied().unwrap_or(0.0);
+                        for &(k, ak) in &targets {
+                            if let Some(v) = l.phit.get_mut(k * na0 + t) {
+                                *v += ak * src;
+                            }
+                        }
+                    }
+                }
+                true
+            }
+        }
+    }
+
+    /// Every landmark's estimate as its linearisation point (after a joint estimate from
+    /// outside, `Ekf::set_joint`, `Ekf::replace_marginal`, whose covariance was taken at the
+    /// estimate).
     pub(crate) fn relinearise_landmarks(&mut self) {
         for k in 0..self.landmarks.len() {
             let at = self
@@ -641,4 +734,34 @@ pub(crate) fn carried_by_pose(pose: &rig_model::Pose2, world: &Vector3<f64>) -> 
         0.0,
         0.0,
     )
+}
+
+/// `P <- T P T^T` on the lower triangle of the symmetric `n x n` buffer `p`, with
+/// `T = I + sum_t a_t e_t e_src^T` (each target row plus `a_t` times the source row; the
+/// source is not a target).
+fn shear_rows(p: &mut [f64], n: usize, targets: &[(usize, f64)], src: usize) {
+    use crate::linalg::sym;
+    use crate::state::at;
+    let row_src: Vec<f64> = (0..n).map(|j| sym(p, n, src, j)).collect();
+    let old: Vec<Vec<f64>> = targets
+        .iter()
+        .map(|&(t, _)| (0..n).map(|j| sym(p, n, t, j)).collect())
+        .collect();
+    let is_target = |j: usize| targets.iter().position(|&(t, _)| t == j);
+    for (ti, &(t, a)) in targets.iter().enumerate() {
+        for j in 0..n {
+            let v = match is_target(j) {
+                // Both ends targets: P_tj + a_t P_sj + a_j P_ts + a_t a_j P_ss.
+                Some(tj) => {
+                    let aj = targets[tj].1;
+                    old[ti][j] + a * row_src[j] + aj * old[ti][src] + a * aj * row_src[src]
+                }
+                None => old[ti][j] + a * row_src[j],
+            };
+            let (r, c) = if t >= j { (t, j) } else { (j, t) };
+            if let Some(x) = p.get_mut(at(n, r, c)) {
+                *x = v;
+            }
+        }
+    }
 }

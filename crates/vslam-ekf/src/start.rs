@@ -249,12 +249,14 @@ impl Ekf {
         ekf.x = x;
         ekf.p = p;
         let mut ids = Vec::with_capacity(nl);
-        for l in &handover.landmarks {
+        for (k, l) in handover.landmarks.iter().enumerate() {
             let id = LandmarkId(ekf.next_id);
             ekf.next_id += 1;
+            // Linearised where the batch's covariance was taken: its estimate.
+            let point = ekf.x.fixed_rows::<3>(StateLayout::landmark(k)).into_owned();
             ekf.landmarks.push(Slot {
                 id,
-                first: None,
+                first: Some(point),
                 observations: l.observations,
                 rejections_in_a_row: 0,
                 settled: true,

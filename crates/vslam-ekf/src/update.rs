@@ -424,16 +424,19 @@ impl Ekf {
         } else {
             report.rejected.push(gated);
         }
-        // The landmark's linearisation point follows it until it is known well enough
-        // (`FEJ_SETTLE_SIGMA_M`), except while the pose is lost (`FEJ_POSITION_SIGMA_M`).
-        if accepted && !self.pose_lost() && self.landmarks.get(s).is_some_and(|l| !l.settled) {
-            let camera_learned = self.camera_learned();
-            let i = StateLayout::landmark(s);
-            let b = self.block3(i);
-            let at = self.x.fixed_rows::<3>(i).into_owned();
-            if let Some(slot) = self.landmarks.get_mut(s) {
-                slot.first = Some(at);
-                if b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M && camera_learned {
+        // The landmark's linearisation point follows it, with the covariance
+        // (`Ekf::shear_linearisation_point`), except while the pose is lost
+        // (`FEJ_POSITION_SIGMA_M`); it settles for the iterated update once it is known well
+        // enough (`FEJ_SETTLE_SIGMA_M`).
+        if accepted && !self.pose_lost() {
+            self.follow_estimate(s);
+            if self.landmarks.get(s).is_some_and(|l| !l.settled) {
+                let camera_learned = self.camera_learned();
+                let b = self.block3(StateLayout::landmark(s));
+                if let Some(slot) = self.landmarks.get_mut(s)
+                    && b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M
+                    && camera_learned
+                {
                     slot.settled = true;
                 }
             }
@@ -476,6 +479,9 @@ impl Ekf {
         s: usize,
         z: &Measurement,
     ) -> Result<Option<(f64, bool)>, Error> {
+        if !self.pose_lost() {
+            self.follow_estimate(s);
+        }
         let camera = self.camera();
         let pose = self.pose();
         let id = self.landmarks.get(s).map_or(LandmarkId(u64::MAX), |l| l.id);
@@ -626,6 +632,13 @@ impl Ekf {
     ) -> Result<UpdateReport, Error> {
         let slots = self.batch_slots(batch)?;
         self.prepare_local(&slots);
+        // Each observation linearised at its landmark's estimate, the covariance moved with
+        // it (other updates and the smoother move landmarks they do not observe).
+        if !self.pose_lost() {
+            for &s in &slots {
+                self.follow_estimate(s);
+            }
+        }
         let camera = self.camera();
         let pose = self.pose();
         // Linearise every observation at the current estimate; one that cannot be projected
@@ -1520,5 +1533,123 @@ mod landmark_only_tests {
         assert!(!accepted && nis > ekf.gate_bound(), "{nis}");
         assert_eq!(ekf.state(), before.state());
         assert_eq!(ekf.covariance(), before.covariance());
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod linearisation_point_tests {
+    use super::*;
+    use crate::Settings;
+
+    /// Moving a landmark's linearisation point by `d` is `P <- T P T^T` with `T = I + (J d)
+    /// e_theta^T + (d / B) e_B^T` on the landmark's rows, against the dense product by
+    /// nalgebra, with the filter dense and in a local session.
+    #[test]
+    fn moving_a_linearisation_point_shears_the_covariance_dense_and_in_a_session() {
+        for margin in [0.0, 1.0] {
+            let mut ekf = crate::local::tests::drive(margin);
+            let (id, _) = ekf.visible_landmarks()[0];
+            let s = ekf.slot(id).unwrap();
+            if margin > 0.0 {
+                ekf.prepare_local(&[s]);
+                assert!(ekf.local.is_some(), "no session open");
+            }
+            let dense = |e: &Ekf| {
+                let mut e = e.clone();
+                e.settle();
+                e.covariance()
+            };
+            let p = dense(&ekf);
+            let n = p.nrows();
+            let d = Vector3::new(0.3, -0.2, 0.4);
+            let li = ekf.landmark_state_index(id).unwrap();
+            let kb = ekf.camera_state_index(Param::Baseline).unwrap();
+            let b = ekf.camera().baseline;
+            let mut t = DMatrix::<f64>::identity(n, n);
+            t[(li, 2)] = -d.y;
+            t[(li + 1, 2)] = d.x;
+            for a in 0..3 {
+                t[(li + a, kb)] = d[a] / b;
+            }
+            let want = &t * &p * t.transpose();
+            assert!(ekf.shear_linearisation_point(s, &d), "margin {margin}");
+            let got = dense(&ekf);
+            let off = (&got - &want).amax() / p.amax();
+            assert!(
+                off < 1e-12,
+                "margin {margin}: covariance off by {off} (relative)"
+            );
+        }
+    }
+
+    /// Deterministic pixel noise, +-0.5 px.
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
+    /// A dark stretch, then lamps seen for the first time only: nothing the filter sees ties
+    /// them to the map before the stretch, so its heading's sigma must not fall. With the
+    /// linearisation points frozen once a landmark was known to 0.5 m, after moving without
+    /// the covariance, it did (docs/halls.md, "The linearisation point").
+    #[test]
+    fn lamps_seen_for_the_first_time_do_not_tell_the_filter_its_heading() {
+        let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
+        let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
+        let mut noise = Lcg(11);
+        // Lamps 7 m above the cameras, in rows across the drive; none between x = 8 and
+        // x = 20 m.
+        let lamps: Vec<Vector3<f64>> = (0..200)
+            .map(|k| Vector3::new(f64::from(k / 5), f64::from(k % 5) - 2.0, 7.8))
+            .filter(|p| p.x < 8.0 || p.x > 20.0)
+            .collect();
+        let mut ids: Vec<Option<LandmarkId>> = alloc::vec![None; lamps.len()];
+        let mut truth = Pose2::default();
+        let (v, dt) = (0.5, 0.1);
+        let mut sigma_at_dark_end = None;
+        for _ in 0..800 {
+            ekf.predict(v, 0.0, 0.0, dt).unwrap();
+            truth = Pose2::new(truth.x + v * dt, 0.0, 0.0);
+            if truth.x > 17.0 && sigma_at_dark_end.is_none() {
+                sigma_at_dark_end = Some(ekf.cov(2, 2).sqrt());
+            }
+            let mut batch = Vec::new();
+            for (p, id) in lamps.iter().zip(ids.iter_mut()) {
+                if (p.x - truth.x).abs() > 3.0 {
+                    continue;
+                }
+                let Ok(mut z) = rig_model::project(&rig.nominal, &truth, p) else {
+                    continue;
+                };
+                for c in z.iter_mut() {
+                    *c += noise.next();
+                }
+                match id {
+                    Some(id) => batch.push((*id, z)),
+                    None => *id = Some(ekf.add_landmark(&z).unwrap()),
+                }
+            }
+            ekf.update(&batch).unwrap();
+            if truth.x > 35.0 {
+                break;
+            }
+        }
+        let before = sigma_at_dark_end.unwrap();
+        let after = ekf.cov(2, 2).sqrt();
+        assert!(
+            before > 1e-3,
+            "the dark stretch left the heading known to {before} rad"
+        );
+        assert!(
+            after >= 0.98 * before,
+            "the heading's sigma fell from {before} to {after} rad on lamps seen for the first time"
+        );
     }
 }
