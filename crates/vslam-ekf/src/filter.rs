@@ -46,41 +46,38 @@ pub const ITERATE_HEADING_SIGMA_RAD: f64 = 0.035;
 /// sigmas of its linear model's.
 pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 
-/// A landmark is settled, and the iterated update relinearises its observation, once its
-/// largest position sigma is below this, metres, and the camera is learned
-/// ([`FEJ_CAMERA_RELATIVE`]).
-///
-/// Its observations' Jacobians are taken at its linearisation point, which follows its
-/// estimate: before each update that observes it, and after each accepted one, the point
-/// moves to the estimate and the covariance is re-linearised with it
-/// ([`Ekf::shear_linearisation_point`]: the landmark's rows sheared by its move times the
-/// heading's and the baseline's, as the landmark was placed from them), so that the
-/// covariance's unobservable turn of the world stays the one the Jacobians see. First
-/// estimates frozen (the FEJ-EKF of Huang, Mourikis and Roumeliotis, ICRA 2008) kept the
-/// turn but linearised lamps 5 m above a narrow lens far off (the first stereo depth is
-/// half a metre out at 8 m); frozen once the landmark was known to 0.5 m (the rule before
-/// 2026-12-06) they had already moved, and every move without the shear gave the filter
-/// information on its heading: after the 16 m dark stretch of hall 22 (`hall_mc 1 22 --lens
-/// radtan`) the heading's sigma fell from 0.26 to 0.08 degrees in 9 s of lamps seen for the
-/// first time, with the heading 0.47 degrees off, and the map came out 0.25 m RMS off with
-/// 33 landmarks beyond 0.1 m (docs/halls.md, "The linearisation point"). A joint estimate
-/// from the smoother (`Ekf::set_joint`) is a new linearisation point of every landmark.
+/// First-estimates Jacobians (the FEJ-EKF of Huang, Mourikis and Roumeliotis, ICRA 2008): the
+/// update's Jacobians of a landmark's observation are taken at a fixed linearisation point of
+/// that landmark (the pose's and the landmark's columns; the camera's at the estimate, as
+/// they are not in the unobservable directions), which follows the landmark's estimate until
+/// its largest position sigma is below this, metres, and the camera is learned
+/// ([`FEJ_CAMERA_RELATIVE`]), and then stays; a joint estimate from the smoother
+/// (`Ekf::set_joint`) is a new linearisation point, and the iterated update relinearises at
+/// the estimate but for the heading's column (the observability constraint at this point:
+/// `Ekf::observation_model_constrained`). Jacobians at each
+/// update's estimate gave the filter information on its global heading from lamps seen for the first time: on a loop (5.6
+/// degrees of heading sigma became 0.4 within a second, docs/halls.md "Loops") and after
+/// every dark stretch of the generated halls (the heading's sigma halved by new lamps while
+/// its error grew to 0.5 degrees, 3 sigma; docs/benchmarks.md, "Halls with LED panels and
+/// dark stretches"). Frozen at the landmark's very first estimate, a narrow lens's lamps 5 m
+/// above the cameras were linearised too far off (two of eight halls inconsistent); 0.5 m
+/// left every hall consistent.
 pub const FEJ_SETTLE_SIGMA_M: f64 = 0.5;
 
-/// A landmark settles ([`FEJ_SETTLE_SIGMA_M`]) only once the camera's estimated parameters
-/// move a landmark by at most this share of its distance (their sigmas over the focal length
-/// or the baseline, or in radians and metres): from nominal values 2.5 % off (the paper's
-/// square) a linearisation point frozen early (when settling froze it) left the focal length
-/// 6.8 sigma off and lost every lamp of a seed as the camera converged.
+/// A landmark's linearisation point settles ([`FEJ_SETTLE_SIGMA_M`]) only once the camera's
+/// estimated parameters move a landmark by at most this share of its distance (their sigmas
+/// over the focal length or the baseline, or in radians and metres): from nominal values
+/// 2.5 % off (the paper's square) a point settled early left the focal length 6.8 sigma off
+/// and lost every lamp of a seed as the camera converged.
 pub const FEJ_CAMERA_RELATIVE: f64 = 0.005;
 
-/// While the pose's position sigma is above this, metres, the pose is lost: linearisation
-/// points stay where they are (lamps seen for the first time must not tell the filter where
-/// it is).
+/// While the pose's position sigma is above this, metres, the pose is lost: a new landmark's
+/// linearisation point stays at its first estimate (lamps seen for the first time must not
+/// tell the filter where it is).
 pub const FEJ_POSITION_SIGMA_M: f64 = 0.5;
 
 /// While the pose's heading sigma is above this, radians, the pose is lost as it is by
-/// [`FEJ_POSITION_SIGMA_M`]: linearisation points stay where they are. Wheels that slip for a
+/// [`FEJ_POSITION_SIGMA_M`]: new landmarks keep their first estimates. Wheels that slip for a
 /// while leave the position known to a decimetre after a 15 m dark stretch but the heading to
 /// 2.3 degrees; the update iterated at each estimate (its threshold
 /// [`ITERATE_HEADING_SIGMA_RAD`]) took the heading's sigma to 0.9 degrees from two lamps seen
@@ -165,6 +162,20 @@ pub struct Settings {
     /// filter can take follows from this (docs/c-api.md). Once full, new landmarks are
     /// refused ([`crate::Error::LandmarkCap`]): lamps beyond it are not mapped.
     pub max_landmarks: usize,
+    /// Whether a landmark's linearisation point follows its estimate for good, the
+    /// covariance re-linearised with it at each move ([`Ekf::shear_linearisation_point`]),
+    /// the landmarks handed over by phase 1 included. Off (the default), the point follows the
+    /// estimate without the covariance until [`FEJ_SETTLE_SIGMA_M`] and then stays, and each
+    /// move before it gives the filter information on its heading that nothing in view holds:
+    /// after hall 22's 16 m dark stretch, lamps seen for the first time took the heading's
+    /// sigma from 0.26 to 0.08 degrees with the heading 0.47 degrees off. On, the 24 white
+    /// halls of `hall_mc` end with every landmark near its lamp inside 3 sigma (3583 of
+    /// 3583, against 3227 of 3287) and 41 lamps missed (52), but the radtan hall with
+    /// odometry memory loses its scale (landmarks 19.6 -> 70.6 mm RMS, the baseline honest
+    /// at -0.28 mm and 0.30 sigma) and the paper's square, whose focal length is estimated,
+    /// is inconsistent (the shear moves the heading and the baseline only): measured, not the
+    /// default (docs/halls.md, "The linearisation point").
+    pub follow_points: bool,
 }
 
 impl Default for Settings {
@@ -183,6 +194,7 @@ impl Default for Settings {
             far_updates_per_frame: 8,
             local_margin_m: 1.0,
             max_landmarks: usize::MAX,
+            follow_points: false,
         }
     }
 }

@@ -252,11 +252,12 @@ impl Ekf {
         for (k, l) in handover.landmarks.iter().enumerate() {
             let id = LandmarkId(ekf.next_id);
             ekf.next_id += 1;
-            // Linearised where the batch's covariance was taken: its estimate.
+            // With `Settings::follow_points`, linearised where the batch's covariance was
+            // taken, its estimate; else at the estimate throughout.
             let point = ekf.x.fixed_rows::<3>(StateLayout::landmark(k)).into_owned();
             ekf.landmarks.push(Slot {
                 id,
-                first: Some(point),
+                first: ekf.settings.follow_points.then_some(point),
                 observations: l.observations,
                 rejections_in_a_row: 0,
                 settled: true,

@@ -424,20 +424,31 @@ impl Ekf {
         } else {
             report.rejected.push(gated);
         }
-        // The landmark's linearisation point follows it, with the covariance
-        // (`Ekf::shear_linearisation_point`), except while the pose is lost
-        // (`FEJ_POSITION_SIGMA_M`); it settles for the iterated update once it is known well
-        // enough (`FEJ_SETTLE_SIGMA_M`).
+        // The landmark's linearisation point follows it until it is known well enough
+        // (`FEJ_SETTLE_SIGMA_M`), except while the pose is lost (`FEJ_POSITION_SIGMA_M`); with
+        // `Settings::follow_points` for good, the covariance with it
+        // (`Ekf::shear_linearisation_point`), and settling only lets the iterated update
+        // relinearise it.
         if accepted && !self.pose_lost() {
-            self.follow_estimate(s);
-            if self.landmarks.get(s).is_some_and(|l| !l.settled) {
+            let follow = self.settings.follow_points;
+            let settled = self.landmarks.get(s).is_some_and(|l| l.settled);
+            if follow {
+                self.follow_estimate(s);
+            }
+            if !settled {
                 let camera_learned = self.camera_learned();
-                let b = self.block3(StateLayout::landmark(s));
-                if let Some(slot) = self.landmarks.get_mut(s)
-                    && b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M
-                    && camera_learned
-                {
-                    slot.settled = true;
+                let i = StateLayout::landmark(s);
+                let b = self.block3(i);
+                let at = self.x.fixed_rows::<3>(i).into_owned();
+                if let Some(slot) = self.landmarks.get_mut(s) {
+                    if !follow {
+                        slot.first = Some(at);
+                    }
+                    if b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M
+                        && camera_learned
+                    {
+                        slot.settled = true;
+                    }
                 }
             }
         }
@@ -479,7 +490,7 @@ impl Ekf {
         s: usize,
         z: &Measurement,
     ) -> Result<Option<(f64, bool)>, Error> {
-        if !self.pose_lost() {
+        if self.settings.follow_points && !self.pose_lost() {
             self.follow_estimate(s);
         }
         let camera = self.camera();
@@ -632,9 +643,10 @@ impl Ekf {
     ) -> Result<UpdateReport, Error> {
         let slots = self.batch_slots(batch)?;
         self.prepare_local(&slots);
-        // Each observation linearised at its landmark's estimate, the covariance moved with
-        // it (other updates and the smoother move landmarks they do not observe).
-        if !self.pose_lost() {
+        // With `Settings::follow_points`, each observation linearised at its landmark's
+        // estimate, the covariance moved with it (other updates and the smoother move
+        // landmarks they do not observe).
+        if self.settings.follow_points && !self.pose_lost() {
             for &s in &slots {
                 self.follow_estimate(s);
             }
@@ -1597,12 +1609,18 @@ mod linearisation_point_tests {
 
     /// A dark stretch, then lamps seen for the first time only: nothing the filter sees ties
     /// them to the map before the stretch, so its heading's sigma must not fall. With the
-    /// linearisation points frozen once a landmark was known to 0.5 m, after moving without
-    /// the covariance, it did (docs/halls.md, "The linearisation point").
+    /// points following the estimates and the covariance moved with them
+    /// (`Settings::follow_points`) it does not (0.0119 -> 0.0127 rad); moved without it,
+    /// 0.0119 -> 0.0013 rad. The default rule moves them without it until a landmark is known
+    /// to 0.5 m (docs/halls.md, "The linearisation point").
     #[test]
     fn lamps_seen_for_the_first_time_do_not_tell_the_filter_its_heading() {
         let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
-        let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
+        let settings = Settings {
+            follow_points: true,
+            ..Settings::default()
+        };
+        let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
         let mut noise = Lcg(11);
         // Lamps 7 m above the cameras, in rows across the drive; none between x = 8 and
         // x = 20 m.
