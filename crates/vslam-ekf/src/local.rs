@@ -429,10 +429,10 @@ pub(crate) mod tests {
         crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005), (Param::F, 5.0)])
     }
 
-    /// Deterministic pixel noise.
-    struct Lcg(u64);
+    /// Deterministic pixel noise, +-0.3 px.
+    pub(crate) struct Lcg(pub(crate) u64);
     impl Lcg {
-        fn next(&mut self) -> f64 {
+        pub(crate) fn next(&mut self) -> f64 {
             self.0 = self
                 .0
                 .wrapping_mul(6_364_136_223_846_793_005)
