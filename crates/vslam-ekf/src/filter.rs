@@ -174,7 +174,9 @@ pub struct Settings {
     /// odometry memory loses its scale (landmarks 19.6 -> 70.6 mm RMS, the baseline honest
     /// at -0.28 mm and 0.30 sigma) and the paper's square, whose focal length is estimated,
     /// is inconsistent (the shear moves the heading and the baseline only): measured, not the
-    /// default (docs/halls.md, "The linearisation point").
+    /// default (docs/halls.md, "The linearisation point"). The points move before the update
+    /// is linearised, and stay moved when it is refused: the shear changes the covariance's
+    /// entries, not what it knows.
     pub follow_points: bool,
 }
 
