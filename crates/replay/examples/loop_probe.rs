@@ -7,7 +7,7 @@
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
 //! [--no-smoother] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
-//! [--nees-at T_S [--worst N]] [--cov-at T_S]`:
+//! [--nees-at T_S [--worst N]] [--cov-at T_S] [--partial-from T_S]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
 //! smoother; `--rig` runs on that rig instead of the log's; `--field` and `--max-in-view` set
@@ -20,8 +20,13 @@
 //! prints, every frame for half a second from `T` seconds, the covariance's structure
 //! ([`print_cov`]: the heading's sigma given the map, the common turn of the landmarks near
 //! the vehicle, and every twin pair's difference against the heading) and, at phase 1's
-//! hand-over, each landmark handed over with when it was first seen. Every 100th
-//! frame is printed too (the drift in between).
+//! hand-over, each landmark handed over with when it was first seen; `--partial-from T`
+//! prints every frame from `T` seconds the information on turning the pose and the
+//! landmarks newer than `T` together ([`print_partial`]; the landmarks at their
+//! linearisation points, at their estimates with `PROBE_EST` set, the pose and the lamps at
+//! the truth with `PROBE_TRUE`). With `PROBE_ACC` set, every printed frame lists the
+//! landmarks the update accepted with their linearisation point's distance from the
+//! estimate. Every 100th frame is printed too (the drift in between).
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::collections::BTreeMap;

@@ -254,10 +254,13 @@ impl Ekf {
             ekf.next_id += 1;
             // With `Settings::follow_points`, linearised where the batch's covariance was
             // taken, its estimate; else at the estimate throughout.
-            let point = ekf.x.fixed_rows::<3>(StateLayout::landmark(k)).into_owned();
+            let first = ekf
+                .settings
+                .follow_points
+                .then(|| ekf.x.fixed_rows::<3>(StateLayout::landmark(k)).into_owned());
             ekf.landmarks.push(Slot {
                 id,
-                first: ekf.settings.follow_points.then_some(point),
+                first,
                 observations: l.observations,
                 rejections_in_a_row: 0,
                 settled: true,

@@ -1487,13 +1487,8 @@ mod landmark_only_tests {
             let z = z0 + Vector4::new(0.4, -0.3, 0.2, 0.1);
             let n = ekf.state_len();
             let x = ekf.state().clone();
-            // Read through a settled copy (entry by entry, a session's passive block is slow).
-            let dense = |e: &Ekf| {
-                let mut e = e.clone();
-                e.settle();
-                e.covariance()
-            };
-            let p = dense(&ekf);
+            // `covariance` reads a session through a settled copy.
+            let p = ekf.covariance();
             let (zhat, h) = ekf.update_jacobian(id).unwrap();
             let r =
                 DMatrix::from_diagonal(&DVector::from_row_slice(&ekf.measurement_variances(&zhat)));
@@ -1513,7 +1508,7 @@ mod landmark_only_tests {
             assert!((nis - nis_want).abs() < 1e-9 * nis_want.max(1.0));
             let dx = (ekf.state() - &x_want).amax();
             assert!(dx < 1e-10, "margin {margin}: state off by {dx}");
-            let got = dense(&ekf);
+            let got = ekf.covariance();
             let dp = (&got - &p_want).amax() / p.amax();
             assert!(
                 dp < 1e-9,
@@ -1567,12 +1562,7 @@ mod linearisation_point_tests {
                 ekf.prepare_local(&[s]);
                 assert!(ekf.local.is_some(), "no session open");
             }
-            let dense = |e: &Ekf| {
-                let mut e = e.clone();
-                e.settle();
-                e.covariance()
-            };
-            let p = dense(&ekf);
+            let p = ekf.covariance();
             let n = p.nrows();
             let d = Vector3::new(0.3, -0.2, 0.4);
             let li = ekf.landmark_state_index(id).unwrap();
@@ -1586,7 +1576,7 @@ mod linearisation_point_tests {
             }
             let want = &t * &p * t.transpose();
             assert!(ekf.shear_linearisation_point(s, &d), "margin {margin}");
-            let got = dense(&ekf);
+            let got = ekf.covariance();
             let off = (&got - &want).amax() / p.amax();
             assert!(
                 off < 1e-12,
