@@ -7,13 +7,14 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--follow-points] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
 //! smoother over the landmarks near the vehicle, `nav::NavSettings::smooth_near_vehicle`;
-//! `--follow-points`: linearisation points that follow the landmarks' estimates with the
-//! covariance, `vslam_ekf::Settings::follow_points`; `--reference`: each hall's frames also solved as one batch with the truth's association,
+//! `--frozen-points`: linearisation points that follow the landmarks' estimates without the
+//! covariance until they are known to 0.5 m and then stay (`vslam_ekf::Settings::follow_points`
+//! off, the rule before 2026-12-06); `--reference`: each hall's frames also solved as one batch with the truth's association,
 //! its landmark RMS and the navigator's ratio to it printed: a minute or more a hall). With `--keep DIR` each
 //! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
 //! `--odometry-tau S` gives the odometry's errors that time constant of memory (issue 36), in
@@ -69,7 +70,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--follow-points] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
     let mut settings = NavSettings::default();
     let mut lens = None;
     let mut positional = Vec::new();
@@ -113,7 +114,7 @@ fn run() -> Result<(), String> {
                     .map_err(|_| format!("--far-gain {v:?}: {usage}"))?;
             }
             "--smooth-near" => settings.smooth_near_vehicle = true,
-            "--follow-points" => settings.ekf.follow_points = true,
+            "--frozen-points" => settings.ekf.follow_points = false,
             "--odometry-tau" => {
                 let v = rest.next().ok_or(usage)?;
                 odometry_tau = Some(

@@ -63,6 +63,29 @@ pub(crate) struct Slot {
     /// learned: `first` stops following the estimate (unless `Settings::follow_points`), and
     /// the iterated update relinearises its observation.
     pub(crate) settled: bool,
+    /// With `Settings::follow_points`, how the covariance holds the landmark's placement in
+    /// the camera ([`Placement`]); `None` by default, or where no stereo pair from the
+    /// placing pose sees the point.
+    pub(crate) placement: Option<Placement>,
+}
+
+/// A landmark's placement as the covariance holds it: the pose it was placed from and its
+/// derivative in every camera parameter at its linearisation point, as a stereo pair from
+/// that pose sees it (`L = pose * mount * (B / d) (u - cx, v - cy, f)`).
+///
+/// Kept because a column must be re-linearised absolutely, not by the point's move: the
+/// focal length's column is `R (0, 0, z / f) = R (0, 0, B / d)`, unchanged when the focal
+/// length is refined and the landmark's depth with it; only a change of the disparity the
+/// point stands for moves it. Taken as the move `d` times the column's derivative at the
+/// current camera, it was sheared on every refinement of `f` (the paper's square, whose `f`
+/// starts 2.5 % off, ended 6.9 sigma off; docs/halls.md, "The linearisation point").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Placement {
+    /// The vehicle's pose it was placed from (handed over: the pose at the hand-over).
+    pub(crate) pose: rig_model::Pose2,
+    /// `dL/dC` at the linearisation point and the camera of the last re-linearisation, every
+    /// parameter's column (those not estimated unused).
+    pub(crate) columns: rig_model::rig::Jac3xC,
 }
 
 impl Ekf {
@@ -410,30 +433,74 @@ impl Ekf {
         }
     }
 
+    /// The placement's camera columns for a landmark at `at` placed from `pose`: the stereo
+    /// pair the current camera would see of it there, triangulated back
+    /// ([`rig_model::Triangulation::jac_camera_in_world`]). `None` when no pair from that
+    /// pose sees the point (behind the cameras, no disparity).
+    pub(crate) fn placement_at(
+        &self,
+        pose: &rig_model::Pose2,
+        at: &Vector3<f64>,
+    ) -> Option<Placement> {
+        let camera = self.camera();
+        let z = rig_model::project(&camera, pose, at).ok()?;
+        let tri = rig_model::triangulate(&camera, &z).ok()?;
+        let columns = tri.jac_camera_in_world(&camera, pose);
+        columns.iter().all(|v| v.is_finite()).then_some(Placement {
+            pose: *pose,
+            columns,
+        })
+    }
+
     /// Re-linearises the landmark in slot `s`'s initialisation at a point moved by `d`
-    /// (metres): `P <- T P T^T` with `T = I + (J d) e_theta^T + (d / B) e_B^T` on the
-    /// landmark's rows, `J` the planar quarter turn and `B` the baseline (when it is
-    /// estimated). A landmark placed from the pose and the camera moves with the heading by
-    /// `J (L - p)` and with the baseline by `(L - C) / B` (`C` the camera); the covariance
-    /// took both at the point it was placed at, and the update's Jacobians are taken at the
-    /// linearisation point. Moved without this, the point leaves the covariance's
-    /// unobservable turn of the world (the landmark at `J (L - c)` for a turn about `c`)
-    /// behind the Jacobians', and every update of the landmark told the filter its heading
-    /// (docs/halls.md, "The linearisation point"). `T` is invertible: no information is
-    /// made or lost. Returns whether it was applied (not to a landmark passive in an open
-    /// local session).
+    /// (metres): `P <- T P T^T`, `T` the identity but for the landmark's rows, which gain
+    /// `(J d) e_theta^T` and, for each estimated camera parameter `c`, `(g_c(new) - g_c) e_c^T`:
+    /// `J` the planar quarter turn, `g_c` the placement's column in `c` as the covariance
+    /// holds it ([`Placement`]) and `g_c(new)` the same at the new point and the current
+    /// camera. A landmark placed from the pose and the camera moves with the heading by
+    /// `J (L - p)` and with the camera by its columns (with the baseline by `(L - C) / B`,
+    /// `C` the camera; with the focal length along the optical axis by `B / d`); the
+    /// covariance took them at the point it was placed at, and the update's Jacobians are
+    /// taken at the linearisation point. Moved without this, the point leaves the
+    /// covariance's unobservable turn of the world (the landmark at `J (L - c)` for a turn
+    /// about `c`) behind the Jacobians', and every update of the landmark told the filter
+    /// its heading (docs/halls.md, "The linearisation point"). `T` is invertible: no
+    /// information is made or lost. Without a placement (no pair from its pose sees the new
+    /// point) the baseline's column moves by `d / B` and no other camera column moves.
+    /// Returns whether it was applied (not to a landmark passive in an open local session).
     pub(crate) fn shear_linearisation_point(&mut self, s: usize, d: &Vector3<f64>) -> bool {
         let i = StateLayout::landmark(s);
         let mut shears: Vec<(usize, [f64; 3])> = alloc::vec![(2, [-d.y, d.x, 0.0])];
-        if let Some(k) = self
-            .estimated
-            .iter()
-            .position(|p| *p == rig_model::camera::Param::Baseline)
-        {
-            let b = self.camera().baseline;
-            shears.push((self.camera_offset() + k, [d.x / b, d.y / b, d.z / b]));
+        let slot = self.landmarks.get(s).copied();
+        let point = slot.and_then(|l| l.first);
+        let moved = match (slot.and_then(|l| l.placement), point) {
+            (Some(old), Some(point)) => self
+                .placement_at(&old.pose, &(point + d))
+                .map(|new| (old, new)),
+            _ => None,
+        };
+        let c0 = self.camera_offset();
+        match &moved {
+            Some((old, new)) => {
+                for (k, p) in self.estimated.iter().enumerate() {
+                    let g = new.columns.column(p.index()) - old.columns.column(p.index());
+                    if g.iter().any(|v| *v != 0.0) {
+                        shears.push((c0 + k, [g.x, g.y, g.z]));
+                    }
+                }
+            }
+            None => {
+                if let Some(k) = self
+                    .estimated
+                    .iter()
+                    .position(|p| *p == rig_model::camera::Param::Baseline)
+                {
+                    let b = self.camera().baseline;
+                    shears.push((c0 + k, [d.x / b, d.y / b, d.z / b]));
+                }
+            }
         }
-        match self.local.as_deref_mut() {
+        let applied = match self.local.as_deref_mut() {
             None => {
                 let n = self.p.nrows();
                 for (src, a) in &shears {
@@ -474,7 +541,14 @@ impl Ekf {
                 }
                 true
             }
+        };
+        if applied
+            && let Some((_, new)) = moved
+            && let Some(slot) = self.landmarks.get_mut(s)
+        {
+            slot.placement = Some(new);
         }
+        applied
     }
 
     /// Every landmark's estimate as its linearisation point (after a joint estimate from
@@ -486,10 +560,16 @@ impl Ekf {
                 .x
                 .fixed_rows::<3>(StateLayout::landmark(k))
                 .into_owned();
+            let placement = self
+                .landmarks
+                .get(k)
+                .and_then(|l| l.placement)
+                .and_then(|old| self.placement_at(&old.pose, &at));
             if let Some(slot) = self.landmarks.get_mut(k)
                 && slot.first.is_some()
             {
                 slot.first = Some(at);
+                slot.placement = placement;
             }
         }
     }
@@ -509,6 +589,12 @@ impl Ekf {
                 cap: self.settings.max_landmarks,
             });
         }
+        // Read before the state grows (the camera's rows move).
+        let placement = if self.settings.follow_points {
+            self.placement_at(&self.pose(), &position)
+        } else {
+            None
+        };
         let n = self.x.len();
         let c0 = self.camera_offset();
         let m = self.estimated.len();
@@ -575,6 +661,7 @@ impl Ekf {
             observations: 1,
             rejections_in_a_row: 0,
             settled: false,
+            placement,
         });
         self.health.landmarks_added += 1;
         Ok(id)

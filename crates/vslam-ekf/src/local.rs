@@ -446,11 +446,15 @@ pub(crate) mod tests {
     /// near the vehicle, a landmark added, two removed (one near, one far), one merged. Also
     /// the setting of `crate::marginal`'s tests.
     pub(crate) fn drive(margin: f64) -> Ekf {
-        let rig = rig();
-        let settings = Settings {
+        drive_with(Settings {
             local_margin_m: margin,
             ..Settings::default()
-        };
+        })
+    }
+
+    /// [`drive`] with the filter's settings given.
+    pub(crate) fn drive_with(settings: Settings) -> Ekf {
+        let rig = rig();
         let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
         let lamps: Vec<Vector3<f64>> = (0..144)
             .map(|k| Vector3::new(f64::from(k % 12), f64::from(k / 12) - 5.5, 3.0))

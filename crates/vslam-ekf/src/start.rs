@@ -264,8 +264,21 @@ impl Ekf {
                 observations: l.observations,
                 rejections_in_a_row: 0,
                 settled: true,
+                placement: None,
             });
             ids.push(id);
+        }
+        // Seen from the hand-over's pose, once every slot is in (the camera's rows follow the
+        // landmarks').
+        for k in 0..ekf.landmarks.len() {
+            let placement = ekf
+                .landmarks
+                .get(k)
+                .and_then(|l| l.first)
+                .and_then(|at| ekf.placement_at(&handover.pose, &at));
+            if let Some(slot) = ekf.landmarks.get_mut(k) {
+                slot.placement = placement;
+            }
         }
         Ok((ekf, ids))
     }

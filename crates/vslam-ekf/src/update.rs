@@ -1550,39 +1550,107 @@ mod linearisation_point_tests {
     use crate::Settings;
 
     /// Moving a landmark's linearisation point by `d` is `P <- T P T^T` with `T = I + (J d)
-    /// e_theta^T + (d / B) e_B^T` on the landmark's rows, against the dense product by
-    /// nalgebra, with the filter dense and in a local session.
+    /// e_theta^T + sum_c (g_c(new) - g_c) e_c^T` on the landmark's rows, against the dense
+    /// product by nalgebra, with the filter dense and in a local session. Without a
+    /// placement (by default) the baseline's column moves by `d / B` and no other; with
+    /// `follow_points`, each estimated camera parameter's by its placement's column at the
+    /// new point less the one held, the columns written out here from the geometry: the
+    /// baseline's `(L - C) / B` and the focal length's `R (0, 0, z / f)`, `C` and `R` the
+    /// camera's position and rotation at the placing pose, `z` the point's depth in it.
     #[test]
     fn moving_a_linearisation_point_shears_the_covariance_dense_and_in_a_session() {
-        for margin in [0.0, 1.0] {
-            let mut ekf = crate::local::tests::drive(margin);
-            let (id, _) = ekf.visible_landmarks()[0];
-            let s = ekf.slot(id).unwrap();
-            if margin > 0.0 {
-                ekf.prepare_local(&[s]);
-                assert!(ekf.local.is_some(), "no session open");
+        for follow_points in [false, true] {
+            for margin in [0.0, 1.0] {
+                let mut ekf = crate::local::tests::drive_with(Settings {
+                    local_margin_m: margin,
+                    follow_points,
+                    ..Settings::default()
+                });
+                let (id, _) = ekf.visible_landmarks()[0];
+                let s = ekf.slot(id).unwrap();
+                if margin > 0.0 {
+                    ekf.prepare_local(&[s]);
+                    assert!(ekf.local.is_some(), "no session open");
+                }
+                let p = ekf.covariance();
+                let n = p.nrows();
+                let d = Vector3::new(0.3, -0.2, 0.4);
+                let li = ekf.landmark_state_index(id).unwrap();
+                let kb = ekf.camera_state_index(Param::Baseline).unwrap();
+                let kf = ekf.camera_state_index(Param::F).unwrap();
+                let c = ekf.camera();
+                let mut t = DMatrix::<f64>::identity(n, n);
+                t[(li, 2)] = -d.y;
+                t[(li + 1, 2)] = d.x;
+                let slot = ekf.landmarks[s];
+                assert_eq!(slot.placement.is_some(), follow_points);
+                match slot.placement {
+                    None => {
+                        for a in 0..3 {
+                            t[(li + a, kb)] = d[a] / c.baseline;
+                        }
+                    }
+                    Some(held) => {
+                        let at = slot.first.unwrap() + d;
+                        let rot = held.pose.world_from_robot_rotation()
+                            * c.mount.robot_from_rig_rotation();
+                        let rig_point = rig_model::rig::point_in_rig(&c, &held.pose, &at);
+                        let camera = at - rot * rig_point;
+                        let gb = (at - camera) / c.baseline;
+                        let gf = rot * Vector3::new(0.0, 0.0, rig_point.z / c.f);
+                        for a in 0..3 {
+                            t[(li + a, kb)] = gb[a] - held.columns[(a, Param::Baseline.index())];
+                            t[(li + a, kf)] = gf[a] - held.columns[(a, Param::F.index())];
+                        }
+                        assert!(
+                            (gf - held.columns.column(Param::F.index())).norm() > 1e-6,
+                            "the move changed no focal-length column"
+                        );
+                    }
+                }
+                let want = &t * &p * t.transpose();
+                assert!(
+                    ekf.shear_linearisation_point(s, &d),
+                    "margin {margin}, follow_points {follow_points}"
+                );
+                let got = ekf.covariance();
+                let off = (&got - &want).amax() / p.amax();
+                assert!(
+                    off < 1e-9,
+                    "margin {margin}, follow_points {follow_points}: covariance off by {off} (relative)"
+                );
             }
-            let p = ekf.covariance();
-            let n = p.nrows();
-            let d = Vector3::new(0.3, -0.2, 0.4);
-            let li = ekf.landmark_state_index(id).unwrap();
-            let kb = ekf.camera_state_index(Param::Baseline).unwrap();
-            let b = ekf.camera().baseline;
-            let mut t = DMatrix::<f64>::identity(n, n);
-            t[(li, 2)] = -d.y;
-            t[(li + 1, 2)] = d.x;
-            for a in 0..3 {
-                t[(li + a, kb)] = d[a] / b;
-            }
-            let want = &t * &p * t.transpose();
-            assert!(ekf.shear_linearisation_point(s, &d), "margin {margin}");
-            let got = ekf.covariance();
-            let off = (&got - &want).amax() / p.amax();
-            assert!(
-                off < 1e-12,
-                "margin {margin}: covariance off by {off} (relative)"
-            );
         }
+    }
+
+    /// The focal length refined, and the landmark's depth with it, does not move the focal
+    /// length's column of its placement: `z / f = B / d` stays. Taken as the point's move
+    /// times the column's derivative, each refinement sheared it (the paper's square with its
+    /// focal length 2.5 % off ended 6.9 sigma off).
+    #[test]
+    fn a_refined_focal_length_does_not_move_the_placement_s_column() {
+        let mut ekf = crate::local::tests::drive_with(Settings {
+            follow_points: true,
+            ..Settings::default()
+        });
+        let (id, _) = ekf.visible_landmarks()[0];
+        let s = ekf.slot(id).unwrap();
+        let slot = ekf.landmarks[s];
+        let (held, at) = (slot.placement.unwrap(), slot.first.unwrap());
+        let before = ekf.placement_at(&held.pose, &at).unwrap();
+        // The focal length 2 % larger, the point 2 % deeper along the placing camera's axis.
+        let kf = ekf.camera_state_index(Param::F).unwrap();
+        let c = ekf.camera();
+        ekf.x[kf] = c.f * 1.02;
+        let rot = held.pose.world_from_robot_rotation() * c.mount.robot_from_rig_rotation();
+        let rig_point = rig_model::rig::point_in_rig(&c, &held.pose, &at);
+        let deeper = at + rot * Vector3::new(0.0, 0.0, 0.02 * rig_point.z);
+        let after = ekf.placement_at(&held.pose, &deeper).unwrap();
+        let (gf0, gf1) = (
+            before.columns.column(Param::F.index()),
+            after.columns.column(Param::F.index()),
+        );
+        assert!((gf1 - gf0).norm() < 1e-9 * gf0.norm(), "{gf0:?} -> {gf1:?}");
     }
 
     /// A dark stretch, then lamps seen for the first time only: nothing the filter sees ties

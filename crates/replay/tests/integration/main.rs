@@ -34,6 +34,8 @@ struct Run {
     /// of 3 sigma (`eval::landmarks_against_lamps`).
     near: usize,
     inside: usize,
+    /// The simulator's lamps.
+    lamps: Vec<sim::Lamp>,
 }
 
 /// `sc` simulated as it is (its own seed), written to a log named after `tag` and replayed.
@@ -52,6 +54,7 @@ fn replayed_run(sc: &sim::Scenario, tag: &str, settings: &replay::NavSettings) -
         replay,
         near,
         inside,
+        lamps: sim_run.landmarks,
     }
 }
 

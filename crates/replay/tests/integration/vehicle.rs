@@ -89,31 +89,18 @@ fn without_estimating_v_the_same_drive_is_seen_to_have_worse_odometry() {
 /// `sim::hall`'s hall 26 (45 m aisles, lamps every 4.5 m 6.2 m up) through the radtan lens,
 /// the odometry as good as stated, replayed with no flags. At the end of its third aisle the
 /// vehicle turns in place under two or three lamps, its camera 0.5 m ahead of the axle
-/// sweeping an arc, the pose's sigma just above 0.1 m so that the update iterates. That turn
-/// tells the filter the map's scale: the baseline moves 0.3 mm in 1.5 s while its sigma falls
-/// from 0.176 to 0.115 mm, and the map ends with the baseline 2.9 sigma off, the odometry's
-/// scale 3.1 sigma off and 41 of 78 landmarks inside 3 sigma (the batch over every frame: the
-/// baseline's sigma 0.18 mm). The baseline's column constrained in the iterated update fixed
-/// this hall but not the radtan hall with odometry memory (docs/halls.md, "The scale told by
-/// a turn in place").
-#[test]
-#[ignore = "unfinished: the iterated update takes the map's scale from a turn in place (docs/halls.md)"]
-fn a_turn_in_place_does_not_tell_the_filter_the_map_s_scale() {
-    let r = radtan_hall(26, "hall-26-scale");
-    assert_parameters_inside(&r);
-    assert_nine_in_ten_inside(&r);
-    assert_eq!(r.replay.truth.as_ref().unwrap().landmarks_duplicate, 0);
-}
-
-/// Hall 26 as above with the landmarks' linearisation points following their estimates, the
-/// covariance re-linearised with them (`vslam_ekf::Settings::follow_points`, measured, not the
-/// default; docs/halls.md, "The linearisation point"): the baseline -0.095 mm off at 0.186,
+/// sweeping an arc, the pose's sigma just above 0.1 m so that the update iterates. With the
+/// linearisation points frozen once a landmark was known to 0.5 m (the rule before
+/// 2026-12-06), that turn told the filter the map's scale: the baseline moved 0.3 mm in 1.5 s
+/// while its sigma fell from 0.176 to 0.115 mm, and the map ended with the baseline 2.9 sigma
+/// off, the odometry's scale 3.1 sigma off and 41 of 78 landmarks inside 3 sigma (the batch
+/// over every frame: the baseline's sigma 0.18 mm). With the points following the estimates
+/// and the covariance re-linearised with them (`vslam_ekf::Settings::follow_points`, the
+/// default; docs/halls.md, "The linearisation point"): the baseline -0.094 mm off at 0.186,
 /// every parameter and 92 of 92 landmarks inside 3 sigma.
 #[test]
-fn with_points_following_a_turn_in_place_does_not_tell_the_filter_the_scale() {
-    let mut settings = NavSettings::default();
-    settings.ekf.follow_points = true;
-    let r = radtan_hall_with(26, "hall-26-follow-points", &settings);
+fn a_turn_in_place_does_not_tell_the_filter_the_map_s_scale() {
+    let r = radtan_hall(26, "hall-26-scale");
     assert_parameters_inside(&r);
     assert_eq!(
         r.inside, r.near,
@@ -130,30 +117,33 @@ fn with_points_following_a_turn_in_place_does_not_tell_the_filter_the_scale() {
 /// derivative, and walked the pose and its two lamps together 0.04, 0.06, 0.08 ... m a pass,
 /// 0.6 m in one frame: the map's shared translation moved 3.6 sigma, the loop down aisle 1
 /// was never closed, 44 of 45 lamps missed, trajectory 742 mm. Gauss-Newton's passes now
-/// stop when a pose step grows (docs/halls.md, "Not done yet"): 255 mm, 16 missed. Every
-/// lamp mapped is not reached yet.
+/// stop when a pose step grows (docs/halls.md, "Not done yet"): 255 mm, 16 missed, but 2 of
+/// 11 landmarks near their lamps inside 3 sigma. With the linearisation points following the
+/// estimates (the default since 2026-12-06): 241 mm, 22 missed, the far halves of the aisles
+/// 0.1 to 0.3 m off after the 13 m dark stretch, and 24 of 24 inside 3 sigma. Every lamp
+/// mapped is not reached yet.
 #[test]
 fn a_u_turn_s_iterated_update_does_not_walk_the_local_map_away() {
     let r = radtan_hall(27, "hall-27-u-turn");
     let t = r.replay.truth.as_ref().unwrap();
     let d = format!("{t:?}");
     assert!(t.ate_rms <= 0.4, "{d}");
-    assert!(t.lamps_missed <= 20, "{d}");
+    assert!(t.lamps_missed <= 25, "{d}");
     assert_eq!(t.landmarks_duplicate, 0, "{d}");
+    assert_eq!(
+        r.inside, r.near,
+        "{} of {} inside 3 sigma; {d}",
+        r.inside, r.near
+    );
 }
 
 /// Hall `seed` of the Monte Carlo (`hall_mc 1 SEED --lens radtan`), simulated, written and
 /// replayed with no flags.
 fn radtan_hall(seed: u64, tag: &str) -> crate::Run {
-    radtan_hall_with(seed, tag, &NavSettings::default())
-}
-
-/// [`radtan_hall`] with the navigator's settings.
-fn radtan_hall_with(seed: u64, tag: &str, settings: &NavSettings) -> crate::Run {
     let mut spec = sim::hall::HallSpec::draw(seed);
     spec.lens = sim::hall::HallLens::Radtan;
     let sc = sim::hall::scenario(&spec, seed).unwrap();
-    replayed_run(&sc, tag, settings)
+    replayed_run(&sc, tag, &NavSettings::default())
 }
 
 /// Every estimated parameter within 3 sigma of the truth.
