@@ -9,7 +9,7 @@
 use replay::NavSettings;
 use rig_model::Param;
 
-use crate::{assert_nine_in_ten_inside, parameters, replayed_run, scenario};
+use crate::{parameters, replayed_run, scenario};
 
 #[test]
 fn a_forklift_with_odometry_errors_and_a_clock_offset_is_calibrated() {
