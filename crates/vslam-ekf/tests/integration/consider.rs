@@ -57,7 +57,13 @@ fn measure(s: &Setup, rng: &mut TestRng, id: LandmarkId) -> (LandmarkId, Measure
 #[test]
 fn the_update_equals_the_dense_schmidt_update() {
     for (seed, landmarks, batch_size) in [(1u64, 4usize, 1usize), (2, 6, 1), (3, 40, 10)] {
-        let mut s = setup(300 + seed, 2, landmarks, consider());
+        // The linearisation points held (they follow the estimates by default, the covariance
+        // sheared with them: no textbook update does).
+        let settings = Settings {
+            follow_points: false,
+            ..consider()
+        };
+        let mut s = setup(300 + seed, 2, landmarks, settings);
         let mut rng = rng(seed);
         let ids: Vec<LandmarkId> = s.points.iter().map(|(id, _)| *id).collect();
         let batch: Vec<_> = ids
