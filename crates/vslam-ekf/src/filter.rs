@@ -61,7 +61,9 @@ pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
 /// its error grew to 0.5 degrees, 3 sigma; docs/benchmarks.md, "Halls with LED panels and
 /// dark stretches"). Frozen at the landmark's very first estimate, a narrow lens's lamps 5 m
 /// above the cameras were linearised too far off (two of eight halls inconsistent); 0.5 m
-/// left every hall consistent.
+/// left every hall consistent. The rule of [`Settings::follow_points`] off; on (the default),
+/// the point follows the estimate for good, the covariance re-linearised with it, and this
+/// only says when the iterated update relinearises the landmark.
 pub const FEJ_SETTLE_SIGMA_M: f64 = 0.5;
 
 /// A landmark's linearisation point settles ([`FEJ_SETTLE_SIGMA_M`]) only once the camera's

@@ -51,21 +51,22 @@ pub const MERGE_POINT_SIGMA_M: f64 = 0.02;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Slot {
     pub(crate) id: LandmarkId,
-    /// The linearisation point of its observations' Jacobians (`Ekf::observation_model`):
-    /// its position when added, following its estimate until `settled`; `None` for the
-    /// landmarks handed over by phase 1 (linearised at their estimate). With
-    /// `Settings::follow_points`, its estimate where the covariance last took it (placed,
-    /// handed over, or moved with [`Ekf::shear_linearisation_point`]), for every landmark.
+    /// The linearisation point of its observations' Jacobians (`Ekf::observation_model`).
+    /// With `Settings::follow_points` (the default), its estimate where the covariance last
+    /// took it (placed, handed over, or moved with [`Ekf::shear_linearisation_point`]), for
+    /// every landmark. Without: its position when added, following its estimate until
+    /// `settled`; `None` for the landmarks handed over by phase 1 (linearised at their
+    /// estimate).
     pub(crate) first: Option<Vector3<f64>>,
     pub(crate) observations: u64,
     pub(crate) rejections_in_a_row: u32,
     /// Whether the landmark is known to [`crate::FEJ_SETTLE_SIGMA_M`] with the camera
-    /// learned: `first` stops following the estimate (unless `Settings::follow_points`), and
-    /// the iterated update relinearises its observation.
+    /// learned: the iterated update relinearises its observation (and, without
+    /// `Settings::follow_points`, `first` stops following the estimate).
     pub(crate) settled: bool,
-    /// With `Settings::follow_points`, how the covariance holds the landmark's placement in
-    /// the camera ([`Placement`]); `None` by default, or where no stereo pair from the
-    /// placing pose sees the point.
+    /// With `Settings::follow_points` (the default), how the covariance holds the landmark's
+    /// placement in the camera ([`Placement`]); `None` without it, or where no stereo pair
+    /// from the placing pose sees the point.
     pub(crate) placement: Option<Placement>,
 }
 
@@ -132,9 +133,9 @@ impl Ekf {
     }
 
     /// A landmark's linearisation point for the first-estimates Jacobians
-    /// (`crate::FEJ_SETTLE_SIGMA_M`): `None` for an unknown landmark or one without it (by
-    /// default a landmark handed over by phase 1, linearised at its estimate). For tests and
-    /// tools.
+    /// (`crate::FEJ_SETTLE_SIGMA_M`): `None` for an unknown landmark or one without it (a
+    /// landmark handed over by phase 1 without `Settings::follow_points`, linearised at its
+    /// estimate). For tests and tools.
     pub fn linearisation_point(&self, id: LandmarkId) -> Option<Vector3<f64>> {
         let s = self.slot(id)?;
         self.landmarks.get(s).and_then(|slot| slot.first)
@@ -553,7 +554,8 @@ impl Ekf {
 
     /// Every landmark's estimate as its linearisation point (after a joint estimate from
     /// outside, `Ekf::set_joint`, `Ekf::replace_marginal`, whose covariance was taken at the
-    /// estimate); the landmarks without one (handed over by phase 1, by default) keep none.
+    /// estimate), its placement's columns taken there; the landmarks without one (handed over
+    /// by phase 1 without `Settings::follow_points`) keep none.
     pub(crate) fn relinearise_landmarks(&mut self) {
         for k in 0..self.landmarks.len() {
             let at = self

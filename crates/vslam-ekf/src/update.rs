@@ -426,7 +426,7 @@ impl Ekf {
         }
         // The landmark's linearisation point follows it until it is known well enough
         // (`FEJ_SETTLE_SIGMA_M`), except while the pose is lost (`FEJ_POSITION_SIGMA_M`); with
-        // `Settings::follow_points` for good, the covariance with it
+        // `Settings::follow_points` (the default) for good, the covariance with it
         // (`Ekf::shear_linearisation_point`), and settling only lets the iterated update
         // relinearise it.
         if accepted && !self.pose_lost() {
@@ -1552,8 +1552,8 @@ mod linearisation_point_tests {
     /// Moving a landmark's linearisation point by `d` is `P <- T P T^T` with `T = I + (J d)
     /// e_theta^T + sum_c (g_c(new) - g_c) e_c^T` on the landmark's rows, against the dense
     /// product by nalgebra, with the filter dense and in a local session. Without a
-    /// placement (by default) the baseline's column moves by `d / B` and no other; with
-    /// `follow_points`, each estimated camera parameter's by its placement's column at the
+    /// placement (`follow_points` off) the baseline's column moves by `d / B` and no other;
+    /// with `follow_points` (the default), each estimated camera parameter's by its placement's column at the
     /// new point less the one held, the columns written out here from the geometry: the
     /// baseline's `(L - C) / B` and the focal length's `R (0, 0, z / f)`, `C` and `R` the
     /// camera's position and rotation at the placing pose, `z` the point's depth in it.
@@ -1657,8 +1657,8 @@ mod linearisation_point_tests {
     /// them to the map before the stretch, so its heading's sigma must not fall. With the
     /// points following the estimates and the covariance moved with them
     /// (`Settings::follow_points`) it does not (0.0119 -> 0.0128 rad); moved without it,
-    /// 0.0119 -> 0.0021 rad. The default rule moves them without it until a landmark is known
-    /// to 0.5 m (docs/halls.md, "The linearisation point").
+    /// 0.0119 -> 0.0021 rad. The old rule (`follow_points` off) moves them without it until a
+    /// landmark is known to 0.5 m (docs/halls.md, "The linearisation point").
     #[test]
     fn lamps_seen_for_the_first_time_do_not_tell_the_filter_its_heading() {
         let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
