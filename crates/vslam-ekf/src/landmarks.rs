@@ -466,8 +466,9 @@ impl Ekf {
     /// covariance's unobservable turn of the world (the landmark at `J (L - c)` for a turn
     /// about `c`) behind the Jacobians', and every update of the landmark told the filter
     /// its heading (docs/halls.md, "The linearisation point"). `T` is invertible: no
-    /// information is made or lost. Without a placement (no pair from its pose sees the new
-    /// point) the baseline's column moves by `d / B` and no other camera column moves.
+    /// information is made or lost. Without a placement (none held, or no pair from its pose
+    /// sees the new point) the baseline's column moves by `d / B` and no other camera column
+    /// moves; the landmark then holds none.
     /// Returns whether it was applied (not to a landmark passive in an open local session).
     pub(crate) fn shear_linearisation_point(&mut self, s: usize, d: &Vector3<f64>) -> bool {
         let i = StateLayout::landmark(s);
@@ -543,11 +544,10 @@ impl Ekf {
                 true
             }
         };
-        if applied
-            && let Some((_, new)) = moved
-            && let Some(slot) = self.landmarks.get_mut(s)
-        {
-            slot.placement = Some(new);
+        // Without a new placement the baseline's column moved by `d / B` alone: the held
+        // columns no longer say what the covariance holds, and are dropped for good.
+        if applied && let Some(slot) = self.landmarks.get_mut(s) {
+            slot.placement = moved.map(|(_, new)| new);
         }
         applied
     }
