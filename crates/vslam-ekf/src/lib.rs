@@ -128,6 +128,14 @@
 //! with a baseline that is 3 % off is 3 % off in the same direction as every other landmark
 //! seen with it, and only the correlation through `C` lets a later update move them together.
 //!
+//! Later observations of the landmark are linearised at a point of it: by default
+//! ([`Settings::follow_points`]) its estimate, moved there before each update that observes it
+//! and after each accepted one, with `G`'s heading and camera columns re-linearised at the new
+//! point (`P <- T P T^T`, the camera's columns from the pose the landmark was placed from), so
+//! that the covariance's unobservable turn of the world and the Jacobians' agree and no update
+//! tells the filter its heading from lamps nothing else ties to the map (docs/halls.md, "The
+//! linearisation point").
+//!
 //! # Confirmation
 //!
 //! [`Candidates`] is the per-frame front door for measurements keyed by the association's track
