@@ -89,6 +89,28 @@ pub(crate) struct Placement {
     pub(crate) columns: rig_model::rig::Jac3xC,
 }
 
+impl Placement {
+    /// The placement's camera columns for a landmark at `at` placed from `pose`, with the
+    /// camera `camera`: the stereo pair it would see of it there, triangulated back
+    /// ([`rig_model::Triangulation::jac_camera_in_world`]). `None` when no pair from that
+    /// pose sees the point (behind the cameras, no disparity). The camera is the caller's to
+    /// read where the state's rows agree with its landmarks (not while a landmark is being
+    /// added or handed over: `Ekf::camera` then reads a landmark's rows).
+    pub(crate) fn at(
+        camera: &rig_model::CameraParams,
+        pose: &rig_model::Pose2,
+        at: &Vector3<f64>,
+    ) -> Option<Self> {
+        let z = rig_model::project(camera, pose, at).ok()?;
+        let tri = rig_model::triangulate(camera, &z).ok()?;
+        let columns = tri.jac_camera_in_world(camera, pose);
+        columns.iter().all(|v| v.is_finite()).then_some(Self {
+            pose: *pose,
+            columns,
+        })
+    }
+}
+
 impl Ekf {
     /// Landmarks in the map.
     pub fn landmark_count(&self) -> usize {
@@ -434,25 +456,6 @@ impl Ekf {
         }
     }
 
-    /// The placement's camera columns for a landmark at `at` placed from `pose`: the stereo
-    /// pair the current camera would see of it there, triangulated back
-    /// ([`rig_model::Triangulation::jac_camera_in_world`]). `None` when no pair from that
-    /// pose sees the point (behind the cameras, no disparity).
-    pub(crate) fn placement_at(
-        &self,
-        pose: &rig_model::Pose2,
-        at: &Vector3<f64>,
-    ) -> Option<Placement> {
-        let camera = self.camera();
-        let z = rig_model::project(&camera, pose, at).ok()?;
-        let tri = rig_model::triangulate(&camera, &z).ok()?;
-        let columns = tri.jac_camera_in_world(&camera, pose);
-        columns.iter().all(|v| v.is_finite()).then_some(Placement {
-            pose: *pose,
-            columns,
-        })
-    }
-
     /// Re-linearises the landmark in slot `s`'s initialisation at a point moved by `d`
     /// (metres): `P <- T P T^T`, `T` the identity but for the landmark's rows, which gain
     /// `(J d) e_theta^T` and, for each estimated camera parameter `c`, `(g_c(new) - g_c) e_c^T`:
@@ -475,10 +478,11 @@ impl Ekf {
         let mut shears: Vec<(usize, [f64; 3])> = alloc::vec![(2, [-d.y, d.x, 0.0])];
         let slot = self.landmarks.get(s).copied();
         let point = slot.and_then(|l| l.first);
+        let camera = self.camera();
         let moved = match (slot.and_then(|l| l.placement), point) {
-            (Some(old), Some(point)) => self
-                .placement_at(&old.pose, &(point + d))
-                .map(|new| (old, new)),
+            (Some(old), Some(point)) => {
+                Placement::at(&camera, &old.pose, &(point + d)).map(|new| (old, new))
+            }
             _ => None,
         };
         let c0 = self.camera_offset();
@@ -497,7 +501,7 @@ impl Ekf {
                     .iter()
                     .position(|p| *p == rig_model::camera::Param::Baseline)
                 {
-                    let b = self.camera().baseline;
+                    let b = camera.baseline;
                     shears.push((c0 + k, [d.x / b, d.y / b, d.z / b]));
                 }
             }
@@ -557,6 +561,7 @@ impl Ekf {
     /// estimate), its placement's columns taken there; the landmarks without one (handed over
     /// by phase 1 without `Settings::follow_points`) keep none.
     pub(crate) fn relinearise_landmarks(&mut self) {
+        let camera = self.camera();
         for k in 0..self.landmarks.len() {
             let at = self
                 .x
@@ -566,7 +571,7 @@ impl Ekf {
                 .landmarks
                 .get(k)
                 .and_then(|l| l.placement)
-                .and_then(|old| self.placement_at(&old.pose, &at));
+                .and_then(|old| Placement::at(&camera, &old.pose, &at));
             if let Some(slot) = self.landmarks.get_mut(k)
                 && slot.first.is_some()
             {
@@ -593,7 +598,7 @@ impl Ekf {
         }
         // Read before the state grows (the camera's rows move).
         let placement = if self.settings.follow_points {
-            self.placement_at(&self.pose(), &position)
+            Placement::at(&self.camera(), &self.pose(), &position)
         } else {
             None
         };

@@ -16,7 +16,7 @@ use crate::error::Error;
 use crate::filter::{Ekf, Settings, check_finite};
 use crate::health::{DOF, HealthState};
 use crate::kernels::Workspace;
-use crate::landmarks::{LandmarkId, Slot};
+use crate::landmarks::{LandmarkId, Placement, Slot};
 use crate::motion::check_noise;
 use crate::state::{CameraCovariance, LANDMARK_DIM, POSE_DIM, StateLayout};
 
@@ -268,14 +268,15 @@ impl Ekf {
             });
             ids.push(id);
         }
-        // Seen from the hand-over's pose, once every slot is in (the camera's rows follow the
-        // landmarks').
+        // Seen from the hand-over's pose, with the camera read once every slot is in (its rows
+        // follow the landmarks').
+        let camera = ekf.camera();
         for k in 0..ekf.landmarks.len() {
             let placement = ekf
                 .landmarks
                 .get(k)
                 .and_then(|l| l.first)
-                .and_then(|at| ekf.placement_at(&handover.pose, &at));
+                .and_then(|at| Placement::at(&camera, &handover.pose, &at));
             if let Some(slot) = ekf.landmarks.get_mut(k) {
                 slot.placement = placement;
             }

@@ -439,10 +439,9 @@ impl Ekf {
                 let camera_learned = self.camera_learned();
                 let i = StateLayout::landmark(s);
                 let b = self.block3(i);
-                let at = self.x.fixed_rows::<3>(i).into_owned();
                 if let Some(slot) = self.landmarks.get_mut(s) {
                     if !follow {
-                        slot.first = Some(at);
+                        slot.first = Some(self.x.fixed_rows::<3>(i).into_owned());
                     }
                     if b.diagonal().max() <= FEJ_SETTLE_SIGMA_M * FEJ_SETTLE_SIGMA_M
                         && camera_learned
@@ -1548,6 +1547,7 @@ mod landmark_only_tests {
 mod linearisation_point_tests {
     use super::*;
     use crate::Settings;
+    use crate::landmarks::Placement;
 
     /// Moving a landmark's linearisation point by `d` is `P <- T P T^T` with `T = I + (J d)
     /// e_theta^T + sum_c (g_c(new) - g_c) e_c^T` on the landmark's rows, against the dense
@@ -1637,7 +1637,7 @@ mod linearisation_point_tests {
         let s = ekf.slot(id).unwrap();
         let slot = ekf.landmarks[s];
         let (held, at) = (slot.placement.unwrap(), slot.first.unwrap());
-        let before = ekf.placement_at(&held.pose, &at).unwrap();
+        let before = Placement::at(&ekf.camera(), &held.pose, &at).unwrap();
         // The focal length 2 % larger, the point 2 % deeper along the placing camera's axis.
         let kf = ekf.camera_state_index(Param::F).unwrap();
         let c = ekf.camera();
@@ -1645,7 +1645,7 @@ mod linearisation_point_tests {
         let rot = held.pose.world_from_robot_rotation() * c.mount.robot_from_rig_rotation();
         let rig_point = rig_model::rig::point_in_rig(&c, &held.pose, &at);
         let deeper = at + rot * Vector3::new(0.0, 0.0, 0.02 * rig_point.z);
-        let after = ekf.placement_at(&held.pose, &deeper).unwrap();
+        let after = Placement::at(&ekf.camera(), &held.pose, &deeper).unwrap();
         let (gf0, gf1) = (
             before.columns.column(Param::F.index()),
             after.columns.column(Param::F.index()),
