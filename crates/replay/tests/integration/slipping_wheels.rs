@@ -417,3 +417,36 @@ fn rms_after_scale(r: &Run) -> (f64, f64) {
         .sum();
     ((sum / n).sqrt(), s)
 }
+
+/// Hall 32 of the Monte Carlo (`hall_mc 1 32 --lens radtan --odometry-tau 0.6`: five aisles
+/// of 33 m, lamps every 4 m 6.3 m up among beam corners, tubes and LED panels, no dark
+/// stretch) with odometry errors of 0.6 s memory stated in the rig file. Phase 1's landmark
+/// budget fills before the calibration is stable, and the hand-over is honest but wide (the
+/// pose 1.1 m and 2.2 degrees uncertain in the world). Phase 2 then reads the heading from a
+/// single lamp in three frames (its sigma 2.2 -> 0.21 degrees, the heading 4.3 degrees off):
+/// the iterated update's heading column is taken at a linearisation point the lost pose
+/// left behind (docs/halls.md, "A wide hand-over and the points that follow"). It ends with
+/// 84 of 98 lamps missed, 8 of 18 landmarks near their lamp inside 3 sigma and the baseline
+/// 3.5 sigma off. The issue's check for honesty (issue 36): the baseline and every vehicle
+/// parameter inside 3 sigma, nine in ten landmarks near their lamp inside it, no duplicate.
+/// Fails today; the three fixes measured moved the Monte Carlo's other halls both ways.
+#[test]
+#[ignore = "known failure, not fixed: docs/halls.md, \"A wide hand-over and the points that follow\""]
+fn a_wide_hand_over_on_odometry_with_memory_stays_honest() {
+    let mut spec = sim::hall::HallSpec::draw(32);
+    spec.lens = sim::hall::HallLens::Radtan;
+    let mut sc = sim::hall::scenario(&spec, 32).unwrap();
+    (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
+    (sc.rig.noise.velocity_tau, sc.rig.noise.yaw_rate_tau) = (0.6, 0.6);
+    let r = replayed_run(&sc, "slip-hall-32-handover", &NavSettings::default());
+    let t = r.replay.truth.as_ref().unwrap();
+    let d = format!("{t:?}");
+    assert_eq!(t.landmarks_duplicate, 0, "{d}");
+    for (p, error, sigma) in parameters(&r.replay) {
+        assert!(
+            error.abs() <= 3.0 * sigma,
+            "{p}: {error} against sigma {sigma}; {d}"
+        );
+    }
+    assert_nine_in_ten_inside(&r);
+}
