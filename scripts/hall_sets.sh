@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 tag=${1:?usage: hall_sets.sh TAG [BIN_DIR]}
 bin=${2:-}
 if [ -z "$bin" ]; then
-    cargo build --release --locked -p stereonav-cli -p replay --example hall_mc --quiet
+    cargo build --release --locked -p stereonav-cli -p replay --bins --example hall_mc --quiet
     bin=target/release
     hall_mc=$bin/examples/hall_mc
 else
