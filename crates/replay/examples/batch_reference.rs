@@ -111,9 +111,7 @@ fn run() -> Result<(), String> {
         for p in Param::VEHICLE {
             if handover.estimated.contains(&p) {
                 let (scale, unit) = p.display_unit();
-                let sigma = handover.camera_covariance[(p.index(), p.index())]
-                    .max(0.0)
-                    .sqrt();
+                let sigma = handover.sigma(p);
                 println!(
                     "seed {seed}: reference {} error {:+.3} {unit} (sigma {:.3})",
                     p.name(),

@@ -268,10 +268,7 @@ fn run() -> Result<(), String> {
                 "{seed} | batch reference: {:.1} mm over {n} lamps, baseline {:+.3} mm off ({:.3}); the navigator {ratio:.2}x",
                 rms * 1e3,
                 (batch.camera.baseline - run.camera.baseline) * 1e3,
-                batch.camera_covariance[(Param::Baseline.index(), Param::Baseline.index())]
-                    .max(0.0)
-                    .sqrt()
-                    * 1e3
+                batch.sigma(Param::Baseline) * 1e3
             );
             totals.ratios.push(ratio);
         }

@@ -142,6 +142,11 @@ pub struct BatchHandover {
 }
 
 impl BatchHandover {
+    /// 1-sigma uncertainty of one camera parameter (0 for one not estimated).
+    pub fn sigma(&self, p: Param) -> f64 {
+        libm::sqrt(self.camera_covariance[(p.index(), p.index())].max(0.0))
+    }
+
     /// The estimated parameters that the data did not inform (they enter phase 2 with about
     /// their prior).
     pub fn uninformed(&self) -> Vec<Param> {

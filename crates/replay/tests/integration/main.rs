@@ -19,6 +19,14 @@ mod slipping_wheels;
 mod streaming;
 mod vehicle;
 
+/// Hall `seed` of the Monte Carlo (`hall_mc 1 SEED --lens LENS`) as a scenario with its own
+/// seed ([`sim::hall::HallSpec::draw`]).
+fn hall_scenario(seed: u64, lens: sim::hall::HallLens) -> sim::Scenario {
+    let mut spec = sim::hall::HallSpec::draw(seed);
+    spec.lens = lens;
+    sim::hall::scenario(&spec, seed).unwrap()
+}
+
 /// A committed scenario of `fixtures/scenarios` (`name` with its `.toml`).
 fn scenario(name: &str) -> sim::Scenario {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

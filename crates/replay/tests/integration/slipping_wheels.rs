@@ -10,7 +10,7 @@
 
 use replay::NavSettings;
 
-use crate::{Run, assert_nine_in_ten_inside, parameters, replayed_run, scenario};
+use crate::{Run, assert_nine_in_ten_inside, hall_scenario, parameters, replayed_run, scenario};
 use rig_model::Param;
 
 /// The rig file silent about the odometry's memory (its time constants 0).
@@ -226,9 +226,7 @@ fn slow_slipping_wheels_over_many_seeds() {
 /// `sim::hall`'s hall 18 (lamps every 2.5 m, no dark stretch) through `lens`, its odometry's
 /// errors of 0.6 s memory unstated in the rig file, replayed with `settings`.
 fn dense_hall_silent_with(lens: sim::hall::HallLens, settings: &NavSettings) -> Run {
-    let mut spec = sim::hall::HallSpec::draw(18);
-    spec.lens = lens;
-    let mut sc = sim::hall::scenario(&spec, 18).unwrap();
+    let mut sc = hall_scenario(18, lens);
     (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
     let tag = format!("dense-{lens:?}-{}", settings.phase1.max_frames);
     run_with(&silent(sc), 18, &tag, settings)
@@ -433,9 +431,7 @@ fn rms_after_scale(r: &Run) -> (f64, f64) {
 #[test]
 #[ignore = "known failure, not fixed: docs/halls.md, \"A wide hand-over and the points that follow\""]
 fn a_wide_hand_over_on_odometry_with_memory_stays_honest() {
-    let mut spec = sim::hall::HallSpec::draw(32);
-    spec.lens = sim::hall::HallLens::Radtan;
-    let mut sc = sim::hall::scenario(&spec, 32).unwrap();
+    let mut sc = hall_scenario(32, sim::hall::HallLens::Radtan);
     (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
     (sc.rig.noise.velocity_tau, sc.rig.noise.yaw_rate_tau) = (0.6, 0.6);
     let r = replayed_run(&sc, "slip-hall-32-handover", &NavSettings::default());

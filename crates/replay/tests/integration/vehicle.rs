@@ -9,7 +9,7 @@
 use replay::NavSettings;
 use rig_model::Param;
 
-use crate::{assert_nine_in_ten_inside, parameters, replayed_run, scenario};
+use crate::{assert_nine_in_ten_inside, hall_scenario, parameters, replayed_run, scenario};
 
 #[test]
 fn a_forklift_with_odometry_errors_and_a_clock_offset_is_calibrated() {
@@ -136,9 +136,7 @@ fn a_u_turn_s_iterated_update_does_not_walk_the_local_map_away() {
 /// Hall `seed` of the Monte Carlo (`hall_mc 1 SEED --lens radtan`), simulated, written and
 /// replayed with no flags.
 fn radtan_hall(seed: u64, tag: &str) -> crate::Run {
-    let mut spec = sim::hall::HallSpec::draw(seed);
-    spec.lens = sim::hall::HallLens::Radtan;
-    let sc = sim::hall::scenario(&spec, seed).unwrap();
+    let sc = hall_scenario(seed, sim::hall::HallLens::Radtan);
     replayed_run(&sc, tag, &NavSettings::default())
 }
 
