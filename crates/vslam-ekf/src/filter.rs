@@ -180,6 +180,21 @@ pub struct Settings {
     /// linearised, and stay moved when it is refused: the shear changes the covariance's
     /// entries, not what it knows.
     pub follow_points: bool,
+    /// While the pose is lost ([`FEJ_POSITION_SIGMA_M`]), the prediction's heading column
+    /// taken from the pose the previous prediction left (before the update moved it), and the
+    /// iterated update's constrained heading column from the pose before the update: the
+    /// first-estimates Jacobians of the pose (Huang, Mourikis and Roumeliotis, "A
+    /// First-Estimates Jacobian EKF for Improving SLAM Consistency", ISER 2008), so that the
+    /// covariance's share of the world's unobservable turn and the estimate stay together
+    /// while the updates move a lost pose by decimetres. Off, the pose's column follows the
+    /// corrected estimate without the covariance, and lamps known only relative to the
+    /// vehicle tell it the world's heading: hall 22 of `hall_mc 24 11 --lens radtan
+    /// --odometry-tau 0.6`, handed over 4.0 degrees uncertain, 3.8 to 0.85 degrees in its
+    /// third frame with the heading 7.5 degrees off (docs/halls.md, "The pose's linearisation
+    /// point"). Off by default: on, the heading stays honest, but the navigator's rule for a
+    /// lost pose (its sigma in the world, `nav::MATCH_MAX_POSE_SIGMA_M`) then holds the lamps
+    /// of halls like it for longer, and the memory halls end worse (docs/benchmarks.md).
+    pub first_estimate_pose: bool,
 }
 
 impl Default for Settings {
@@ -199,6 +214,7 @@ impl Default for Settings {
             local_margin_m: 1.0,
             max_landmarks: usize::MAX,
             follow_points: true,
+            first_estimate_pose: false,
         }
     }
 }
@@ -340,6 +356,9 @@ pub struct Ekf {
     /// Process noise accumulated on the pose since [`Ekf::take_motion_covariance`], in the
     /// current pose's frame: the relative pose uncertainty between two frames.
     pub(crate) motion_covariance: Matrix3<f64>,
+    /// The pose's position where the latest prediction left it, before any update moved it
+    /// ([`Settings::first_estimate_pose`]); `None` after the state was set anew.
+    pub(crate) predicted_at: Option<[f64; 2]>,
     pub(crate) workspace: Workspace,
     /// Estimated camera parameters held this frame ([`Ekf::set_held`]), by [`Param::index`].
     pub(crate) held: [bool; N_PARAMS],

@@ -168,6 +168,7 @@ impl Ekf {
             }
         }
         self.relinearise_landmarks();
+        self.predicted_at = None;
         Ok(slots.len())
     }
 

@@ -121,10 +121,11 @@ impl Ekf {
         s: usize,
         camera: &CameraParams,
         pose: &Pose2,
+        anchor: &Pose2,
     ) -> Result<(Measurement, Obs), Error> {
         let (predicted, mut h) = self.observation_columns(s, camera, pose, false)?;
         if let Some(first) = self.landmarks.get(s).and_then(|l| l.first) {
-            let (dx, dy) = (pose.x - first.x, pose.y - first.y);
+            let (dx, dy) = (anchor.x - first.x, anchor.y - first.y);
             // Columns 0..3 are the pose's (x, y, heading), 3..6 the landmark's.
             for row in &mut h.h {
                 row[2] = -dy * row[3] + dx * row[4];
@@ -219,7 +220,8 @@ impl Ekf {
         // matching's gates on hall 11 after the stretch (`hall_mc 4 11 --lens radtan
         // --odometry-tau 0.6`) were off: trajectory 528 mm against 204 mm with it
         // (docs/vehicle.md, "Dark stretches").
-        let (z, mut m) = self.observation_model_constrained(s, &self.camera(), &self.pose())?;
+        let (z, mut m) =
+            self.observation_model_constrained(s, &self.camera(), &self.pose(), &self.pose())?;
         m.r = self.measurement_variances(&z);
         Ok((z, self.innovation_covariance_with(&m, upper)))
     }
@@ -252,7 +254,8 @@ impl Ekf {
         id: LandmarkId,
     ) -> Result<(Measurement, DMatrix<f64>), Error> {
         let s = self.slot(id).ok_or(Error::UnknownLandmark { id })?;
-        let (z, m) = self.observation_model_constrained(s, &self.camera(), &self.pose())?;
+        let (z, m) =
+            self.observation_model_constrained(s, &self.camera(), &self.pose(), &self.pose())?;
         Ok((z, self.dense_of(&m)))
     }
 

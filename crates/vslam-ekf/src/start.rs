@@ -148,6 +148,7 @@ impl Ekf {
             next_id: 0,
             health: HealthState::new(settings.nis_window),
             motion_covariance: Matrix3::zeros(),
+            predicted_at: None,
             workspace: Workspace::default(),
             held: [false; N_PARAMS],
             local: None,
@@ -352,6 +353,7 @@ impl Ekf {
         self.local = None;
         self.x = x;
         self.p = p;
+        self.predicted_at = None;
         self.relinearise_landmarks();
         Ok(())
     }
@@ -387,6 +389,7 @@ impl Ekf {
         self.x[0] = pose.x;
         self.x[1] = pose.y;
         self.x[2] = wrap_angle(pose.theta);
+        self.predicted_at = None;
         for i in 0..POSE_DIM {
             for j in 0..POSE_DIM {
                 self.p[(i, j)] = 0.5 * (covariance[(i, j)] + covariance[(j, i)]);
