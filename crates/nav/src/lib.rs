@@ -133,6 +133,13 @@ pub struct NavSettings {
     /// the warehouse, the smoother near the vehicle was slower and not more accurate, and
     /// moved the hall maps' scale (docs/halls.md, "The smoother over part of the map").
     pub smooth_near_vehicle: bool,
+    /// The pose counts as lost for map matching only while it is more than
+    /// [`MATCH_MAX_POSE_SIGMA_M`] uncertain in the world *and* relative to the map around it:
+    /// no landmark accepted in the last [`ANCHOR_FRAMES`] frames is within that sigma of it
+    /// (the covariance of `L - p` in the vehicle's frame, the heading's share and every
+    /// correlation in it), or a landmark predicted in view is not (a place mapped before, to
+    /// be recognised by its constellation). Off (the default), the absolute sigma alone.
+    pub relative_lost: bool,
     /// Hold (consider, not refine) in phase 2 every estimated camera parameter the motion so
     /// far cannot inform: all of them until the vehicle has translated
     /// [`NavSettings::min_translation_m`], and those with a structural trap
@@ -161,6 +168,7 @@ impl Default for NavSettings {
             skip_phase1: false,
             smooth_phase2: true,
             smooth_near_vehicle: false,
+            relative_lost: false,
             hold_unexcited: true,
             min_translation_m: 0.05,
             frame_pairs: FramePairSettings::default(),
@@ -347,6 +355,8 @@ pub struct Navigator {
     /// Lost, the held lamps recognised no place: lamps are mapped again until the pose is
     /// found.
     gave_up_holding: bool,
+    /// Landmarks the filter accepted lately, with the frame ([`NavSettings::relative_lost`]).
+    anchors: BTreeMap<LandmarkId, u64>,
     /// Landmarks within [`MERGE_SEARCH_M`] of each other that were observed in the same frame:
     /// two lamps, never merged. `(smaller id, larger id)`.
     co_observed: BTreeSet<(LandmarkId, LandmarkId)>,
@@ -422,6 +432,7 @@ impl Navigator {
             smoothed: BTreeMap::new(),
             held: loops::Held::new(),
             gave_up_holding: false,
+            anchors: BTreeMap::new(),
             co_observed: BTreeSet::new(),
             merge_gate: chi2_quantile(p, 3.0),
             frame_pairs,
@@ -1204,7 +1215,7 @@ impl Navigator {
         // While the pose is lost the filter dead-reckons the lamps it holds (`loops::Held`):
         // a smoother's solve would move the pose under them. It starts again from the filter
         // once the loop is closed.
-        if pose_lost(ekf) {
+        if lost_for_matching(ekf, &self.anchors, self.settings.relative_lost) {
             if self.smoother.is_mapping() {
                 self.smoother.stop_mapping();
             }
@@ -1384,7 +1395,7 @@ impl Navigator {
         // anew from a lost pose would tell the filter where it is) until their constellation
         // is recognised among the landmarks (`loops`), or there are so many that the vehicle
         // must be on new ground.
-        let lost = pose_lost(ekf);
+        let lost = lost_for_matching(ekf, &self.anchors, self.settings.relative_lost);
         if !lost {
             self.held.clear();
             self.gave_up_holding = false;
@@ -1541,6 +1552,14 @@ impl Navigator {
             .map(|g| (g.id, g.nis))
             .collect();
         outcome.rejected = report.update.rejected.iter().map(|g| g.id).collect();
+        if self.settings.relative_lost {
+            let frame = self.stats.frames;
+            for (id, _) in &outcome.accepted {
+                self.anchors.insert(*id, frame);
+            }
+            self.anchors
+                .retain(|_, f| frame.saturating_sub(*f) <= ANCHOR_FRAMES);
+        }
         let accepted = report.update.accepted.iter().map(|g| (g.id, true));
         let rejected = report.update.rejected.iter().map(|g| (g.id, false));
         outcome.associations = accepted
@@ -1828,6 +1847,67 @@ fn pose_lost(ekf: &Ekf) -> bool {
     c.m11.max(c.m22) > MATCH_MAX_POSE_SIGMA_M * MATCH_MAX_POSE_SIGMA_M
 }
 
+/// Whether the pose is lost for map matching: [`pose_lost`], and with `relative`
+/// ([`NavSettings::relative_lost`]) lost relative to the map around it as well: no landmark of
+/// `anchors` (accepted lately) within [`MATCH_MAX_POSE_SIGMA_M`] of it, or a landmark predicted
+/// in view that is not.
+fn lost_for_matching(ekf: &Ekf, anchors: &BTreeMap<LandmarkId, u64>, relative: bool) -> bool {
+    if !pose_lost(ekf) {
+        return false;
+    }
+    if !relative {
+        return true;
+    }
+    let near =
+        |id: &LandmarkId| relative_sigma_m(ekf, *id).is_some_and(|s| s <= MATCH_MAX_POSE_SIGMA_M);
+    let anchored = anchors.keys().any(near);
+    let unknown_in_view = ekf
+        .landmarks_reached()
+        .iter()
+        .any(|(id, _)| !anchors.contains_key(id) && !near(id));
+    !anchored || unknown_in_view
+}
+
+/// Frames a landmark the filter accepted anchors the pose ([`NavSettings::relative_lost`]):
+/// one second at 20 Hz, a lamp tracked through a turn.
+pub const ANCHOR_FRAMES: u64 = 20;
+
+/// The pose's sigma relative to landmark `id`: the larger axis of the covariance of the
+/// landmark's horizontal position in the vehicle's frame, `R(theta)^T (L - p)`, over the
+/// landmark, the pose and the heading with their correlations, metres. `None` for an unknown
+/// landmark or a covariance that cannot be read.
+fn relative_sigma_m(ekf: &Ekf, id: LandmarkId) -> Option<f64> {
+    let i = ekf.landmark_state_index(id)?;
+    let rows = [i, i + 1, 0, 1, 2];
+    let l = ekf.landmark_position(id)?;
+    let pose = ekf.pose();
+    let (dx, dy) = (l.x - pose.x, l.y - pose.y);
+    let (s, c) = (libm::sin(pose.theta), libm::cos(pose.theta));
+    // d/d(L, p, theta) of R^T (L - p): R^T [I, -I, d(R^T)/dtheta (L - p)].
+    let j = nalgebra::SMatrix::<f64, 2, 5>::new(
+        c,
+        s,
+        -c,
+        -s,
+        -s * dx + c * dy,
+        -s,
+        c,
+        s,
+        -c,
+        -c * dx - s * dy,
+    );
+    let entries: Option<Vec<f64>> = rows
+        .iter()
+        .flat_map(|&rb| rows.iter().map(move |&ra| ekf.covariance_entry(ra, rb)))
+        .collect();
+    let p = nalgebra::SMatrix::<f64, 5, 5>::from_column_slice(&entries?);
+    let cov = j * p * j.transpose();
+    let (a, b, d) = (cov.m11, cov.m22, cov.m12);
+    // The larger eigenvalue of the symmetric 2 x 2.
+    let largest = 0.5 * (a + b) + libm::sqrt(0.25 * (a - b) * (a - b) + d * d);
+    (largest.is_finite() && largest >= 0.0).then(|| libm::sqrt(largest))
+}
+
 /// What the lamps held while lost recognised ([`recognise`]).
 enum Recognised {
     /// A place: its `(track, landmark)` pairs and where it puts the vehicle.
@@ -1993,4 +2073,70 @@ fn map_held(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use rig_model::camera::Mount;
+    use rig_model::config::Noise;
+
+    fn rig() -> Rig {
+        Rig {
+            lens: None,
+            board: rig_model::Board::DEFAULT,
+            width: 752,
+            height: 480,
+            nominal: CameraParams {
+                vehicle: Default::default(),
+                f: 700.0,
+                cx: 376.0,
+                cy: 240.0,
+                baseline: 0.12,
+                mount: Mount {
+                    z: 0.8,
+                    ..Mount::default()
+                },
+            },
+            estimate: Vec::new(),
+            prior: [None; rig_model::N_PARAMS],
+            noise: Noise::white(0.3, 0.02, 0.01),
+        }
+    }
+
+    /// A landmark placed from a pose a metre uncertain in the world shares that uncertainty:
+    /// the pose is known relative to it to what the pixels give, centimetres; driving on
+    /// blind, the odometry's drift grows the relative sigma, and with no landmark accepted
+    /// lately the pose counts as lost for map matching ([`NavSettings::relative_lost`]).
+    #[test]
+    fn a_pose_uncertain_in_the_world_is_known_relative_to_the_lamps_it_placed() {
+        let rig = rig();
+        let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
+        let start = Pose2::new(20.0, 0.0, 0.0);
+        let cov = Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, 0.004));
+        ekf.set_start_pose(start, &cov).unwrap();
+        let lamp = nalgebra::Vector3::new(21.0, 0.5, 7.8);
+        let z = rig_model::project(&rig.nominal, &start, &lamp).unwrap();
+        let id = ekf.add_landmark(&z).unwrap();
+        let relative = relative_sigma_m(&ekf, id).unwrap();
+        assert!(relative < 0.05, "relative sigma {relative} m");
+        let anchors: BTreeMap<LandmarkId, u64> = [(id, 0)].into_iter().collect();
+        assert!(pose_lost(&ekf));
+        assert!(!lost_for_matching(&ekf, &anchors, true));
+        assert!(lost_for_matching(&ekf, &anchors, false));
+        // Blind at 1 m/s: dead reckoning alone between the pose and the lamp, its drift
+        // growing as the heading's sigma times the distance.
+        let mut blind_s = 0.0;
+        while relative_sigma_m(&ekf, id).unwrap() <= MATCH_MAX_POSE_SIGMA_M && blind_s < 200.0 {
+            ekf.predict(1.0, 0.0, 0.0, 0.05).unwrap();
+            blind_s += 0.05;
+        }
+        assert!(
+            (30.0..100.0).contains(&blind_s),
+            "relative sigma {} m after {blind_s} s",
+            relative_sigma_m(&ekf, id).unwrap()
+        );
+        assert!(lost_for_matching(&ekf, &anchors, true));
+    }
 }
