@@ -1860,12 +1860,13 @@ fn lost_for_matching(ekf: &Ekf, anchors: &BTreeMap<LandmarkId, u64>, relative: b
     }
     let near =
         |id: &LandmarkId| relative_sigma_m(ekf, *id).is_some_and(|s| s <= MATCH_MAX_POSE_SIGMA_M);
-    let anchored = anchors.keys().any(near);
-    let unknown_in_view = ekf
-        .landmarks_reached()
+    // Anchored first: the landmarks in view are projected only for an anchored pose.
+    if !anchors.keys().any(near) {
+        return true;
+    }
+    ekf.landmarks_reached()
         .iter()
-        .any(|(id, _)| !anchors.contains_key(id) && !near(id));
-    !anchored || unknown_in_view
+        .any(|(id, _)| !anchors.contains_key(id) && !near(id))
 }
 
 /// Frames a landmark the filter accepted anchors the pose ([`NavSettings::relative_lost`]):

@@ -434,10 +434,17 @@ fn rms_after_scale(r: &Run) -> (f64, f64) {
 #[test]
 #[ignore = "known failure, not fixed: docs/halls.md, \"A wide hand-over and the points that follow\""]
 fn a_wide_hand_over_on_odometry_with_memory_stays_honest() {
+    hall_32_with_memory_is_honest("slip-hall-32-handover", &NavSettings::default());
+}
+
+/// Hall 32 with 0.6 s of odometry memory stated in the rig file, replayed with `settings`
+/// under `tag`, checked for issue 36's honesty: no duplicate, the baseline and every vehicle
+/// parameter inside 3 sigma, nine in ten landmarks near their lamp inside it.
+fn hall_32_with_memory_is_honest(tag: &str, settings: &NavSettings) -> Run {
     let mut sc = hall_scenario(32, sim::hall::HallLens::Radtan);
     (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
     (sc.rig.noise.velocity_tau, sc.rig.noise.yaw_rate_tau) = (0.6, 0.6);
-    let r = replayed_run(&sc, "slip-hall-32-handover", &NavSettings::default());
+    let r = replayed_run(&sc, tag, settings);
     let t = r.replay.truth.as_ref().unwrap();
     let d = format!("{t:?}");
     assert_eq!(t.landmarks_duplicate, 0, "{d}");
@@ -448,6 +455,7 @@ fn a_wide_hand_over_on_odometry_with_memory_stays_honest() {
         );
     }
     assert_nine_in_ten_inside(&r);
+    r
 }
 
 /// The same hall with the pose's first-estimates Jacobians while it is lost
@@ -460,9 +468,6 @@ fn a_wide_hand_over_on_odometry_with_memory_stays_honest() {
 /// docs/halls.md, "The pose's linearisation point"). Slow tier (20 s).
 #[test]
 fn slow_a_wide_hand_over_stays_honest_with_the_pose_s_first_estimates() {
-    let mut sc = hall_scenario(32, sim::hall::HallLens::Radtan);
-    (sc.spec.noise.velocity_tau_s, sc.spec.noise.yaw_rate_tau_s) = (0.6, 0.6);
-    (sc.rig.noise.velocity_tau, sc.rig.noise.yaw_rate_tau) = (0.6, 0.6);
     let defaults = NavSettings::default();
     let settings = NavSettings {
         relative_lost: true,
@@ -472,16 +477,7 @@ fn slow_a_wide_hand_over_stays_honest_with_the_pose_s_first_estimates() {
         },
         ..defaults
     };
-    let r = replayed_run(&sc, "slip-hall-32-fej", &settings);
+    let r = hall_32_with_memory_is_honest("slip-hall-32-fej", &settings);
     let t = r.replay.truth.as_ref().unwrap();
-    let d = format!("{t:?}");
-    assert_eq!(t.landmarks_duplicate, 0, "{d}");
-    assert!(t.lamps_missed <= 3, "{d}");
-    for (p, error, sigma) in parameters(&r.replay) {
-        assert!(
-            error.abs() <= 3.0 * sigma,
-            "{p}: {error} against sigma {sigma}; {d}"
-        );
-    }
-    assert_nine_in_ten_inside(&r);
+    assert!(t.lamps_missed <= 3, "{t:?}");
 }
