@@ -997,6 +997,16 @@ impl Navigator {
             ) {
                 Ok((inc, reported, jv)) => {
                     match &mut self.ekf {
+                        // The filter's odometry errors as states (`vslam_ekf::errors`): its
+                        // own motion and noise; the batch's factor below stays the white
+                        // equivalent's.
+                        Some(ekf) if !ekf.error_axes().is_empty() => ekf.predict_odometry_vehicle(
+                            &self.odometry,
+                            (t0, t_us),
+                            &noise,
+                            &vehicle,
+                            &jv,
+                        )?,
                         Some(ekf) => ekf.predict_increment_vehicle(&inc, &jv)?,
                         None => {
                             let (pose, f, q) = inc.apply(&self.pose);

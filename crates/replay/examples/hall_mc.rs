@@ -7,14 +7,17 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
 //! smoother over the landmarks near the vehicle, `nav::NavSettings::smooth_near_vehicle`;
 //! `--fej-pose`: the pose's first-estimates Jacobians while it is lost
 //! (`vslam_ekf::Settings::first_estimate_pose`); `--relative-lost`: lost only relative to
-//! the map around the pose as well (`nav::NavSettings::relative_lost`);
+//! the map around the pose as well (`nav::NavSettings::relative_lost`); `--error-states`:
+//! the odometry's errors with memory held as states of the filter
+//! (`vslam_ekf::Settings::odometry_error_states`); `--print-vehicle`: each hall's vehicle
+//! parameters' errors and sigmas on stderr;
 //! `--frozen-points`: linearisation points that follow the landmarks' estimates without the
 //! covariance until they are known to 0.5 m and then stay (`vslam_ekf::Settings::follow_points`
 //! off, the rule before 2026-12-06); `--reference`: each hall's frames also solved as one batch with the truth's association,
@@ -73,8 +76,9 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
     let mut settings = NavSettings::default();
+    let mut print_vehicle = false;
     let mut lens = None;
     let mut positional = Vec::new();
     let mut keep: Option<std::path::PathBuf> = None;
@@ -119,6 +123,8 @@ fn run() -> Result<(), String> {
             "--smooth-near" => settings.smooth_near_vehicle = true,
             "--frozen-points" => settings.ekf.follow_points = false,
             "--fej-pose" => settings.ekf.first_estimate_pose = true,
+            "--error-states" => settings.ekf.odometry_error_states = true,
+            "--print-vehicle" => print_vehicle = true,
             "--relative-lost" => settings.relative_lost = true,
             "--odometry-tau" => {
                 let v = rest.next().ok_or(usage)?;
@@ -237,6 +243,11 @@ fn run() -> Result<(), String> {
         };
         let estimated: Vec<&(Param, f64)> =
             vehicle.iter().filter(|(p, _)| sigma(*p) > 0.0).collect();
+        if print_vehicle {
+            for (p, err) in &estimated {
+                eprintln!("  {p:?}: error {err:+.5}, sigma {:.5}", sigma(*p));
+            }
+        }
         let vehicle_inside = estimated
             .iter()
             .filter(|(p, err)| err.abs() <= 3.0 * sigma(*p))

@@ -195,6 +195,14 @@ pub struct Settings {
     /// lost pose (its sigma in the world, `nav::MATCH_MAX_POSE_SIGMA_M`) then holds the lamps
     /// of halls like it for longer, and the memory halls end worse (docs/benchmarks.md).
     pub first_estimate_pose: bool,
+    /// The odometry's errors with memory (`[noise] velocity_tau`, `yaw_rate_tau`: a
+    /// first-order Gauss-Markov process of the rig's stationary sigma and that time constant)
+    /// held as states of the filter (`crate::errors`): one per axis with memory, after the
+    /// camera block, predicted through the motion and decaying towards zero, so that a slow
+    /// slip is explained by the error process and not by the vehicle's parameters or the map.
+    /// Off, the errors are weighed as white noise of their long-run variance
+    /// ([`rig_model::Noise::white_equivalent`]). No effect when the rig states no memory.
+    pub odometry_error_states: bool,
 }
 
 impl Default for Settings {
@@ -215,6 +223,7 @@ impl Default for Settings {
             max_landmarks: usize::MAX,
             follow_points: true,
             first_estimate_pose: false,
+            odometry_error_states: false,
         }
     }
 }
@@ -331,7 +340,7 @@ pub struct UpdateReport {
 
 /// EKF SLAM with the camera parameters in the state (eq. (3)-(8)).
 ///
-/// State `x = [X, Y, theta, L_1, ..., L_N, C_est]`; see the crate docs for the layout, the
+/// State `x = [X, Y, theta, L_1, ..., L_N, C_est, E]`; see the crate docs for the layout, the
 /// update form and the rest of the design.
 #[derive(Debug, Clone)]
 pub struct Ekf {
@@ -339,6 +348,9 @@ pub struct Ekf {
     pub(crate) p: DMatrix<f64>,
     pub(crate) landmarks: Vec<Slot>,
     pub(crate) estimated: Vec<Param>,
+    /// The odometry's errors held as states, in state order after the camera block
+    /// ([`Settings::odometry_error_states`]).
+    pub(crate) errors: Vec<crate::errors::ErrorAxis>,
     /// Values of the parameters not estimated (the estimated ones are read from `x`).
     pub(crate) camera_base: CameraParams,
     pub(crate) noise: Noise,

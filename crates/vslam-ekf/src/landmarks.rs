@@ -604,12 +604,14 @@ impl Ekf {
         };
         let n = self.x.len();
         let c0 = self.camera_offset();
-        let m = self.estimated.len();
+        // The camera block and the odometry's errors after it move down together.
+        let m = self.layout().tail();
         let (idx, g, noise) = (*idx, *g, *noise);
         match self.local.as_deref_mut() {
             None => self.p = grow(&self.p, c0, &idx[..q], &g, &noise)?,
             Some(l) => {
-                // The same in P_AA (the camera block starts at its row kc0), and the new rows
+                // The same in P_AA (the camera block starts at its row kc0, the last `m`
+                // active rows with the odometry's errors), and the new rows
                 // of phi: G phi over the involved rows.
                 let kc0 = l.n_active() - m;
                 let mut local_idx = idx;

@@ -19,17 +19,20 @@
 //! | [`motion`] | the motion eq. (4) applies and its noise: the exact arc, [`Increment`] | |
 //! | [`local`] | local sessions (the compressed filter): updates of a large state on the states near the vehicle, exact, settled when it moves on; [`Ekf::settle`] | eq. (5)-(7) |
 //! | `kernels`, `linalg` | the update's arithmetic on column-major slices (multiversioned SIMD loops, faer panels) | eq. (6)-(7) |
+//! | [`errors`] | the odometry's errors with memory as states (an option, off by default: it biases the odometry scale) | eq. (4)-(5) |
 //! | [`candidates`], [`health`], [`chi2`] | confirmation of new landmarks, the filter's health, chi-square bounds | |
 //!
 //! # State layout (eq. 3)
 //!
-//! `x = [X, Y, theta, L_1, ..., L_N, C_est]`: the planar pose, each landmark's world point,
-//! then the camera parameters listed in the rig file's `estimate` (in that order; the others
-//! stay at their start values). The camera block sits last so that every observation's `H` has
-//! the same shape (pose, one landmark, camera); a new landmark is inserted before it, and a
-//! removed one takes its rows and columns with it (both O(n^2) copies, rare events).
+//! `x = [X, Y, theta, L_1, ..., L_N, C_est, E]`: the planar pose, each landmark's world
+//! point, then the camera parameters listed in the rig file's `estimate` (in that order; the
+//! others stay at their start values), and, with [`Settings::odometry_error_states`], the
+//! odometry's errors with memory ([`errors`]; no observation involves them). The camera block
+//! sits after the landmarks so that every observation's `H` has the same shape (pose, one
+//! landmark, camera); a new landmark is inserted before it, and a removed one takes its rows
+//! and columns with it (both O(n^2) copies, rare events).
 //!
-//! The covariance `P` is dense, `n x n` with `n = 3 + 3N + m`, in one column-major buffer
+//! The covariance `P` is dense, `n x n` with `n = 3 + 3N + m + e`, in one column-major buffer
 //! (nalgebra's `DMatrix`), so that nalgebra and faer can both view it without copying. Only its
 //! lower triangle (diagonal included) is maintained: at 500 landmarks `P` is 18 MB, fits in no
 //! cache, and the update is bound by memory traffic; mirroring after every update would write
@@ -173,6 +176,8 @@ pub mod candidates;
 pub mod chi2;
 #[cfg(feature = "alloc")]
 mod error;
+
+pub mod errors;
 #[cfg(feature = "alloc")]
 mod filter;
 #[cfg(feature = "alloc")]
@@ -206,6 +211,8 @@ mod views;
 pub use candidates::{CandidateSettings, Candidates, FrameReport};
 #[cfg(feature = "alloc")]
 pub use error::Error;
+
+pub use errors::ErrorAxis;
 #[cfg(feature = "alloc")]
 pub use filter::{
     AUTO_JOSEPH_MAX_STATES, CameraUpdate, CovarianceUpdate, Ekf, FEJ_CAMERA_RELATIVE,

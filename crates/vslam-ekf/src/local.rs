@@ -454,7 +454,12 @@ pub(crate) mod tests {
 
     /// [`drive`] with the filter's settings given.
     pub(crate) fn drive_with(settings: Settings) -> Ekf {
-        let rig = rig();
+        let mut rig = rig();
+        if settings.odometry_error_states {
+            // Odometry with memory, its errors as states of the filter (`crate::errors`).
+            rig.noise.velocity_tau = 0.6;
+            rig.noise.yaw_rate_tau = 0.6;
+        }
         let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
         let lamps: Vec<Vector3<f64>> = (0..144)
             .map(|k| Vector3::new(f64::from(k % 12), f64::from(k / 12) - 5.5, 3.0))
@@ -475,7 +480,25 @@ pub(crate) mod tests {
         let mut truth = start;
         for step in 0..120 {
             let (vx, w) = (0.5, if step < 60 { 0.02 } else { -0.03 });
-            ekf.predict(vx, 0.0, w, 0.1).unwrap();
+            if settings.odometry_error_states {
+                let (t0, t1) = (step * 100_000, (step + 1) * 100_000);
+                let samples = [t0, t1].map(|t_us| rig_model::odometry::OdomSample {
+                    t_us,
+                    vx,
+                    vy: 0.0,
+                    vtheta: w,
+                });
+                ekf.predict_odometry_vehicle(
+                    &samples,
+                    (t0, t1),
+                    &rig.noise,
+                    &rig_model::Vehicle::NOMINAL,
+                    &nalgebra::Matrix3x4::zeros(),
+                )
+                .unwrap();
+            } else {
+                ekf.predict(vx, 0.0, w, 0.1).unwrap();
+            }
             truth = Pose2::new(
                 truth.x + vx * 0.1 * truth.theta.cos(),
                 truth.y + vx * 0.1 * truth.theta.sin(),
@@ -528,8 +551,25 @@ pub(crate) mod tests {
 
     #[test]
     fn a_local_session_is_the_dense_filter() {
-        let dense = drive(0.0);
-        let mut local = drive(1.0);
+        a_local_session_is_the_dense_filter_with(false);
+    }
+
+    /// The odometry's error states (`crate::errors`) are active in every session: their
+    /// prediction, decay and updates in a session are the dense filter's.
+    #[test]
+    fn a_local_session_with_odometry_error_states_is_the_dense_filter() {
+        a_local_session_is_the_dense_filter_with(true);
+    }
+
+    fn a_local_session_is_the_dense_filter_with(error_states: bool) {
+        let settings = |margin: f64| Settings {
+            local_margin_m: margin,
+            odometry_error_states: error_states,
+            ..Settings::default()
+        };
+        let dense = drive_with(settings(0.0));
+        let mut local = drive_with(settings(1.0));
+        assert_eq!(dense.error_axes().len(), if error_states { 3 } else { 0 });
         assert_eq!(dense.health().local_sessions, 0);
         let health = local.health();
         assert!(health.local_sessions >= 2, "{health:?}");

@@ -205,6 +205,20 @@ impl Increment {
         t1_us: u64,
         noise: &Noise,
     ) -> Result<Self, Error> {
+        Self::integrate(samples, t0_us, t1_us, noise, None)
+    }
+
+    /// [`Self::from_odometry`], and with `offset` the motion's derivative with respect to a
+    /// constant offset added to every sample's velocities `(vx, vy, vtheta)`, composed piece by
+    /// piece as the motions are (`d (a then b) = J_a d a + J_b d b`, the arc's
+    /// [`arc_velocity_jacobian`] for each piece).
+    fn integrate(
+        samples: &[OdomSample],
+        t0_us: u64,
+        t1_us: u64,
+        noise: &Noise,
+        mut offset: Option<&mut Matrix3<f64>>,
+    ) -> Result<Self, Error> {
         if t1_us < t0_us {
             return Err(Error::BackwardInterval { t0_us, t1_us });
         }
@@ -268,6 +282,12 @@ impl Increment {
                 piece_noise.velocity = libm::hypot(piece_noise.velocity, gap_v);
                 piece_noise.yaw_rate = libm::hypot(piece_noise.yaw_rate, gap_w);
             }
+            if let Some(j) = offset.as_deref_mut() {
+                let next = constant_velocity_motion(s.vx, s.vy, s.vtheta, dt);
+                *j = compose_jacobian_first(total.motion.dtheta, &next) * *j
+                    + compose_jacobian_second(total.motion.dtheta)
+                        * arc_velocity_jacobian(s.vx, s.vy, s.vtheta, dt);
+            }
             total = total.then(&Self::piece(s.vx, s.vy, s.vtheta, dt, &piece_noise));
             t = end;
         }
@@ -293,23 +313,7 @@ impl Increment {
             let inc = Self::from_odometry(samples, t0_us, t1_us, noise)?;
             return Ok((inc, inc.covariance, nalgebra::Matrix3x4::zeros()));
         }
-        let (a, b) = (v.odometry_time_us(t0_us), v.odometry_time_us(t1_us));
-        let first = samples.partition_point(|s| s.t_us <= a).saturating_sub(1);
-        let last = samples.partition_point(|s| s.t_us < b).max(first + 1);
-        let corrected: alloc::vec::Vec<OdomSample> = samples
-            .get(first..last.min(samples.len()))
-            .unwrap_or_default()
-            .iter()
-            .map(|s| {
-                let (vx, vy, vtheta) = v.true_velocities(s.vx, s.vy, s.vtheta);
-                OdomSample {
-                    t_us: s.t_us,
-                    vx,
-                    vy,
-                    vtheta,
-                }
-            })
-            .collect();
+        let (a, b, corrected) = corrected_samples(samples, t0_us, t1_us, v);
         let mut inc = Self::from_odometry(&corrected, a, b, noise)?;
         let reported = inc.covariance;
         // The true motion's error is the reported one through D^-1, D = diag(odom_scale,
@@ -328,6 +332,60 @@ impl Increment {
         };
         Ok((inc, reported, j))
     }
+}
+
+/// The odometry-clock interval of the board's `[t0_us, t1_us]` for the vehicle `v` and the
+/// samples over it with the true velocities of `v` (vehicle-interfaces.md 1.2).
+fn corrected_samples(
+    samples: &[OdomSample],
+    t0_us: u64,
+    t1_us: u64,
+    v: &rig_model::Vehicle,
+) -> (u64, u64, alloc::vec::Vec<OdomSample>) {
+    let (a, b) = (v.odometry_time_us(t0_us), v.odometry_time_us(t1_us));
+    let first = samples.partition_point(|s| s.t_us <= a).saturating_sub(1);
+    let last = samples.partition_point(|s| s.t_us < b).max(first + 1);
+    let corrected = samples
+        .get(first..last.min(samples.len()))
+        .unwrap_or_default()
+        .iter()
+        .map(|s| {
+            let (vx, vy, vtheta) = v.true_velocities(s.vx, s.vy, s.vtheta);
+            OdomSample {
+                t_us: s.t_us,
+                vx,
+                vy,
+                vtheta,
+            }
+        })
+        .collect();
+    (a, b, corrected)
+}
+
+/// `d motion / d e` for errors `e = (e_vx, e_vy, e_vtheta)` in the *reported* velocities held
+/// over the board's `[t0_us, t1_us]` (the reported samples minus `e` are the measured ones,
+/// `crate::errors`): with `true = D^-1 (reported - bias - e)`, `D = diag(odom_scale,
+/// odom_scale, odom_yaw_scale)`, it is `-J D^-1`, `J` the motion's derivative in a constant
+/// offset of the true velocities. In the robot frame at the interval's start.
+///
+/// # Errors
+///
+/// As [`Increment::from_odometry`].
+pub fn reported_error_jacobian(
+    samples: &[OdomSample],
+    t0_us: u64,
+    t1_us: u64,
+    v: &rig_model::Vehicle,
+) -> Result<Matrix3<f64>, Error> {
+    let (a, b, corrected) = corrected_samples(samples, t0_us, t1_us, v);
+    let mut j = Matrix3::zeros();
+    Increment::integrate(&corrected, a, b, &Noise::white(1.0, 0.0, 0.0), Some(&mut j))?;
+    let d_inv = Matrix3::from_diagonal(&nalgebra::Vector3::new(
+        -1.0 / v.odom_scale,
+        -1.0 / v.odom_scale,
+        -1.0 / v.odom_yaw_scale,
+    ));
+    Ok(j * d_inv)
 }
 
 #[cfg(test)]

@@ -120,6 +120,18 @@ impl Ekf {
         inc: &Increment,
         vehicle_jacobian: &Matrix3x4<f64>,
     ) -> Result<(), Error> {
+        self.predict_with_columns(inc, vehicle_jacobian, &[])
+    }
+
+    /// [`Self::predict_increment_vehicle`] with more columns of `d motion / d x`: `(state
+    /// index, column in the robot frame at the interval's start)`, the odometry's error states
+    /// (`crate::errors`).
+    pub(crate) fn predict_with_columns(
+        &mut self,
+        inc: &Increment,
+        vehicle_jacobian: &Matrix3x4<f64>,
+        extra: &[(usize, Vector3<f64>)],
+    ) -> Result<(), Error> {
         let m = &inc.motion;
         for (what, value) in [
             ("motion dx", m.dx),
@@ -163,6 +175,7 @@ impl Ekf {
                     rot * vehicle_jacobian.column(p.index() - rig_model::N_CAMERA),
                 )
             })
+            .chain(extra.iter().map(|(i, col)| (*i, rot * col)))
             .filter(|(_, col)| col.iter().any(|v| *v != 0.0))
             .collect();
         self.x[0] = pose.x;

@@ -13,6 +13,7 @@ use rig_model::{CameraParams, N_PARAMS, Pose2, Rig};
 
 use crate::chi2::chi2_quantile;
 use crate::error::Error;
+use crate::errors::ErrorAxis;
 use crate::filter::{Ekf, Settings, check_finite};
 use crate::health::{DOF, HealthState};
 use crate::kernels::Workspace;
@@ -87,13 +88,25 @@ impl Ekf {
             estimated.push(p);
         }
         let m = estimated.len();
+        let errors = if settings.odometry_error_states {
+            ErrorAxis::with_memory(&rig.noise)
+        } else {
+            Vec::new()
+        };
         let layout = StateLayout {
             landmarks: 0,
             camera: m,
+            errors: errors.len(),
         };
         let (n, c0) = (layout.dim(), layout.camera_start());
         let mut x = DVector::zeros(n);
         let mut p_mat = DMatrix::zeros(n, n);
+        // The odometry's errors start at their stationary spread, zero mean.
+        for (k, axis) in errors.iter().enumerate() {
+            let (sigma, _) = axis.process(&rig.noise);
+            let i = layout.errors_start() + k;
+            p_mat[(i, i)] = sigma * sigma;
+        }
         for (a, &pa) in estimated.iter().enumerate() {
             x[c0 + a] = start.camera.get(pa);
         }
@@ -137,6 +150,7 @@ impl Ekf {
             p: p_mat,
             landmarks: Vec::new(),
             estimated,
+            errors,
             camera_base: start.camera,
             noise: rig.noise,
             pixel_noise: rig.pixel_noise(),
@@ -193,6 +207,7 @@ impl Ekf {
         let layout = StateLayout {
             landmarks: nl,
             camera: m,
+            errors: ekf.errors.len(),
         };
         let (n, c0) = (layout.dim(), layout.camera_start());
         let src = &handover.covariance;
@@ -243,6 +258,12 @@ impl Ekf {
                 let k = c0 + a;
                 p[(k, k)] = sigma * sigma;
             }
+        }
+        // The odometry's errors as `Self::new` started them (the batch holds none).
+        let e_new = layout.errors_start();
+        let e_old = ekf.layout().errors_start();
+        for k in 0..ekf.errors.len() {
+            p[(e_new + k, e_new + k)] = ekf.p[(e_old + k, e_old + k)];
         }
         if p.iter().any(|v| !v.is_finite()) {
             return Err(Error::BadCameraCovariance);
@@ -337,15 +358,26 @@ impl Ekf {
         for (a, &pa) in self.estimated.iter().enumerate() {
             x[c0 + a] = joint.camera.get(pa);
         }
+        let e0 = layout.errors_start();
+        for i in e0..n {
+            x[i] = self.x[i];
+        }
         if let Some(&value) = x.iter().find(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "smoother state",
                 value,
             });
         }
-        let p = DMatrix::from_fn(n, n, |i, j| {
-            let (bi, bj) = (map[i], map[j]);
-            0.5 * (src[(bi, bj)] + src[(bj, bi)])
+        // The odometry's errors are not in the joint estimate: their block stays, their
+        // cross-covariances with the states set anew are dropped (a block-diagonal of two
+        // covariances is one).
+        let p = DMatrix::from_fn(n, n, |i, j| match (i >= e0, j >= e0) {
+            (true, true) => self.cov(i, j),
+            (false, false) => {
+                let (bi, bj) = (map[i], map[j]);
+                0.5 * (src[(bi, bj)] + src[(bj, bi)])
+            }
+            _ => 0.0,
         });
         if p.iter().any(|v| !v.is_finite()) || (0..n).any(|i| p[(i, i)] < 0.0) {
             return Err(Error::BadCameraCovariance);

@@ -1,4 +1,4 @@
-//! Eq. (3), the state: its layout `x = [X, Y, theta, L_1, ..., L_N, C_est]` ([`StateLayout`],
+//! Eq. (3), the state: its layout `x = [X, Y, theta, L_1, ..., L_N, C_est, E]` ([`StateLayout`],
 //! the one place that says where each block sits), the covariance buffer's indexing, and what a
 //! caller reads of the pose, the camera and the covariance.
 
@@ -17,24 +17,28 @@ pub const LANDMARK_DIM: usize = 3;
 /// The 10x10 covariance of the camera parameters, [`Param::ALL`] order.
 pub type CameraCovariance = SMatrix<f64, N_PARAMS, N_PARAMS>;
 
-/// Eq. (3): the state layout `x = [X, Y, theta, L_1, ..., L_N, C_est]`: the planar pose at
-/// `0..3`, landmark `s` (in state order) at `3 + 3 s`, the estimated camera parameters (the
-/// rig file's `estimate` order) last, so that every observation's `H` has the same shape and a
-/// new landmark is inserted just before the camera block. Every index into `x` and `P` is
-/// computed here.
+/// Eq. (3): the state layout `x = [X, Y, theta, L_1, ..., L_N, C_est, E]`: the planar pose
+/// at `0..3`, landmark `s` (in state order) at `3 + 3 s`, the estimated camera parameters (the
+/// rig file's `estimate` order) after the landmarks, so that every observation's `H` has the
+/// same shape and a new landmark is inserted just before the camera block, and last the
+/// odometry's errors when they are states (`Settings::odometry_error_states`; no observation
+/// involves them). Every index into `x` and `P` is computed here.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct StateLayout {
     /// Landmarks in the state, `N`.
     pub landmarks: usize,
     /// Camera (and vehicle) parameters estimated, `m`.
     pub camera: usize,
+    /// The odometry's errors held as states (`crate::errors`), `e`: 0 to 3, after the
+    /// camera block.
+    pub errors: usize,
 }
 
 impl StateLayout {
-    /// Length of the state, `3 + 3 N + m`.
+    /// Length of the state, `3 + 3 N + m + e`.
     #[must_use]
     pub const fn dim(&self) -> usize {
-        POSE_DIM + LANDMARK_DIM * self.landmarks + self.camera
+        POSE_DIM + LANDMARK_DIM * self.landmarks + self.camera + self.errors
     }
 
     /// Index of the `x` of the landmark in state-order slot `s` (`y`, `z` follow).
@@ -47,6 +51,18 @@ impl StateLayout {
     #[must_use]
     pub const fn camera_start(&self) -> usize {
         Self::landmark(self.landmarks)
+    }
+
+    /// Index of the first odometry error state (the end of the camera block).
+    #[must_use]
+    pub const fn errors_start(&self) -> usize {
+        self.camera_start() + self.camera
+    }
+
+    /// The states after the landmarks: the camera block and the odometry's errors, `m + e`.
+    #[must_use]
+    pub const fn tail(&self) -> usize {
+        self.camera + self.errors
     }
 }
 
@@ -62,6 +78,7 @@ impl Ekf {
         StateLayout {
             landmarks: self.landmarks.len(),
             camera: self.estimated.len(),
+            errors: self.errors.len(),
         }
     }
 
@@ -75,7 +92,7 @@ impl Ekf {
         self.x.len()
     }
 
-    /// The state vector `[X, Y, theta, L_1, ..., L_N, C_est]`.
+    /// The state vector `[X, Y, theta, L_1, ..., L_N, C_est, E]`.
     pub fn state(&self) -> &DVector<f64> {
         &self.x
     }
@@ -166,6 +183,7 @@ mod tests {
         let layout = StateLayout {
             landmarks: 5,
             camera: 1,
+            errors: 0,
         };
         assert_eq!(layout.dim(), 19);
         assert_eq!(StateLayout::landmark(0), 3);

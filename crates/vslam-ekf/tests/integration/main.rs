@@ -10,6 +10,7 @@ mod common;
 mod consider;
 mod jacobians;
 mod merge;
+mod odometry_errors;
 mod relative;
 mod simulation;
 mod update;

@@ -1,0 +1,189 @@
+//! The odometry's errors with memory as states of the filter (`vslam_ekf::errors`,
+//! `Settings::odometry_error_states`) against the default white equivalent: drives under a
+//! ceiling of lamps (straights and U-turns, or one long straight), the reported velocities
+//! carrying a real vehicle's odometry scale, yaw scale and bias and first-order Gauss-Markov
+//! errors of 0.6 s (the simulator's process, vehicle-interfaces.md section 2; the rig states
+//! the time constant), the filter estimating the vehicle's parameters and mapping the lamps as
+//! it goes. The finding (docs/vehicle.md, "The errors as states"): with the errors as states
+//! the odometry scale ends 1 to 6 sigma high on every seed; with the white equivalent (the
+//! default) it is honest.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use crate::common;
+
+use nalgebra::Vector3;
+use rig_model::camera::{Param, Pose2};
+use rig_model::odometry::{OdomSample, constant_velocity_motion, vehicle_jacobian};
+use rig_model::project;
+use vslam_ekf::{Ekf, LandmarkId, Settings};
+
+/// Each estimated vehicle parameter's error over its sigma at the end of a drive.
+#[derive(Debug)]
+struct End {
+    scale: f64,
+    yaw_scale: f64,
+    yaw_bias: f64,
+}
+
+impl End {
+    fn worst(&self) -> f64 {
+        self.scale
+            .abs()
+            .max(self.yaw_scale.abs())
+            .max(self.yaw_bias.abs())
+    }
+}
+
+/// (speed m/s, yaw rate rad/s, seconds) of each leg.
+type Legs = [(f64, f64, f64)];
+
+/// A straight, a U-turn to the left, a straight back, one to the right: twice.
+const LAPS: [(f64, f64, f64); 8] = {
+    let u = core::f64::consts::PI / 0.4;
+    [
+        (0.5, 0.0, 6.0),
+        (0.3, 0.4, u),
+        (0.5, 0.0, 6.0),
+        (0.3, -0.4, u),
+        (0.5, 0.0, 6.0),
+        (0.3, 0.4, u),
+        (0.5, 0.0, 6.0),
+        (0.3, -0.4, u),
+    ]
+};
+
+/// One drive, seeded: frames at 20 Hz, odometry at 100 Hz.
+fn drive(seed: u64, error_states: bool, legs: &Legs) -> End {
+    let mut rng = common::rng(seed);
+    let mut truth = common::random_camera(&mut rng);
+    truth.mount.roll *= 0.1;
+    truth.mount.pitch *= 0.1;
+    let estimate = [Param::OdomScale, Param::OdomYawScale, Param::OdomYawBias];
+    let mut rig = common::rig(truth, &estimate);
+    let tau = 0.6;
+    rig.noise.velocity_tau = tau;
+    rig.noise.yaw_rate_tau = tau;
+    let (scale, yaw_scale, yaw_bias) = (1.01, 1.01, 0.002);
+    let settings = Settings {
+        odometry_error_states: error_states,
+        ..Settings::default()
+    };
+    let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
+    // Lamps 3 m above the cameras on a jittered 1.5 m grid.
+    let lamps: Vec<Vector3<f64>> = (0..400)
+        .map(|k| {
+            let (i, j) = (f64::from(k % 20), f64::from(k / 20));
+            Vector3::new(
+                -6.0 + 1.5 * i + common::uniform(&mut rng, -0.3, 0.3),
+                -12.0 + 1.5 * j + common::uniform(&mut rng, -0.3, 0.3),
+                truth.mount.z + 3.0,
+            )
+        })
+        .collect();
+    let mut ids: Vec<Option<LandmarkId>> = vec![None; lamps.len()];
+    // The reported odometry's errors, stationary from the start.
+    let sigma = [rig.noise.velocity, rig.noise.velocity, rig.noise.yaw_rate];
+    let mut e = sigma.map(|s| s * common::normal(&mut rng));
+    let period_us = 10_000_u64;
+    let phi = (-1e-6 * period_us as f64 / tau).exp();
+    let mut pose = Pose2::default();
+    let mut samples: Vec<OdomSample> = Vec::new();
+    let mut t_us = 0_u64;
+    let mut last_frame: Option<u64> = None;
+    for &(v, w, secs) in legs {
+        for _ in 0..(secs / 0.01).round() as u64 {
+            samples.push(OdomSample {
+                t_us,
+                vx: scale * v + e[0],
+                vy: e[1],
+                vtheta: yaw_scale * w + yaw_bias + e[2],
+            });
+            for (ek, s) in e.iter_mut().zip(sigma) {
+                *ek = phi * *ek + (1.0 - phi * phi).sqrt() * s * common::normal(&mut rng);
+            }
+            pose = constant_velocity_motion(v, 0.0, w, 0.01).apply(&pose);
+            t_us += period_us;
+            if !t_us.is_multiple_of(50_000) {
+                continue;
+            }
+            // A frame at t_us: the sample that starts there is not reported yet, and the
+            // prediction holds the last one to the frame.
+            if let Some(t0) = last_frame {
+                let v_est = ekf.camera().vehicle;
+                let jv = vehicle_jacobian(&samples, t0, t_us, &v_est).unwrap();
+                ekf.predict_odometry_vehicle(&samples, (t0, t_us), &rig.noise, &v_est, &jv)
+                    .unwrap();
+            }
+            last_frame = Some(t_us);
+            let mut batch = Vec::new();
+            let mut new = Vec::new();
+            for (k, lamp) in lamps.iter().enumerate() {
+                let Ok(z) = project(&truth, &pose, lamp) else {
+                    continue;
+                };
+                let inside = |u: f64, v: f64| u > 20.0 && u < 732.0 && v > 20.0 && v < 460.0;
+                if !(inside(z[0], z[1]) && inside(z[2], z[3])) {
+                    continue;
+                }
+                let z = common::noisy(&mut rng, &z, rig.noise.pixel);
+                match ids[k] {
+                    Some(id) if ekf.contains(id) => batch.push((id, z)),
+                    _ => new.push((k, z)),
+                }
+            }
+            ekf.update(&batch).unwrap();
+            for (k, z) in new {
+                ids[k] = ekf.add_landmark(&z).ok();
+            }
+        }
+    }
+    let c = ekf.camera();
+    let cov = ekf.camera_covariance();
+    let normalised = |p: Param, truth: f64| (c.get(p) - truth) / cov[(p.index(), p.index())].sqrt();
+    End {
+        scale: normalised(Param::OdomScale, scale),
+        yaw_scale: normalised(Param::OdomYawScale, yaw_scale),
+        yaw_bias: normalised(Param::OdomYawBias, yaw_bias),
+    }
+}
+
+/// The default model (the white equivalent of the stated memory): every vehicle parameter
+/// inside 3 sigma on six seeds of straights and U-turns.
+#[test]
+fn the_white_equivalent_keeps_the_vehicle_parameters_honest() {
+    for seed in 0..6 {
+        let end = drive(seed, false, &LAPS);
+        assert!(end.worst() < 3.0, "seed {seed}: {end:?}");
+    }
+}
+
+/// The errors as states: the odometry scale ends high on every seed of the same drives, 3.2
+/// to 6.4 sigma on four of the six (the yaw scale and bias honest). Not fixed: docs/vehicle.md,
+/// "The errors as states". Fails until it is.
+#[test]
+#[ignore = "the errors as states bias the odometry scale (docs/vehicle.md); fails"]
+fn the_error_states_keep_the_vehicle_parameters_honest() {
+    let mut worst: Vec<String> = Vec::new();
+    for seed in 0..6 {
+        let end = drive(seed, true, &LAPS);
+        if end.worst() >= 3.0 {
+            worst.push(format!("seed {seed}: {end:?}"));
+        }
+    }
+    assert!(worst.is_empty(), "{}", worst.join("\n"));
+}
+
+/// The same on one long straight (20 m at 0.5 m/s): the scale 1.3 to 3.1 sigma high (mean
+/// 2.4) with the errors as states, within 1.3 sigma either way (mean -0.2) without.
+#[test]
+#[ignore = "the errors as states bias the odometry scale (docs/vehicle.md); fails"]
+fn the_error_states_keep_the_scale_honest_on_a_straight() {
+    let scales: Vec<f64> = (0..6)
+        .map(|seed| drive(seed, true, &[(0.5, 0.0, 40.0)]).scale)
+        .collect();
+    let mean = scales.iter().sum::<f64>() / 6.0;
+    assert!(
+        mean.abs() < 1.0,
+        "mean normalised scale error {mean:.2}: {scales:?}"
+    );
+}
