@@ -200,8 +200,10 @@ pub struct Settings {
     /// held as states of the filter (`crate::errors`): one per axis with memory, after the
     /// camera block, predicted through the motion and decaying towards zero, so that a slow
     /// slip is explained by the error process and not by the vehicle's parameters or the map.
-    /// Off, the errors are weighed as white noise of their long-run variance
-    /// ([`rig_model::Noise::white_equivalent`]). No effect when the rig states no memory.
+    /// Off (the default), the errors are weighed as white noise of their long-run variance
+    /// ([`rig_model::Noise::white_equivalent`]). Off by default because on, the odometry
+    /// scales come out biased (`crate::errors`, docs/vehicle.md "The errors as states"). No
+    /// effect when the rig states no memory.
     pub odometry_error_states: bool,
 }
 
