@@ -6,7 +6,7 @@
 //! by more than `JUMP_M`, is printed with the pose error and sigma.
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
-//! [--no-smoother] [--fej-pose] [--error-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
+//! [--no-smoother] [--fej-pose] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
 //! [--nees-at T_S [--worst N]] [--cov-at T_S] [--partial-from T_S]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
@@ -327,6 +327,7 @@ struct Options {
     no_smoother: bool,
     fej_pose: bool,
     error_states: bool,
+    velocity_states: bool,
     relative_lost: bool,
     missed: bool,
     rig: Option<String>,
@@ -337,7 +338,7 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--fej-pose] [--error-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--fej-pose] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut every_frame = false;
@@ -354,6 +355,7 @@ fn run() -> Result<(), String> {
             "--no-smoother" => opts.no_smoother = true,
             "--fej-pose" => opts.fej_pose = true,
             "--error-states" => opts.error_states = true,
+            "--velocity-states" => opts.velocity_states = true,
             "--relative-lost" => opts.relative_lost = true,
             "--missed" => opts.missed = true,
             "--every-frame" => every_frame = true,
@@ -488,6 +490,7 @@ fn run() -> Result<(), String> {
             max_off_axis_deg: opts.field.unwrap_or(defaults.ekf.max_off_axis_deg),
             first_estimate_pose: opts.fej_pose,
             odometry_error_states: opts.error_states,
+            odometry_velocity_states: opts.velocity_states,
             ..defaults.ekf
         },
         candidates: vslam_ekf::CandidateSettings {

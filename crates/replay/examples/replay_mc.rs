@@ -1,7 +1,7 @@
 //! The whole stack over many seeds of a scenario: each seed simulated to a vehicle log (the
 //! board's byte stream, link faults and all), replayed, and scored against the truth.
 //!
-//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near] [--odometry-tau S] [--tau-unstated] [--error-states]`
+//! `cargo run --release -p replay --example replay_mc -- SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near] [--odometry-tau S] [--tau-unstated] [--error-states] [--velocity-states]`
 //!
 //! Prints, over the seeds: when phase 1 handed over (time since the first frame, and since the
 //! vehicle first moved), the whole method's errors (landmark RMS, trajectory RMS in the first
@@ -38,7 +38,7 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near] [--odometry-tau S] [--tau-unstated] [--error-states]";
+    let usage = "usage: replay_mc SCENARIO.toml RUNS [--skip-phase1] [--no-smoother] [--iterations N] [--consider-camera] [--velocity-noise MPS] [--detail] [--window FRAMES] [--max-landmarks N] [--smooth-near] [--odometry-tau S] [--tau-unstated] [--error-states] [--velocity-states]";
     let scenario_path = PathBuf::from(args.first().ok_or(usage)?);
     let runs: u64 = args
         .get(1)
@@ -86,6 +86,7 @@ fn run() -> Result<(), String> {
             }
             "--tau-unstated" => tau_unstated = true,
             "--error-states" => settings.ekf.odometry_error_states = true,
+            "--velocity-states" => settings.ekf.odometry_velocity_states = true,
             other => return Err(format!("unknown argument {other:?}; {usage}")),
         }
     }

@@ -455,7 +455,7 @@ pub(crate) mod tests {
     /// [`drive`] with the filter's settings given.
     pub(crate) fn drive_with(settings: Settings) -> Ekf {
         let mut rig = rig();
-        if settings.odometry_error_states {
+        if settings.odometry_error_states || settings.odometry_velocity_states {
             // Odometry with memory, its errors as states of the filter (`crate::errors`).
             rig.noise.velocity_tau = 0.6;
             rig.noise.yaw_rate_tau = 0.6;
@@ -480,7 +480,7 @@ pub(crate) mod tests {
         let mut truth = start;
         for step in 0..120 {
             let (vx, w) = (0.5, if step < 60 { 0.02 } else { -0.03 });
-            if settings.odometry_error_states {
+            if settings.odometry_error_states || settings.odometry_velocity_states {
                 let (t0, t1) = (step * 100_000, (step + 1) * 100_000);
                 let samples = [t0, t1].map(|t_us| rig_model::odometry::OdomSample {
                     t_us,
@@ -561,6 +561,18 @@ pub(crate) mod tests {
         a_local_session_is_the_dense_filter_with(true);
     }
 
+    /// The same with the velocity-state form: the odometry's measurement of the velocities
+    /// and the errors touches active states only.
+    #[test]
+    fn a_local_session_with_odometry_velocity_states_is_the_dense_filter() {
+        let settings = |margin: f64| Settings {
+            local_margin_m: margin,
+            odometry_velocity_states: true,
+            ..Settings::default()
+        };
+        compare(drive_with(settings(0.0)), drive_with(settings(1.0)));
+    }
+
     fn a_local_session_is_the_dense_filter_with(error_states: bool) {
         let settings = |margin: f64| Settings {
             local_margin_m: margin,
@@ -568,8 +580,12 @@ pub(crate) mod tests {
             ..Settings::default()
         };
         let dense = drive_with(settings(0.0));
-        let mut local = drive_with(settings(1.0));
         assert_eq!(dense.error_axes().len(), if error_states { 3 } else { 0 });
+        compare(dense, drive_with(settings(1.0)));
+    }
+
+    /// A dense filter and one with local sessions after the same drive.
+    fn compare(dense: Ekf, mut local: Ekf) {
         assert_eq!(dense.health().local_sessions, 0);
         let health = local.health();
         assert!(health.local_sessions >= 2, "{health:?}");

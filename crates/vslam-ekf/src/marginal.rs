@@ -174,7 +174,7 @@ impl Ekf {
 
     /// [`Self::replace_marginal`] over the dense covariance: `x += C g`, `P -= C M C^T` with
     /// `C = P_{.S}`.
-    fn replace_dense(
+    pub(crate) fn replace_dense(
         &mut self,
         pairs: &[(usize, usize)],
         g: &DVector<f64>,
@@ -202,7 +202,7 @@ impl Ekf {
     /// `A = P_{A S}` and `B = phi^T H^T` (`H` selecting `S`), `P_AA -= A M A^T`,
     /// `phi^T -= B M A^T`, `psi += B M B^T` and the passive states through `P0_BA0 B g`
     /// (`crate::local`'s module docs).
-    fn replace_in_session(
+    pub(crate) fn replace_in_session(
         &mut self,
         ks: &[usize],
         g: &DVector<f64>,

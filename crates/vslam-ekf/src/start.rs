@@ -88,23 +88,31 @@ impl Ekf {
             estimated.push(p);
         }
         let m = estimated.len();
-        let errors = if settings.odometry_error_states {
+        let errors = if settings.odometry_error_states || settings.odometry_velocity_states {
             ErrorAxis::with_memory(&rig.noise)
         } else {
             Vec::new()
         };
+        let velocity_states = settings.odometry_velocity_states && !errors.is_empty();
+        let v = if velocity_states { 3 } else { 0 };
         let layout = StateLayout {
             landmarks: 0,
             camera: m,
-            errors: errors.len(),
+            errors: v + errors.len(),
         };
         let (n, c0) = (layout.dim(), layout.camera_start());
         let mut x = DVector::zeros(n);
         let mut p_mat = DMatrix::zeros(n, n);
-        // The odometry's errors start at their stationary spread, zero mean.
+        // The velocities start unknown (the first frame's odometry tells them), the
+        // odometry's errors at their stationary spread, zero mean.
+        for k in 0..v {
+            let i = layout.errors_start() + k;
+            p_mat[(i, i)] =
+                crate::errors::VELOCITY_PRIOR_SIGMA * crate::errors::VELOCITY_PRIOR_SIGMA;
+        }
         for (k, axis) in errors.iter().enumerate() {
             let (sigma, _) = axis.process(&rig.noise);
-            let i = layout.errors_start() + k;
+            let i = layout.errors_start() + v + k;
             p_mat[(i, i)] = sigma * sigma;
         }
         for (a, &pa) in estimated.iter().enumerate() {
@@ -151,6 +159,7 @@ impl Ekf {
             landmarks: Vec::new(),
             estimated,
             errors,
+            velocity_states,
             camera_base: start.camera,
             noise: rig.noise,
             pixel_noise: rig.pixel_noise(),
@@ -207,7 +216,7 @@ impl Ekf {
         let layout = StateLayout {
             landmarks: nl,
             camera: m,
-            errors: ekf.errors.len(),
+            errors: ekf.layout().errors,
         };
         let (n, c0) = (layout.dim(), layout.camera_start());
         let src = &handover.covariance;
@@ -262,7 +271,7 @@ impl Ekf {
         // The odometry's errors as `Self::new` started them (the batch holds none).
         let e_new = layout.errors_start();
         let e_old = ekf.layout().errors_start();
-        for k in 0..ekf.errors.len() {
+        for k in 0..ekf.layout().errors {
             p[(e_new + k, e_new + k)] = ekf.p[(e_old + k, e_old + k)];
         }
         if p.iter().any(|v| !v.is_finite()) {

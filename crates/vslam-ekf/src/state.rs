@@ -78,7 +78,7 @@ impl Ekf {
         StateLayout {
             landmarks: self.landmarks.len(),
             camera: self.estimated.len(),
-            errors: self.errors.len(),
+            errors: self.errors.len() + if self.velocity_states { 3 } else { 0 },
         }
     }
 

@@ -4,9 +4,10 @@
 //! carrying a real vehicle's odometry scale, yaw scale and bias and first-order Gauss-Markov
 //! errors of 0.6 s (the simulator's process, vehicle-interfaces.md section 2; the rig states
 //! the time constant), the filter estimating the vehicle's parameters and mapping the lamps as
-//! it goes. The finding (docs/vehicle.md, "The errors as states"): with the errors as states
-//! the odometry scale ends 1 to 6 sigma high on every seed; with the white equivalent (the
-//! default) it is honest.
+//! it goes, from rest, its speeds changing at 0.4 m/s^2 and rad/s^2. The finding
+//! (docs/vehicle.md, "The errors as states"): with the errors as states the odometry scale
+//! ends 2 to 5 sigma high on every seed; with the white equivalent (the default) it is honest,
+//! and so is the velocity-state form on these drives.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use crate::common;
@@ -34,6 +35,17 @@ impl End {
     }
 }
 
+/// How the filter takes the odometry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Model {
+    /// The prediction's input, weighed by the white equivalent (the default).
+    WhiteEquivalent,
+    /// The prediction's input, its errors as states.
+    ErrorStates,
+    /// A measurement of the velocities, which are states with the errors.
+    VelocityStates,
+}
+
 /// (speed m/s, yaw rate rad/s, seconds) of each leg.
 type Legs = [(f64, f64, f64)];
 
@@ -52,8 +64,8 @@ const LAPS: [(f64, f64, f64); 8] = {
     ]
 };
 
-/// One drive, seeded: frames at 20 Hz, odometry at 100 Hz.
-fn drive(seed: u64, error_states: bool, legs: &Legs) -> End {
+/// One drive, seeded: frames at 20 Hz, odometry at 100 Hz, the vehicle starting from rest.
+fn drive(seed: u64, model: Model, legs: &Legs) -> End {
     let mut rng = common::rng(seed);
     let mut truth = common::random_camera(&mut rng);
     truth.mount.roll *= 0.1;
@@ -65,7 +77,8 @@ fn drive(seed: u64, error_states: bool, legs: &Legs) -> End {
     rig.noise.yaw_rate_tau = tau;
     let (scale, yaw_scale, yaw_bias) = (1.01, 1.01, 0.002);
     let settings = Settings {
-        odometry_error_states: error_states,
+        odometry_error_states: model == Model::ErrorStates,
+        odometry_velocity_states: model == Model::VelocityStates,
         ..Settings::default()
     };
     let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
@@ -90,8 +103,12 @@ fn drive(seed: u64, error_states: bool, legs: &Legs) -> End {
     let mut samples: Vec<OdomSample> = Vec::new();
     let mut t_us = 0_u64;
     let mut last_frame: Option<u64> = None;
-    for &(v, w, secs) in legs {
+    // The vehicle's velocities move to each leg's at 0.4 m/s^2 and 0.4 rad/s^2 at most.
+    let (mut v, mut w) = (0.0_f64, 0.0_f64);
+    let toward = |from: f64, to: f64| from + (to - from).clamp(-0.004, 0.004);
+    for &(leg_v, leg_w, secs) in legs {
         for _ in 0..(secs / 0.01).round() as u64 {
+            (v, w) = (toward(v, leg_v), toward(w, leg_w));
             samples.push(OdomSample {
                 t_us,
                 vx: scale * v + e[0],
@@ -152,20 +169,20 @@ fn drive(seed: u64, error_states: bool, legs: &Legs) -> End {
 #[test]
 fn the_white_equivalent_keeps_the_vehicle_parameters_honest() {
     for seed in 0..6 {
-        let end = drive(seed, false, &LAPS);
+        let end = drive(seed, Model::WhiteEquivalent, &LAPS);
         assert!(end.worst() < 3.0, "seed {seed}: {end:?}");
     }
 }
 
-/// The errors as states: the odometry scale ends high on every seed of the same drives, 3.2
-/// to 6.4 sigma on four of the six (the yaw scale and bias honest). Not fixed: docs/vehicle.md,
-/// "The errors as states". Fails until it is.
+/// The errors as states: the odometry scale ends 3.1 to 4.9 sigma high on all six seeds of
+/// the same drives (the yaw scale and bias honest). Not fixed: docs/vehicle.md, "The errors
+/// as states". Fails until it is.
 #[test]
 #[ignore = "the errors as states bias the odometry scale (docs/vehicle.md); fails"]
 fn the_error_states_keep_the_vehicle_parameters_honest() {
     let mut worst: Vec<String> = Vec::new();
     for seed in 0..6 {
-        let end = drive(seed, true, &LAPS);
+        let end = drive(seed, Model::ErrorStates, &LAPS);
         if end.worst() >= 3.0 {
             worst.push(format!("seed {seed}: {end:?}"));
         }
@@ -173,17 +190,35 @@ fn the_error_states_keep_the_vehicle_parameters_honest() {
     assert!(worst.is_empty(), "{}", worst.join("\n"));
 }
 
-/// The same on one long straight (20 m at 0.5 m/s): the scale 1.3 to 3.1 sigma high (mean
-/// 2.4) with the errors as states, within 1.3 sigma either way (mean -0.2) without.
+/// The same on one long straight (20 m at 0.5 m/s): the scale 1.7 to 3.7 sigma high (mean
+/// 2.8) with the errors as states.
 #[test]
 #[ignore = "the errors as states bias the odometry scale (docs/vehicle.md); fails"]
 fn the_error_states_keep_the_scale_honest_on_a_straight() {
     let scales: Vec<f64> = (0..6)
-        .map(|seed| drive(seed, true, &[(0.5, 0.0, 40.0)]).scale)
+        .map(|seed| drive(seed, Model::ErrorStates, &[(0.5, 0.0, 40.0)]).scale)
         .collect();
     let mean = scales.iter().sum::<f64>() / 6.0;
     assert!(
         mean.abs() < 1.0,
         "mean normalised scale error {mean:.2}: {scales:?}"
     );
+}
+
+/// The velocity-state form (the odometry a measurement of the velocities, `Settings::
+/// odometry_velocity_states`, its acceleration 0.2 m/s^2 and rad/s^2 by default): every
+/// vehicle parameter inside 3 sigma on the same drives (within 1.6 sigma). With an
+/// acceleration of 0.5 the scale ends 1.6 to 3.3 sigma low, with 2.0 about 9 sigma low: the
+/// form is honest only while the velocities' model is smooth against the errors'. It fails
+/// on the generated halls (docs/vehicle.md, "The velocity-state form").
+#[test]
+fn the_velocity_states_keep_the_vehicle_parameters_honest() {
+    let mut worst: Vec<String> = Vec::new();
+    for seed in 0..6 {
+        let end = drive(seed, Model::VelocityStates, &LAPS);
+        if end.worst() >= 3.0 {
+            worst.push(format!("seed {seed}: {end:?}"));
+        }
+    }
+    assert!(worst.is_empty(), "{}", worst.join("\n"));
 }
