@@ -7,7 +7,7 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
@@ -18,7 +18,8 @@
 //! the odometry's errors with memory held as states of the filter
 //! (`vslam_ekf::Settings::odometry_error_states`); `--velocity-states`: the vehicle's
 //! velocities as states too, the odometry their measurement
-//! (`vslam_ekf::Settings::odometry_velocity_states`); `--print-vehicle`: each hall's vehicle
+//! (`vslam_ekf::Settings::odometry_velocity_states`); `--no-smoother`: phase 2 without its
+//! fixed-lag smoother (`nav::NavSettings::smooth_phase2` off); `--print-vehicle`: each hall's vehicle
 //! parameters' errors and sigmas on stderr;
 //! `--frozen-points`: linearisation points that follow the landmarks' estimates without the
 //! covariance until they are known to 0.5 m and then stay (`vslam_ekf::Settings::follow_points`
@@ -78,7 +79,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
     let mut settings = NavSettings::default();
     let mut print_vehicle = false;
     let mut lens = None;
@@ -127,6 +128,7 @@ fn run() -> Result<(), String> {
             "--fej-pose" => settings.ekf.first_estimate_pose = true,
             "--error-states" => settings.ekf.odometry_error_states = true,
             "--velocity-states" => settings.ekf.odometry_velocity_states = true,
+            "--no-smoother" => settings.smooth_phase2 = false,
             "--print-vehicle" => print_vehicle = true,
             "--relative-lost" => settings.relative_lost = true,
             "--odometry-tau" => {
