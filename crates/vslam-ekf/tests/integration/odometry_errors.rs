@@ -18,12 +18,14 @@ use rig_model::odometry::{OdomSample, constant_velocity_motion, vehicle_jacobian
 use rig_model::project;
 use vslam_ekf::{Ekf, LandmarkId, Settings};
 
-/// Each estimated vehicle parameter's error over its sigma at the end of a drive.
+/// Each estimated vehicle parameter's error over its sigma at the end of a drive (the clock
+/// offset's 0 when it is not estimated).
 #[derive(Debug)]
 struct End {
     scale: f64,
     yaw_scale: f64,
     yaw_bias: f64,
+    offset: f64,
 }
 
 impl End {
@@ -32,6 +34,7 @@ impl End {
             .abs()
             .max(self.yaw_scale.abs())
             .max(self.yaw_bias.abs())
+            .max(self.offset.abs())
     }
 }
 
@@ -64,13 +67,22 @@ const LAPS: [(f64, f64, f64); 8] = {
     ]
 };
 
-/// One drive, seeded: frames at 20 Hz, odometry at 100 Hz, the vehicle starting from rest.
+/// One drive, seeded: frames at 20 Hz, odometry at 100 Hz, the vehicle starting from rest;
+/// with `offset_us`, the board's clock that far ahead of the odometry's and the offset
+/// estimated.
 fn drive(seed: u64, model: Model, legs: &Legs) -> End {
+    drive_with_offset(seed, model, legs, 0)
+}
+
+fn drive_with_offset(seed: u64, model: Model, legs: &Legs, offset_us: u64) -> End {
     let mut rng = common::rng(seed);
     let mut truth = common::random_camera(&mut rng);
     truth.mount.roll *= 0.1;
     truth.mount.pitch *= 0.1;
-    let estimate = [Param::OdomScale, Param::OdomYawScale, Param::OdomYawBias];
+    let mut estimate = vec![Param::OdomScale, Param::OdomYawScale, Param::OdomYawBias];
+    if offset_us > 0 {
+        estimate.push(Param::TimeOffset);
+    }
     let mut rig = common::rig(truth, &estimate);
     let tau = 0.6;
     rig.noise.velocity_tau = tau;
@@ -125,13 +137,15 @@ fn drive(seed: u64, model: Model, legs: &Legs) -> End {
             }
             // A frame at t_us: the sample that starts there is not reported yet, and the
             // prediction holds the last one to the frame.
+            // Exposed at t_us on the odometry's clock, stamped by the board's.
+            let stamp = t_us + offset_us;
             if let Some(t0) = last_frame {
                 let v_est = ekf.camera().vehicle;
-                let jv = vehicle_jacobian(&samples, t0, t_us, &v_est).unwrap();
-                ekf.predict_odometry_vehicle(&samples, (t0, t_us), &rig.noise, &v_est, &jv)
+                let jv = vehicle_jacobian(&samples, t0, stamp, &v_est).unwrap();
+                ekf.predict_odometry_vehicle(&samples, (t0, stamp), &rig.noise, &v_est, &jv)
                     .unwrap();
             }
-            last_frame = Some(t_us);
+            last_frame = Some(stamp);
             let mut batch = Vec::new();
             let mut new = Vec::new();
             for (k, lamp) in lamps.iter().enumerate() {
@@ -161,6 +175,11 @@ fn drive(seed: u64, model: Model, legs: &Legs) -> End {
         scale: normalised(Param::OdomScale, scale),
         yaw_scale: normalised(Param::OdomYawScale, yaw_scale),
         yaw_bias: normalised(Param::OdomYawBias, yaw_bias),
+        offset: if offset_us > 0 {
+            normalised(Param::TimeOffset, 1e-6 * offset_us as f64)
+        } else {
+            0.0
+        },
     }
 }
 
@@ -216,6 +235,34 @@ fn the_velocity_states_keep_the_vehicle_parameters_honest() {
     let mut worst: Vec<String> = Vec::new();
     for seed in 0..6 {
         let end = drive(seed, Model::VelocityStates, &LAPS);
+        if end.worst() >= 3.0 {
+            worst.push(format!("seed {seed}: {end:?}"));
+        }
+    }
+    assert!(worst.is_empty(), "{}", worst.join("\n"));
+}
+
+/// A clock offset of 12 ms estimated as well: the white equivalent keeps it (and the rest)
+/// inside 3 sigma.
+#[test]
+fn the_white_equivalent_keeps_the_clock_offset_honest() {
+    for seed in 0..6 {
+        let end = drive_with_offset(seed, Model::WhiteEquivalent, &LAPS, 12_000);
+        assert!(end.worst() < 3.0, "seed {seed}: {end:?}");
+    }
+}
+
+/// The velocity-state form with the 12 ms clock offset estimated: the offset ends 44 to 47 ms
+/// off at a sigma of 3.5 ms on all six seeds (the other parameters honest); a slope regressor
+/// taken over half a second either side of the frame left it 56 to 62 ms off. The likely
+/// cause: the velocities, a random walk, lag the vehicle's accelerations, and a lag is what
+/// a clock offset looks like (docs/vehicle.md, "The velocity-state form"). Fails until fixed.
+#[test]
+#[ignore = "the velocity-state form biases the clock offset (docs/vehicle.md); fails"]
+fn the_velocity_states_keep_the_clock_offset_honest() {
+    let mut worst: Vec<String> = Vec::new();
+    for seed in 0..6 {
+        let end = drive_with_offset(seed, Model::VelocityStates, &LAPS, 12_000);
         if end.worst() >= 3.0 {
             worst.push(format!("seed {seed}: {end:?}"));
         }
