@@ -183,14 +183,22 @@ fn drive_with_offset(seed: u64, model: Model, legs: &Legs, offset_us: u64) -> En
     }
 }
 
+/// Six seeds of [`LAPS`] under `model` (with a clock offset of `offset_us`, estimated, when
+/// not 0): every estimated vehicle parameter inside 3 sigma, or the seeds that are not.
+fn assert_honest(model: Model, offset_us: u64) {
+    let outside: Vec<String> = (0..6)
+        .map(|seed| (seed, drive_with_offset(seed, model, &LAPS, offset_us)))
+        .filter(|(_, end)| end.worst() >= 3.0)
+        .map(|(seed, end)| format!("seed {seed}: {end:?}"))
+        .collect();
+    assert!(outside.is_empty(), "{}", outside.join("\n"));
+}
+
 /// The default model (the white equivalent of the stated memory): every vehicle parameter
 /// inside 3 sigma on six seeds of straights and U-turns.
 #[test]
 fn the_white_equivalent_keeps_the_vehicle_parameters_honest() {
-    for seed in 0..6 {
-        let end = drive(seed, Model::WhiteEquivalent, &LAPS);
-        assert!(end.worst() < 3.0, "seed {seed}: {end:?}");
-    }
+    assert_honest(Model::WhiteEquivalent, 0);
 }
 
 /// The errors as states: the odometry scale ends 3.1 to 4.9 sigma high on all six seeds of
@@ -199,14 +207,7 @@ fn the_white_equivalent_keeps_the_vehicle_parameters_honest() {
 #[test]
 #[ignore = "the errors as states bias the odometry scale (docs/vehicle.md); fails"]
 fn the_error_states_keep_the_vehicle_parameters_honest() {
-    let mut worst: Vec<String> = Vec::new();
-    for seed in 0..6 {
-        let end = drive(seed, Model::ErrorStates, &LAPS);
-        if end.worst() >= 3.0 {
-            worst.push(format!("seed {seed}: {end:?}"));
-        }
-    }
-    assert!(worst.is_empty(), "{}", worst.join("\n"));
+    assert_honest(Model::ErrorStates, 0);
 }
 
 /// The same on one long straight (20 m at 0.5 m/s): the scale 1.7 to 3.7 sigma high (mean
@@ -232,24 +233,14 @@ fn the_error_states_keep_the_scale_honest_on_a_straight() {
 /// on the generated halls (docs/vehicle.md, "The velocity-state form").
 #[test]
 fn the_velocity_states_keep_the_vehicle_parameters_honest() {
-    let mut worst: Vec<String> = Vec::new();
-    for seed in 0..6 {
-        let end = drive(seed, Model::VelocityStates, &LAPS);
-        if end.worst() >= 3.0 {
-            worst.push(format!("seed {seed}: {end:?}"));
-        }
-    }
-    assert!(worst.is_empty(), "{}", worst.join("\n"));
+    assert_honest(Model::VelocityStates, 0);
 }
 
 /// A clock offset of 12 ms estimated as well: the white equivalent keeps it (and the rest)
 /// inside 3 sigma.
 #[test]
 fn the_white_equivalent_keeps_the_clock_offset_honest() {
-    for seed in 0..6 {
-        let end = drive_with_offset(seed, Model::WhiteEquivalent, &LAPS, 12_000);
-        assert!(end.worst() < 3.0, "seed {seed}: {end:?}");
-    }
+    assert_honest(Model::WhiteEquivalent, 12_000);
 }
 
 /// The velocity-state form with the 12 ms clock offset estimated: the offset ends 44 to 47 ms
@@ -260,12 +251,5 @@ fn the_white_equivalent_keeps_the_clock_offset_honest() {
 #[test]
 #[ignore = "the velocity-state form biases the clock offset (docs/vehicle.md); fails"]
 fn the_velocity_states_keep_the_clock_offset_honest() {
-    let mut worst: Vec<String> = Vec::new();
-    for seed in 0..6 {
-        let end = drive_with_offset(seed, Model::VelocityStates, &LAPS, 12_000);
-        if end.worst() >= 3.0 {
-            worst.push(format!("seed {seed}: {end:?}"));
-        }
-    }
-    assert!(worst.is_empty(), "{}", worst.join("\n"));
+    assert_honest(Model::VelocityStates, 12_000);
 }
