@@ -81,6 +81,19 @@ impl ErrorAxis {
         }
     }
 
+    /// `(phi, (1 - phi^2) sigma^2)` of the axis's error over `dt_s` seconds: how much of it
+    /// remains, and the variance it gains.
+    #[must_use]
+    pub fn decay_over(self, noise: &Noise, dt_s: f64) -> (f64, f64) {
+        let (sigma, tau) = self.process(noise);
+        let phi = if tau > 0.0 {
+            libm::exp(-dt_s / tau)
+        } else {
+            0.0
+        };
+        (phi, (1.0 - phi * phi) * sigma * sigma)
+    }
+
     /// The axes with memory under `noise` (a finite, positive time constant and sigma), in
     /// state order.
     #[must_use]
@@ -139,18 +152,6 @@ impl Ekf {
     /// Index of the first error state (after the velocities, when they are states).
     fn error_states_start(&self) -> usize {
         self.layout().errors_start() + if self.velocity_states { 3 } else { 0 }
-    }
-
-    /// The vehicle's velocities `(vx, vy, vtheta)` with their sigmas, with the velocity-state
-    /// form.
-    pub fn velocity_states(&self) -> Option<[(f64, f64); 3]> {
-        let u0 = self.layout().errors_start();
-        self.velocity_states.then(|| {
-            core::array::from_fn(|k| {
-                let i = u0 + k;
-                (self.x[i], libm::sqrt(self.cov(i, i).max(0.0)))
-            })
-        })
     }
 
     /// Eq. (4)-(5) with the odometry's errors as states (module docs): the samples over the
@@ -247,8 +248,8 @@ impl Ekf {
                 let innovation = integrated_innovation_variance(sigma, tau, dt) / (dt * dt);
                 inc.covariance += column * column.transpose() * innovation;
             }
-            let phi = if tau > 0.0 { libm::exp(-dt / tau) } else { 0.0 };
-            decay.push((e0 + k, phi, (1.0 - phi * phi) * sigma * sigma));
+            let (phi, q) = axis.decay_over(noise, dt);
+            decay.push((e0 + k, phi, q));
             if dt > 0.0 {
                 let c = sigma * sigma * tau * (1.0 - phi) * (1.0 - phi) / dt;
                 cross.push((e0 + k, column * c));
@@ -309,9 +310,8 @@ impl Ekf {
             self.add_pose_cross(u0 + k, &(rot * j.column(k) * (0.5 * w2[k])));
         }
         for (k, axis) in self.errors.clone().into_iter().enumerate() {
-            let (sigma, tau) = axis.process(noise);
-            let phi = if tau > 0.0 { libm::exp(-dt / tau) } else { 0.0 };
-            self.decay_state(e0 + k, phi, (1.0 - phi * phi) * sigma * sigma);
+            let (phi, q) = axis.decay_over(noise, dt);
+            self.decay_state(e0 + k, phi, q);
         }
         Ok(())
     }
@@ -437,23 +437,8 @@ impl Ekf {
         let g = hm.transpose() * &s_inv * nu_d;
         let mut mm = hm.transpose() * &s_inv * &hm;
         mm = 0.5 * (&mm + mm.transpose());
-        let pairs: Vec<(usize, usize)> = cols.iter().map(|c| (c.0, 0)).collect();
-        let active: Option<Vec<usize>> = self.local.as_deref().and_then(|l| {
-            pairs
-                .iter()
-                .map(|&(i, _)| match l.place.get(i) {
-                    Some(&crate::local::Place::Active(k)) => Some(k),
-                    _ => None,
-                })
-                .collect()
-        });
-        match active {
-            Some(ks) => self.replace_in_session(&ks, &g, &mm),
-            None => {
-                self.settle();
-                self.replace_dense(&pairs, &g, &mm)
-            }
-        }
+        let states: Vec<usize> = cols.iter().map(|c| c.0).collect();
+        self.apply_marginal_form(&states, &g, &mm)
     }
 
     /// `P_{pose, i} += c` (both halves): process noise shared by the pose and state `i`.
@@ -485,12 +470,14 @@ impl Ekf {
         if let Some(v) = self.x.get_mut(i) {
             *v *= phi;
         }
+        // phi = 1 (the velocities' random walk) only adds the variance: no row to scan.
+        let decays = phi != 1.0;
         let scale = |p: &mut nalgebra::DMatrix<f64>, k: usize| {
             let n = p.nrows();
             if k >= n {
                 return;
             }
-            for j in 0..n {
+            for j in (0..n).filter(|_| decays) {
                 if j == k {
                     continue;
                 }
@@ -513,7 +500,7 @@ impl Ekf {
                 };
                 scale(&mut l.paa, k);
                 let na0 = l.n_a0;
-                if let Some(row) = l.phit.get_mut(k * na0..(k + 1) * na0) {
+                if let Some(row) = l.phit.get_mut(k * na0..(k + 1) * na0).filter(|_| decays) {
                     for v in row {
                         *v *= phi;
                     }

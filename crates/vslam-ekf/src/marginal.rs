@@ -151,40 +151,54 @@ impl Ekf {
         let g = &p_inv * delta;
         let mut m = &p_inv * (&p_ss - &p_new) * &p_inv;
         m = 0.5 * (&m + m.transpose());
+        let states: Vec<usize> = pairs.iter().map(|p| p.0).collect();
+        self.apply_marginal_form(&states, &g, &m)?;
+        self.relinearise_landmarks();
+        self.predicted_at = None;
+        Ok(slots.len())
+    }
+
+    /// `x += P_{.S} g`, `P -= P_{.S} M P_{S.}` over the states `states` (`S`): in the open
+    /// local session when every state of `S` is active there, over the dense covariance
+    /// (the session settled first) otherwise. [`Self::replace_marginal`]'s step, and any
+    /// linear update of a few states (`g = H^T S^-1 nu`, `M = H^T S^-1 H`; the odometry's
+    /// measurement, `crate::errors`).
+    pub(crate) fn apply_marginal_form(
+        &mut self,
+        states: &[usize],
+        g: &DVector<f64>,
+        m: &DMatrix<f64>,
+    ) -> Result<(), Error> {
         let active: Option<Vec<usize>> = self.local.as_deref().and_then(|l| {
-            pairs
+            states
                 .iter()
-                .map(|&(i, _)| match l.place.get(i) {
+                .map(|&i| match l.place.get(i) {
                     Some(&Place::Active(k)) => Some(k),
                     _ => None,
                 })
                 .collect()
         });
         match active {
-            Some(ks) => self.replace_in_session(&ks, &g, &m)?,
+            Some(ks) => self.replace_in_session(&ks, g, m),
             None => {
                 self.settle();
-                self.replace_dense(&pairs, &g, &m)?;
+                self.replace_dense(states, g, m)
             }
         }
-        self.relinearise_landmarks();
-        self.predicted_at = None;
-        Ok(slots.len())
     }
 
     /// [`Self::replace_marginal`] over the dense covariance: `x += C g`, `P -= C M C^T` with
     /// `C = P_{.S}`.
-    pub(crate) fn replace_dense(
+    fn replace_dense(
         &mut self,
-        pairs: &[(usize, usize)],
+        cols: &[usize],
         g: &DVector<f64>,
         m: &DMatrix<f64>,
     ) -> Result<(), Error> {
         let n = self.x.len();
-        let s = pairs.len();
-        let cols: Vec<usize> = pairs.iter().map(|p| p.0).collect();
+        let s = cols.len();
         let mut c = alloc::vec![0.0; n * s];
-        gather_columns(self.p.as_slice(), n, &cols, &mut c);
+        gather_columns(self.p.as_slice(), n, cols, &mut c);
         let mut dx = alloc::vec![0.0; n];
         gemm(&mut dx, n, 1, &c, g.as_slice(), s, 1.0, false);
         let mut cm = alloc::vec![0.0; n * s];
@@ -202,7 +216,7 @@ impl Ekf {
     /// `A = P_{A S}` and `B = phi^T H^T` (`H` selecting `S`), `P_AA -= A M A^T`,
     /// `phi^T -= B M A^T`, `psi += B M B^T` and the passive states through `P0_BA0 B g`
     /// (`crate::local`'s module docs).
-    pub(crate) fn replace_in_session(
+    fn replace_in_session(
         &mut self,
         ks: &[usize],
         g: &DVector<f64>,

@@ -21,16 +21,17 @@ pub type CameraCovariance = SMatrix<f64, N_PARAMS, N_PARAMS>;
 /// at `0..3`, landmark `s` (in state order) at `3 + 3 s`, the estimated camera parameters (the
 /// rig file's `estimate` order) after the landmarks, so that every observation's `H` has the
 /// same shape and a new landmark is inserted just before the camera block, and last the
-/// odometry's errors when they are states (`Settings::odometry_error_states`; no observation
-/// involves them). Every index into `x` and `P` is computed here.
+/// odometry's block when it is held (`crate::errors`: the vehicle's velocities `u` with
+/// `Settings::odometry_velocity_states`, then the errors `E`; no lamp's observation involves
+/// them). Every index into `x` and `P` is computed here.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct StateLayout {
     /// Landmarks in the state, `N`.
     pub landmarks: usize,
     /// Camera (and vehicle) parameters estimated, `m`.
     pub camera: usize,
-    /// The odometry's errors held as states (`crate::errors`), `e`: 0 to 3, after the
-    /// camera block.
+    /// The odometry's block after the camera (`crate::errors`), `e`: the velocities (3, with
+    /// the velocity-state form) and the errors (0 to 3), so 0 to 6.
     pub errors: usize,
 }
 
@@ -53,13 +54,13 @@ impl StateLayout {
         Self::landmark(self.landmarks)
     }
 
-    /// Index of the first odometry error state (the end of the camera block).
+    /// Index of the odometry's block (the end of the camera block).
     #[must_use]
     pub const fn errors_start(&self) -> usize {
         self.camera_start() + self.camera
     }
 
-    /// The states after the landmarks: the camera block and the odometry's errors, `m + e`.
+    /// The states after the landmarks: the camera block and the odometry's block, `m + e`.
     #[must_use]
     pub const fn tail(&self) -> usize {
         self.camera + self.errors
