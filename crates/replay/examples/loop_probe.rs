@@ -6,13 +6,16 @@
 //! by more than `JUMP_M`, is printed with the pose error and sigma.
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
-//! [--no-smoother] [--fej-pose] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID]
+//! [--no-smoother] [--fej-pose] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed [--worst N]] [--lamp ID]
 //! [--nees-at T_S [--worst N]] [--cov-at T_S] [--partial-from T_S]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
 //! smoother; `--rig` runs on that rig instead of the log's; `--field` and `--max-in-view` set
 //! the navigator's field of use and its cap on landmarks in view; `--missed` reports, per lamp
-//! in view 20 frames or more that no landmark is, where its observations were lost; `--lamp`
+//! in view 20 frames or more that no landmark is, where its observations were lost, and the
+//! landmarks farthest from their lamps (12, or `--worst N`) with the error's vector, the
+//! landmark's sigmas and where the lamp is (a map off by its scale shows as errors growing
+//! with the distance from the first frame, inside their sigmas); `--lamp`
 //! follows one lamp's stereo match and track while it is in view; `--nees-at T` prints the
 //! map's NEES and its widest common modes at `T` seconds ([`print_map_nees`]), and with
 //! `--worst N` the `N` landmarks that add the most to it (a landmark off relative to the others
@@ -338,7 +341,7 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--fej-pose] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--fej-pose] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed [--worst N]] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut every_frame = false;
@@ -868,19 +871,40 @@ fn run() -> Result<(), String> {
     if missed_report && let Some(ekf) = nav.ekf() {
         // Each landmark against its lamp (the first frame's world), the worst first.
         let (c0, s0) = (t0.theta.cos(), t0.theta.sin());
-        let mut errors: Vec<(f64, u64, u32)> = ekf
-            .landmark_positions()
-            .filter_map(|(id, p)| {
+        // (error, landmark, lamp, error vector, sigmas, the lamp in the first frame's world)
+        type Row = (f64, u64, u32, Vector3<f64>, Vector3<f64>, Vector3<f64>);
+        let mut errors: Vec<Row> = ekf
+            .landmarks()
+            .filter_map(|est| {
+                let (id, p) = (est.id, est.position);
                 let lamp = landmark_lamp.get(&id.0).copied().flatten()?;
                 let l = lamps.iter().find(|l| l.id == lamp)?;
                 let (dx, dy) = (l.x - t0.x, l.y - t0.y);
                 let t = Vector3::new(c0 * dx + s0 * dy, -s0 * dx + c0 * dy, l.z);
-                Some(((p - t).norm(), id.0, lamp))
+                let sd = Vector3::new(
+                    est.covariance[(0, 0)].sqrt(),
+                    est.covariance[(1, 1)].sqrt(),
+                    est.covariance[(2, 2)].sqrt(),
+                );
+                Some(((p - t).norm(), id.0, lamp, p - t, sd, t))
             })
             .collect();
         errors.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for (e, id, lamp) in errors.iter().take(12) {
-            println!("landmark L{id} (lamp {lamp}): {:.1} mm off", e * 1000.0);
+        let listed = if worst > 0 { worst } else { 12 };
+        for (e, id, lamp, d, sd, t) in errors.iter().take(listed) {
+            println!(
+                "landmark L{id} (lamp {lamp}): {:.1} mm off: d ({:+.0}, {:+.0}, {:+.0}) mm, sd ({:.0}, {:.0}, {:.0}) mm, at ({:.1}, {:.1}, {:.1}) m",
+                e * 1000.0,
+                d.x * 1e3,
+                d.y * 1e3,
+                d.z * 1e3,
+                sd.x * 1e3,
+                sd.y * 1e3,
+                sd.z * 1e3,
+                t.x,
+                t.y,
+                t.z
+            );
         }
     }
     if missed_report {

@@ -344,30 +344,20 @@ impl Ekf {
         // P_{B A} = P0_BA0 phi^T.
         let mut c = alloc::vec![0.0; n0 * na];
         crate::linalg::gemm(&mut c, n0, na, &l.g0, &l.phit, na0, 1.0, false);
-        let base = self.p.as_slice();
-        let paa = l.paa.as_slice();
-        let mut p = DMatrix::<f64>::zeros(n, n);
+        if n == n0
+            && l.place.iter().enumerate().all(|(i, place)| match *place {
+                Place::Passive(b) => b == i,
+                Place::Active(_) => true,
+            })
         {
-            let dst = p.as_mut_slice();
-            for j in 0..n {
-                let Some(&pj) = l.place.get(j) else { continue };
-                for i in j..n {
-                    let Some(&pi) = l.place.get(i) else { continue };
-                    let v = match (pi, pj) {
-                        (Place::Active(a), Place::Active(b)) => sym(paa, na, a, b),
-                        (Place::Active(k), Place::Passive(b))
-                        | (Place::Passive(b), Place::Active(k)) => {
-                            c.get(k * n0 + b).copied().unwrap_or(f64::NAN)
-                        }
-                        (Place::Passive(a), Place::Passive(b)) => sym(base, n0, a, b),
-                    };
-                    if let Some(d) = dst.get_mut(j * n + i) {
-                        *d = v;
-                    }
-                }
-            }
+            // No state added or removed: `P_BB` is already in place; only the active rows and
+            // columns are written, `O(n n_A)`.
+            write_active_in_place(self.p.as_mut_slice(), n, &l, &c);
+            self.health.local_settles += 1;
+            return;
         }
-        self.p = p;
+        let p = settled_buffer(self.p.as_slice(), n0, n, &l, &c);
+        self.p = DMatrix::from_vec(n, n, p);
         self.health.local_settles += 1;
     }
 
@@ -413,6 +403,127 @@ impl Ekf {
             .collect();
         chosen.extend_from_slice(slots);
         self.open_local(&chosen);
+    }
+}
+
+/// Writes the settled session's active rows and columns into `P0` itself (its lower
+/// triangle), when the state's indices did not move during the session: `P_AA` from the
+/// session, `P_AB` from `c = P0_BA0 phi^T` (`n x n_A`, column-major).
+fn write_active_in_place(p: &mut [f64], n: usize, l: &Local, c: &[f64]) {
+    let paa = l.paa.as_slice();
+    let na = l.n_active();
+    for (k, &s) in l.active.iter().enumerate() {
+        // Column `s` from its diagonal down.
+        for i in s..n {
+            let v = match l.place.get(i) {
+                Some(Place::Active(k2)) => sym(paa, na, k, *k2),
+                Some(Place::Passive(_)) => c.get(k * n + i).copied().unwrap_or(f64::NAN),
+                None => continue,
+            };
+            if let Some(d) = p.get_mut(s * n + i) {
+                *d = v;
+            }
+        }
+        // Row `s` left of the diagonal, in the passive columns (the active ones are written
+        // as columns above).
+        for j in 0..s {
+            if let Some(Place::Passive(_)) = l.place.get(j)
+                && let Some(d) = p.get_mut(j * n + s)
+            {
+                *d = c.get(k * n + j).copied().unwrap_or(f64::NAN);
+            }
+        }
+    }
+}
+
+/// A run of consecutive state indices `[start, end)` whose rows live consecutively in one
+/// source: `P0`'s rows from `first` on, or `P_AA`'s.
+#[derive(Debug, Clone, Copy)]
+struct Run {
+    start: usize,
+    end: usize,
+    first: Place,
+}
+
+/// The settled covariance's buffer (`n x n`, column-major, the lower triangle; the upper one
+/// zero) when the session added or removed states: each column's rows copied run by run from
+/// `P0`'s lower triangle, `c = P0_BA0 phi^T` (`n0 x n_A`) or `P_AA`. Memory-bound, `O(n^2)`,
+/// written once and in order.
+fn settled_buffer(base: &[f64], n0: usize, n: usize, l: &Local, c: &[f64]) -> Vec<f64> {
+    let paa = l.paa.as_slice();
+    let na = l.n_active();
+    let mut runs: Vec<Run> = Vec::new();
+    for (i, &place) in l.place.iter().enumerate() {
+        let extends = runs.last().is_some_and(|r| {
+            let len = i - r.start;
+            match (r.first, place) {
+                (Place::Passive(a), Place::Passive(b)) => b == a + len,
+                (Place::Active(a), Place::Active(b)) => b == a + len,
+                _ => false,
+            }
+        });
+        match runs.last_mut() {
+            Some(r) if extends => r.end = i + 1,
+            _ => runs.push(Run {
+                start: i,
+                end: i + 1,
+                first: place,
+            }),
+        }
+    }
+    let mut out: Vec<f64> = Vec::with_capacity(n * n);
+    for j in 0..n {
+        let column = l.place.get(j).copied();
+        out.resize(j * n + j, 0.0);
+        for r in &runs {
+            if r.end <= j {
+                continue;
+            }
+            let from = r.start.max(j);
+            let len = r.end - from;
+            let offset = from - r.start;
+            match (r.first, column) {
+                // P0's lower triangle: rows `a..` of column `b` (a >= b while the order is kept).
+                (Place::Passive(a), Some(Place::Passive(b))) => {
+                    let a = a + offset;
+                    if a >= b {
+                        extend_or_nan(&mut out, base.get(b * n0 + a..b * n0 + a + len), len);
+                    } else {
+                        out.extend((a..a + len).map(|a| sym(base, n0, a, b)));
+                    }
+                }
+                (Place::Passive(a), Some(Place::Active(k))) => {
+                    let a = a + offset;
+                    extend_or_nan(&mut out, c.get(k * n0 + a..k * n0 + a + len), len);
+                }
+                (Place::Active(k0), Some(Place::Passive(b))) => {
+                    let k0 = k0 + offset;
+                    out.extend(
+                        (k0..k0 + len).map(|k| c.get(k * n0 + b).copied().unwrap_or(f64::NAN)),
+                    );
+                }
+                // P_AA's lower triangle: rows `k..` of column `kj`.
+                (Place::Active(k0), Some(Place::Active(kj))) => {
+                    let k0 = k0 + offset;
+                    if k0 >= kj {
+                        extend_or_nan(&mut out, paa.get(kj * na + k0..kj * na + k0 + len), len);
+                    } else {
+                        out.extend((k0..k0 + len).map(|k| sym(paa, na, k, kj)));
+                    }
+                }
+                (_, None) => out.extend(core::iter::repeat_n(f64::NAN, len)),
+            }
+        }
+    }
+    out.resize(n * n, f64::NAN);
+    out
+}
+
+/// Appends `src`, or `len` NaNs when it is out of range (a broken session, never silent).
+fn extend_or_nan(out: &mut Vec<f64>, src: Option<&[f64]>, len: usize) {
+    match src {
+        Some(s) => out.extend_from_slice(s),
+        None => out.extend(core::iter::repeat_n(f64::NAN, len)),
     }
 }
 
