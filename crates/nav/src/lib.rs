@@ -286,6 +286,9 @@ pub struct NavStats {
     pub loops_closed: u64,
     /// Frames whose held lamps fitted several places (nothing closed).
     pub loops_ambiguous: u64,
+    /// Frames whose held lamps fitted one place that the lost pose's covariance rules out
+    /// ([`LOOP_MAX_CORRECTION_D2`]; nothing closed).
+    pub loops_refused: u64,
     /// Observations held out of the map while the pose was lost (a lamp mapped from a lost
     /// pose would tell the filter where it is; counted per frame).
     pub held_while_lost: u64,
@@ -1427,6 +1430,10 @@ impl Navigator {
                     self.stats.loops_ambiguous += 1;
                     false
                 }
+                Recognised::Inconsistent => {
+                    self.stats.loops_refused += 1;
+                    false
+                }
                 Recognised::Nothing => false,
             };
             if !closed
@@ -1795,6 +1802,17 @@ const HELD_MAP_MAX_SIGMA_M: f64 = 0.05;
 /// mapping as on new ground.
 const LOOP_MAX_HELD: usize = 400;
 
+/// Largest squared Mahalanobis distance (x, y, heading) of the correction a recognised place
+/// implies, under the lost pose's covariance, for the loop to be closed. The right closures
+/// of the seventeen hall-loop variants imply 0.6 to 27 (the dead-reckoned covariance is a
+/// little optimistic after 100 m); hall 30 with odometry memory recognised its lamp grid
+/// two rows off at 466 to 758 (8.5 m in y with the heading 1.7 degrees off, where the pose
+/// was 7 m uncertain in y but its heading tied to it). Beyond this the place is taken for a
+/// lattice alias and the lamps stay held. The lost pose's uncertainty grows while it is
+/// held, so an alias refused now may pass later (hall 30 does): this is a gross check, not
+/// a test between the place and its lattice shifts.
+pub const LOOP_MAX_CORRECTION_D2: f64 = 100.0;
+
 /// Rotation a constellation may make beyond three sigma of the heading, radians.
 const LOOP_ROTATION_FLOOR_RAD: f64 = 0.02;
 
@@ -1928,8 +1946,25 @@ enum Recognised {
     },
     /// Several places fit.
     Ambiguous,
+    /// One place fits, but the correction it implies is far beyond the lost pose's
+    /// uncertainty ([`LOOP_MAX_CORRECTION_D2`]).
+    Inconsistent,
     /// Nothing yet.
     Nothing,
+}
+
+/// The squared Mahalanobis distance of the correction from `pose` to `guess` (x, y and the
+/// heading, wrapped) under the pose's covariance `cov`; `None` when `cov` cannot be
+/// inverted.
+fn correction_d2(pose: &Pose2, cov: &Matrix3<f64>, guess: &Pose2) -> Option<f64> {
+    let d = nalgebra::Vector3::new(
+        guess.x - pose.x,
+        guess.y - pose.y,
+        rig_model::camera::wrap_angle(guess.theta - pose.theta),
+    );
+    let inverse = cov.try_inverse()?;
+    let d2 = d.dot(&(inverse * d));
+    d2.is_finite().then_some(d2)
 }
 
 /// Map matching while the pose is lost (more than [`MATCH_MAX_POSE_SIGMA_M`] uncertain): the
@@ -1994,6 +2029,11 @@ fn recognise(
         s * pose.x + c * pose.y + ty,
         rig_model::camera::wrap_angle(pose.theta + angle),
     );
+    // A place whose correction the lost pose's own covariance rules out is a lattice alias
+    // (a regular grid of lamps laid rows off), not the place: nothing is closed.
+    if correction_d2(&pose, &cov, &guess).is_some_and(|d2| d2 > LOOP_MAX_CORRECTION_D2) {
+        return Recognised::Inconsistent;
+    }
     Recognised::Place { pairs, guess }
 }
 
@@ -2092,6 +2132,36 @@ mod tests {
     use super::*;
     use rig_model::camera::Mount;
     use rig_model::config::Noise;
+
+    /// Hall 30's alias (its numbers rounded): the pose 7 m uncertain along y but its heading
+    /// tied to it, the place two lamp rows (8.5 m) off with the heading barely turned, is far
+    /// beyond the pose's reach; the same shift with the turn the correlation asks for, and a
+    /// right closure of the loop variants, are within it.
+    #[test]
+    fn a_correction_against_the_lost_pose_s_covariance() {
+        let pose = Pose2::new(30.0, 15.0, 0.0);
+        // sigma x 0.5 m, y 7 m, heading 0.1 rad, y and the heading correlated at 0.999.
+        let (sx, sy, st) = (0.5_f64, 7.0_f64, 0.1_f64);
+        let cov = Matrix3::new(
+            sx * sx,
+            0.0,
+            0.0,
+            0.0,
+            sy * sy,
+            0.999 * sy * st,
+            0.0,
+            0.999 * sy * st,
+            st * st,
+        );
+        let shifted = |dy: f64, dtheta: f64| Pose2::new(30.0, 15.0 + dy, dtheta);
+        let alias = correction_d2(&pose, &cov, &shifted(-8.5, -0.03)).unwrap();
+        assert!(alias > LOOP_MAX_CORRECTION_D2, "{alias}");
+        let along = correction_d2(&pose, &cov, &shifted(-8.5, -8.5 * 0.999 * st / sy)).unwrap();
+        assert!(along < 2.0, "{along}");
+        let small = correction_d2(&pose, &cov, &shifted(0.7, 0.0)).unwrap();
+        assert!(small < LOOP_MAX_CORRECTION_D2, "{small}");
+        assert!(correction_d2(&pose, &Matrix3::zeros(), &shifted(1.0, 0.0)).is_none());
+    }
 
     fn rig() -> Rig {
         Rig {

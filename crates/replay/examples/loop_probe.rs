@@ -928,8 +928,12 @@ fn run() -> Result<(), String> {
     }
     let st = nav.stats();
     println!(
-        "loops: {} closed, {} ambiguous, {} given up; {} lamps held while lost",
-        st.loops_closed, st.loops_ambiguous, st.loops_given_up, st.held_while_lost
+        "loops: {} closed, {} ambiguous, {} refused (beyond the lost pose's reach), {} given up; {} lamps held while lost",
+        st.loops_closed,
+        st.loops_ambiguous,
+        st.loops_refused,
+        st.loops_given_up,
+        st.held_while_lost
     );
     Ok(())
 }
