@@ -169,7 +169,11 @@ VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
     .venv/bin/maturin develop --profile "$PROFILE" --locked -m crates/py/Cargo.toml
 
 # The command line the Python tests compare with: the binary the Rust tests were built with.
-export STEREONAV_BIN="$PWD/$TARGET_DIR/$PROFILE/stereonav"
+# (CARGO_TARGET_DIR may be absolute.)
+case "$TARGET_DIR" in
+    /*) export STEREONAV_BIN="$TARGET_DIR/$PROFILE/stereonav" ;;
+    *) export STEREONAV_BIN="$PWD/$TARGET_DIR/$PROFILE/stereonav" ;;
+esac
 if [ "$tier" = fast ]; then
     step "pytest (the slow tier's left out)"
     # pytest exits 5 when it collects nothing; under `set -e` that fails the run, as it should.
