@@ -344,20 +344,19 @@ impl Ekf {
         // P_{B A} = P0_BA0 phi^T.
         let mut c = alloc::vec![0.0; n0 * na];
         crate::linalg::gemm(&mut c, n0, na, &l.g0, &l.phit, na0, 1.0, false);
-        if n == n0
+        // No state added or removed: `P_BB` is already in place and only the active rows and
+        // columns are written, `O(n n_A)`; otherwise the whole buffer is written anew.
+        let unmoved = n == n0
             && l.place.iter().enumerate().all(|(i, place)| match *place {
                 Place::Passive(b) => b == i,
                 Place::Active(_) => true,
-            })
-        {
-            // No state added or removed: `P_BB` is already in place; only the active rows and
-            // columns are written, `O(n n_A)`.
+            });
+        if unmoved {
             write_active_in_place(self.p.as_mut_slice(), n, &l, &c);
-            self.health.local_settles += 1;
-            return;
+        } else {
+            let p = settled_buffer(self.p.as_slice(), n0, n, &l, &c);
+            self.p = DMatrix::from_vec(n, n, p);
         }
-        let p = settled_buffer(self.p.as_slice(), n0, n, &l, &c);
-        self.p = DMatrix::from_vec(n, n, p);
         self.health.local_settles += 1;
     }
 
