@@ -1668,9 +1668,10 @@ impl Navigator {
             let mut best: Option<(LandmarkId, f64)> = None;
             let mut inside: Vec<LandmarkId> = Vec::new();
             for &(other, position) in &all {
+                // The distance first: the pass compares every two landmarks.
                 if other == id
-                    || !ekf.contains(other)
                     || (position - position_id).norm() > MERGE_SEARCH_M
+                    || !ekf.contains(other)
                     || self.co_observed.contains(&ordered(id, other))
                 {
                     continue;

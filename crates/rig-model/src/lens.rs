@@ -496,6 +496,13 @@ impl StereoField {
         self.inner.contains(z[0], z[1]) && self.inner.contains(z[2], z[3])
     }
 
+    /// Whether both points of the pair `z` are inside the outer band's bound: a pair outside
+    /// it and outside the field of use is neither used nor in the far band, whatever its
+    /// gains (a test that needs none).
+    pub fn outer_contains(&self, z: &crate::Measurement) -> bool {
+        self.outer.contains(z[0], z[1]) && self.outer.contains(z[2], z[3])
+    }
+
     /// Whether the pair `z` is used, `gains` its four coordinates' variance gains: inside the
     /// field of use, or inside the outer band with no gain above `max_gain`.
     pub fn uses(&self, z: &crate::Measurement, gains: &[f64; 4]) -> bool {

@@ -153,12 +153,16 @@ pub struct Settings {
     /// (0: all): the far band of a tall hall holds dozens of lamps a frame.
     pub far_updates_per_frame: usize,
     /// Large states are updated in local sessions (`crate::local`, the compressed filter):
-    /// the active landmarks are those within this many metres (horizontally) beyond the
-    /// farthest one in view when a session opens, so that the vehicle can drive about as far
-    /// before an observation needs a passive one and the session is settled. Exact either
-    /// way; it moves cost between the updates (larger: more active states) and the settles
-    /// (smaller: more often). 0 keeps every update dense.
+    /// the active landmarks are those predicted in the field of use from any pose within
+    /// this many metres in x and y of the vehicle's when a session opens
+    /// (and [`Settings::local_turn_rad`] in heading), so that the vehicle can drive about as
+    /// far before an observation needs a passive one and the session is settled. Exact
+    /// either way; it moves cost between the updates (larger: more active states) and the
+    /// settles (smaller: more often). 0 keeps every update dense.
     pub local_margin_m: f64,
+    /// The turn, radians either way, within which a session's active landmarks stay in
+    /// reach ([`Settings::local_margin_m`]).
+    pub local_turn_rad: f64,
     /// Landmarks the map holds at most (`usize::MAX`: no cap). A firmware's memory bound: the
     /// covariance is `(3 + 3 N + cameras)^2` doubles for `N` landmarks, so the most memory the
     /// filter can take follows from this (docs/c-api.md). Once full, new landmarks are
@@ -233,6 +237,7 @@ impl Default for Settings {
             far_min_snr: 2.0,
             far_updates_per_frame: 8,
             local_margin_m: 1.0,
+            local_turn_rad: 0.1,
             max_landmarks: usize::MAX,
             follow_points: true,
             first_estimate_pose: false,
@@ -309,6 +314,12 @@ impl Settings {
             (
                 "Settings.local_margin_m",
                 self.local_margin_m,
+                0.0,
+                "finite and at least 0",
+            ),
+            (
+                "Settings.local_turn_rad",
+                self.local_turn_rad,
                 0.0,
                 "finite and at least 0",
             ),

@@ -509,10 +509,7 @@ impl Ekf {
         let applied = match self.local.as_deref_mut() {
             None => {
                 let n = self.p.nrows();
-                for (src, a) in &shears {
-                    let targets = [(i, a[0]), (i + 1, a[1]), (i + 2, a[2])];
-                    shear_rows(self.p.as_mut_slice(), n, &targets, *src);
-                }
+                shear_rows(self.p.as_mut_slice(), n, [i, i + 1, i + 2], &shears);
                 true
             }
             Some(l) => {
@@ -532,13 +529,12 @@ impl Ekf {
                 };
                 let na = l.paa.nrows();
                 let na0 = l.n_a0;
+                shear_rows(l.paa.as_mut_slice(), na, [k0, k1, k2], &local);
+                // phi's rows by the same transform (`P_BA`'s share).
                 for (ks, a) in local {
-                    let targets = [(k0, a[0]), (k1, a[1]), (k2, a[2])];
-                    shear_rows(l.paa.as_mut_slice(), na, &targets, ks);
-                    // phi's rows by the same transform (`P_BA`'s share).
                     for t in 0..na0 {
                         let src = l.phit.get(ks * na0 + t).copied().unwrap_or(0.0);
-                        for &(k, ak) in &targets {
+                        for (k, ak) in [k0, k1, k2].into_iter().zip(a) {
                             if let Some(v) = l.phit.get_mut(k * na0 + t) {
                                 *v += ak * src;
                             }
@@ -836,29 +832,39 @@ pub(crate) fn carried_by_pose(pose: &rig_model::Pose2, world: &Vector3<f64>) -> 
 }
 
 /// `P <- T P T^T` on the lower triangle of the symmetric `n x n` buffer `p`, with
-/// `T = I + sum_t a_t e_t e_src^T` (each target row plus `a_t` times the source row; the
-/// source is not a target).
-fn shear_rows(p: &mut [f64], n: usize, targets: &[(usize, f64)], src: usize) {
+/// `T = I + sum_s a_s e_s^T` on the three `targets` rows (row `targets[r]` plus `a_s[r]` times
+/// source row `s`, for every `(s, a_s)` of `sources`; no source is a target). All sources
+/// at once: each row is read once and each target row written once (one source at a time
+/// read and wrote the three target rows for each, a tenth of a dense hall's replay).
+fn shear_rows(p: &mut [f64], n: usize, targets: [usize; 3], sources: &[(usize, [f64; 3])]) {
     use crate::linalg::sym;
     use crate::state::at;
-    let row_src: Vec<f64> = (0..n).map(|j| sym(p, n, src, j)).collect();
-    let old: Vec<Vec<f64>> = targets
-        .iter()
-        .map(|&(t, _)| (0..n).map(|j| sym(p, n, t, j)).collect())
-        .collect();
-    let is_target = |j: usize| targets.iter().position(|&(t, _)| t == j);
-    for (ti, &(t, a)) in targets.iter().enumerate() {
+    // D = A R: row r is sum_s a_s[r] (row s of P).
+    let mut d = [alloc::vec![0.0; n], alloc::vec![0.0; n], alloc::vec![0.0; n]];
+    for &(src, a) in sources {
         for j in 0..n {
-            let v = match is_target(j) {
-                // Both ends targets: P_tj + a_t P_sj + a_j P_ts + a_t a_j P_ss.
-                Some(tj) => {
-                    let aj = targets[tj].1;
-                    old[ti][j] + a * row_src[j] + aj * old[ti][src] + a * aj * row_src[src]
+            let v = sym(p, n, src, j);
+            for (dr, ar) in d.iter_mut().zip(a) {
+                if let Some(x) = dr.get_mut(j) {
+                    *x += ar * v;
                 }
-                None => old[ti][j] + a * row_src[j],
-            };
-            let (r, c) = if t >= j { (t, j) } else { (j, t) };
-            if let Some(x) = p.get_mut(at(n, r, c)) {
+            }
+        }
+    }
+    let old: [Vec<f64>; 3] = targets.map(|t| (0..n).map(|j| sym(p, n, t, j)).collect());
+    let get = |v: &[f64], j: usize| v.get(j).copied().unwrap_or(f64::NAN);
+    for (r, &t) in targets.iter().enumerate() {
+        for j in 0..n {
+            let mut v = get(&old[r], j) + get(&d[r], j);
+            if let Some(q) = targets.iter().position(|&u| u == j) {
+                // Both ends targets: P_tu + (A R)_tu + (A R)_ut + (A P_SS A^T)_tu.
+                v += get(&d[q], t);
+                for &(src, a) in sources {
+                    v += a[r] * get(&d[q], src);
+                }
+            }
+            let (row, col) = if t >= j { (t, j) } else { (j, t) };
+            if let Some(x) = p.get_mut(at(n, row, col)) {
                 *x = v;
             }
         }

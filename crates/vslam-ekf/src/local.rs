@@ -384,24 +384,48 @@ impl Ekf {
         if self.x.len() < LOCAL_MIN_STATES {
             return;
         }
-        // The landmarks within the view's reach plus the margin, horizontally.
-        let (vx, vy) = (self.x[0], self.x[1]);
-        let distance = |s: usize| {
-            let i = StateLayout::landmark(s);
-            libm::hypot(self.x[i] - vx, self.x[i + 1] - vy)
-        };
-        let mut reach = slots.iter().map(|&s| distance(s)).fold(0.0, f64::max);
-        for (id, _) in self.visible_landmarks() {
-            if let Some(s) = self.slot(id) {
-                reach = reach.max(distance(s));
+        let chosen = self.session_landmarks(slots);
+        self.open_local(&chosen);
+    }
+
+    /// A session's active landmarks: `slots`, and those predicted in the field of use from
+    /// any pose within `local_margin_m` in x and y and `local_turn_rad` in heading of the
+    /// vehicle's (a 3 x 3 x 3 grid of poses). A far-band pair of a landmark left passive is
+    /// not used (`Ekf::landmark_only_update`), as before.
+    ///
+    /// The disc of every landmark within the margin beyond the farthest one in view, the
+    /// rule before, held 2.5 times as many in a hall with lamps every 3 m (about 70 for 28
+    /// in view: the view's corners swept through every heading), and an update costs the
+    /// square of the active block (docs/benchmarks.md, "The session's footprint"). The far
+    /// band's reach swept as well made the fisheye halls' sessions larger than the disc.
+    fn session_landmarks(&self, slots: &[usize]) -> Vec<usize> {
+        let (m, turn) = (self.settings.local_margin_m, self.settings.local_turn_rad);
+        let base = self.pose();
+        let view = self.view();
+        let mut chosen: Vec<usize> = slots.to_vec();
+        chosen.extend(
+            self.landmarks_in_view_from(&base, false)
+                .into_iter()
+                .map(|(s, _)| s),
+        );
+        let mut reached = alloc::vec![false; self.landmarks.len()];
+        for &s in &chosen {
+            if let Some(r) = reached.get_mut(s) {
+                *r = true;
             }
         }
-        let radius = reach + self.settings.local_margin_m;
-        let mut chosen: Vec<usize> = (0..self.landmarks.len())
-            .filter(|&s| distance(s) <= radius)
+        let poses: Vec<rig_model::Pose2> = [-m, 0.0, m]
+            .into_iter()
+            .flat_map(|dx| [-m, 0.0, m].map(|dy| (dx, dy)))
+            .flat_map(|(dx, dy)| {
+                [-turn, 0.0, turn]
+                    .map(|dt| rig_model::Pose2::new(base.x + dx, base.y + dy, base.theta + dt))
+            })
             .collect();
-        chosen.extend_from_slice(slots);
-        self.open_local(&chosen);
+        chosen.extend((0..self.landmarks.len()).filter(|&s| {
+            reached.get(s) == Some(&false) && poses.iter().any(|p| self.in_use_from(&view, p, s))
+        }));
+        chosen
     }
 }
 
@@ -657,6 +681,89 @@ pub(crate) mod tests {
             }
         }
         ekf
+    }
+
+    /// A session holds the landmarks the view reaches from near the vehicle, not every
+    /// landmark within the farthest one's distance: a grid of lamps 2 m apart 8 m up, the
+    /// vehicle in its middle.
+    #[test]
+    fn a_session_holds_the_landmarks_the_view_reaches_from_near_the_vehicle() {
+        let rig = rig();
+        let mut ekf = Ekf::from_prior(&rig, Settings::default()).unwrap();
+        let start = Pose2::default();
+        let lamps: Vec<Vector3<f64>> = (0..256)
+            .map(|k| {
+                let at = |i: i32| 2.0 * f64::from(i) - 15.0;
+                Vector3::new(at(k % 16), at(k / 16), 8.0)
+            })
+            .collect();
+        // Placed as lamps mapped earlier from where each was seen (straight below it).
+        let ids: Vec<LandmarkId> = lamps
+            .iter()
+            .map(|p| {
+                let below = Pose2::new(p.x, p.y, 0.0);
+                let z = rig_model::project(&rig.nominal, &below, p).unwrap();
+                (ekf.x[0], ekf.x[1]) = (p.x, p.y);
+                ekf.add_landmark(&z).unwrap()
+            })
+            .collect();
+        (ekf.x[0], ekf.x[1]) = (start.x, start.y);
+        assert!(ekf.x.len() >= LOCAL_MIN_STATES, "{} states", ekf.x.len());
+        let visible = ekf.visible_landmarks();
+        assert!(!visible.is_empty());
+        let batch: Vec<_> = visible.iter().take(4).copied().collect();
+        ekf.update(&batch).unwrap();
+        let l = ekf.local.as_deref().expect("a session is open");
+        let active = |id: LandmarkId| {
+            let s = ekf.slot(id).unwrap();
+            matches!(
+                l.place.get(StateLayout::landmark(s)),
+                Some(Place::Active(_))
+            )
+        };
+        // Every landmark in view is active, and every one the view reaches from a pose 1 m
+        // off along the grid.
+        for (id, _) in &visible {
+            assert!(active(*id), "{id} is in view");
+        }
+        let view = ekf.view();
+        for pose in [Pose2::new(1.0, 0.0, 0.0), Pose2::new(-1.0, 1.0, 0.1)] {
+            for &id in &ids {
+                if ekf.in_use_from(&view, &pose, ekf.slot(id).unwrap()) {
+                    assert!(active(id), "{id} is in view from {pose:?}");
+                }
+            }
+        }
+        // And no other: each active landmark is reached from one of the 27 poses within the
+        // margin and the turn, so a landmark nearer than the farthest active one may stay
+        // passive (the disc the rule before took held every such landmark).
+        let near: Vec<Pose2> = [-1.0, 0.0, 1.0]
+            .into_iter()
+            .flat_map(|dx| [-1.0, 0.0, 1.0].map(|dy| (dx, dy)))
+            .flat_map(|(dx, dy)| [-0.1, 0.0, 0.1].map(|dt| Pose2::new(dx, dy, dt)))
+            .collect();
+        let reached = |id: LandmarkId| {
+            let s = ekf.slot(id).unwrap();
+            near.iter().any(|p| ekf.in_use_from(&view, p, s))
+        };
+        let distance = |id: LandmarkId| {
+            let p = ekf.landmark_position(id).unwrap();
+            libm::hypot(p.x, p.y)
+        };
+        let active_ids: Vec<LandmarkId> = ids.iter().copied().filter(|&id| active(id)).collect();
+        for &id in &active_ids {
+            assert!(reached(id), "{id} is active, out of reach");
+        }
+        let farthest = active_ids.iter().map(|&id| distance(id)).fold(0.0, f64::max);
+        let passive_inside = ids
+            .iter()
+            .filter(|&&id| !active(id) && distance(id) < farthest)
+            .count();
+        assert!(
+            passive_inside > 0,
+            "{} active landmarks, every landmark within {farthest} m",
+            active_ids.len()
+        );
     }
 
     #[test]

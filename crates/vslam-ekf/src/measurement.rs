@@ -359,33 +359,86 @@ impl Ekf {
     }
 
     fn landmarks_in_view(&self, far: bool) -> Vec<(LandmarkId, Measurement)> {
-        let camera = self.camera();
-        let pose = self.pose();
-        let (w, h) = (f64::from(self.width), f64::from(self.height));
-        let inside_image = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
-        let field = self.stereo_field();
-        let inside = |z: &Measurement| match &self.lens {
-            None => inside_image(z[0], z[1]) && inside_image(z[2], z[3]),
-            Some(lens) => {
-                let gains = self.pixel_noise.gains(z).into();
-                (if far {
-                    field.reaches(z, &gains)
-                } else {
-                    field.uses(z, &gains)
-                }) && lens.sees(z, camera.f, camera.cx, camera.cy, w, h)
-            }
-        };
-        self.landmarks
-            .iter()
-            .enumerate()
-            .filter_map(|(s, slot)| {
-                let l = self
-                    .x
-                    .fixed_rows::<3>(StateLayout::landmark(s))
-                    .into_owned();
-                let z = rig_model::project(&camera, &pose, &l).ok()?;
-                inside(&z).then_some((slot.id, z))
+        self.landmarks_in_view_from(&self.pose(), far)
+            .into_iter()
+            .filter_map(|(s, z)| self.landmarks.get(s).map(|l| (l.id, z)))
+            .collect()
+    }
+
+    /// The slots of the landmarks predicted in the field of use (with `far`, also in the far
+    /// band) from `pose`, with their predictions.
+    pub(crate) fn landmarks_in_view_from(
+        &self,
+        pose: &Pose2,
+        far: bool,
+    ) -> Vec<(usize, Measurement)> {
+        let view = self.view();
+        (0..self.landmarks.len())
+            .filter_map(|s| {
+                let z = self.predicted_from(&view.0, pose, s)?;
+                self.in_view(&view, &z, far).then_some((s, z))
             })
             .collect()
+    }
+
+    /// The camera and its field, for [`Ekf::in_use_from`].
+    pub(crate) fn view(&self) -> (CameraParams, rig_model::lens::StereoField) {
+        (self.camera(), self.stereo_field())
+    }
+
+    /// Whether landmark `s` is predicted in the field of use from `pose` (`view` from
+    /// [`Ekf::view`]).
+    pub(crate) fn in_use_from(
+        &self,
+        view: &(CameraParams, rig_model::lens::StereoField),
+        pose: &Pose2,
+        s: usize,
+    ) -> bool {
+        self.predicted_from(&view.0, pose, s)
+            .is_some_and(|z| self.in_view(view, &z, false))
+    }
+
+    /// Landmark `s` projected from `pose`, `None` when it cannot be.
+    fn predicted_from(&self, camera: &CameraParams, pose: &Pose2, s: usize) -> Option<Measurement> {
+        if s >= self.landmarks.len() {
+            return None;
+        }
+        let l = self
+            .x
+            .fixed_rows::<3>(StateLayout::landmark(s))
+            .into_owned();
+        rig_model::project(camera, pose, &l).ok()
+    }
+
+    /// Whether a prediction is in the field of use (with `far`, also the far band), inside
+    /// both images of the lens.
+    fn in_view(
+        &self,
+        (camera, field): &(CameraParams, rig_model::lens::StereoField),
+        z: &Measurement,
+        far: bool,
+    ) -> bool {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let inside_image = |u: f64, v: f64| u >= 0.0 && u < w && v >= 0.0 && v < h;
+        match &self.lens {
+            None => inside_image(z[0], z[1]) && inside_image(z[2], z[3]),
+            Some(lens) => {
+                // The cheap tests first: the gains are the lens's Jacobians.
+                let inner = field.inner_contains(z);
+                if !(inner || field.outer_contains(z))
+                    || !lens.sees(z, camera.f, camera.cx, camera.cy, w, h)
+                {
+                    return false;
+                }
+                inner || {
+                    let gains = self.pixel_noise.gains(z).into();
+                    if far {
+                        field.reaches(z, &gains)
+                    } else {
+                        field.uses(z, &gains)
+                    }
+                }
+            }
+        }
     }
 }
