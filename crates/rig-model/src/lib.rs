@@ -44,7 +44,7 @@ pub use camera::{CameraParams, Mount, N_CAMERA, N_PARAMS, Param, ParamVector, Po
 #[cfg(feature = "alloc")]
 pub use config::{Board, Noise, Rig};
 pub use rig::{
-    Measurement, ProjectionJacobians, RigError, Triangulation, point_in_rig, project,
+    Measurement, ProjectionJacobians, Projector, RigError, Triangulation, point_in_rig, project,
     project_with_jacobians, triangulate,
 };
 #[cfg(feature = "rig-file")]

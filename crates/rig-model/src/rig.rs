@@ -113,7 +113,38 @@ pub fn project(
     pose: &Pose2,
     landmark: &Vector3<f64>,
 ) -> Result<Measurement, RigError> {
-    project_rig_point(c, &point_in_rig(c, pose, landmark))
+    Projector::new(c, pose).project(landmark)
+}
+
+/// [`project`] for many landmarks from one pose: the mount's and the pose's rotations are
+/// taken once (their sines and cosines were most of a projection's cost when every lamp of a
+/// hall is projected each frame). The same arithmetic as [`project`], to the bit.
+#[derive(Debug, Clone, Copy)]
+pub struct Projector {
+    c: CameraParams,
+    robot_from_world: Matrix3<f64>,
+    rig_from_robot: Matrix3<f64>,
+    origin: Vector3<f64>,
+    mount: Vector3<f64>,
+}
+
+impl Projector {
+    /// The camera `c` on the robot at `pose`.
+    pub fn new(c: &CameraParams, pose: &Pose2) -> Self {
+        Self {
+            c: *c,
+            robot_from_world: pose.world_from_robot_rotation().transpose(),
+            rig_from_robot: c.mount.robot_from_rig_rotation().transpose(),
+            origin: Vector3::new(pose.x, pose.y, 0.0),
+            mount: c.mount.translation(),
+        }
+    }
+
+    /// The landmark's pixels, as [`project`] gives them.
+    pub fn project(&self, landmark: &Vector3<f64>) -> Result<Measurement, RigError> {
+        let p_robot = self.robot_from_world * (landmark - self.origin);
+        project_rig_point(&self.c, &(self.rig_from_robot * (p_robot - self.mount)))
+    }
 }
 
 /// Projects and returns the analytic Jacobians with respect to pose, landmark and `C`.

@@ -840,7 +840,11 @@ fn shear_rows(p: &mut [f64], n: usize, targets: [usize; 3], sources: &[(usize, [
     use crate::linalg::sym;
     use crate::state::at;
     // D = A R: row r is sum_s a_s[r] (row s of P).
-    let mut d = [alloc::vec![0.0; n], alloc::vec![0.0; n], alloc::vec![0.0; n]];
+    let mut d = [
+        alloc::vec![0.0; n],
+        alloc::vec![0.0; n],
+        alloc::vec![0.0; n],
+    ];
     for &(src, a) in sources {
         for j in 0..n {
             let v = sym(p, n, src, j);

@@ -414,12 +414,14 @@ impl Ekf {
                 *r = true;
             }
         }
-        let poses: Vec<rig_model::Pose2> = [-m, 0.0, m]
+        let poses: Vec<rig_model::Projector> = [-m, 0.0, m]
             .into_iter()
             .flat_map(|dx| [-m, 0.0, m].map(|dy| (dx, dy)))
             .flat_map(|(dx, dy)| {
-                [-turn, 0.0, turn]
-                    .map(|dt| rig_model::Pose2::new(base.x + dx, base.y + dy, base.theta + dt))
+                [-turn, 0.0, turn].map(|dt| {
+                    let pose = rig_model::Pose2::new(base.x + dx, base.y + dy, base.theta + dt);
+                    rig_model::Projector::new(&view.0, &pose)
+                })
             })
             .collect();
         chosen.extend((0..self.landmarks.len()).filter(|&s| {
@@ -729,7 +731,8 @@ pub(crate) mod tests {
         let view = ekf.view();
         for pose in [Pose2::new(1.0, 0.0, 0.0), Pose2::new(-1.0, 1.0, 0.1)] {
             for &id in &ids {
-                if ekf.in_use_from(&view, &pose, ekf.slot(id).unwrap()) {
+                let projector = rig_model::Projector::new(&view.0, &pose);
+                if ekf.in_use_from(&view, &projector, ekf.slot(id).unwrap()) {
                     assert!(active(id), "{id} is in view from {pose:?}");
                 }
             }
@@ -737,10 +740,11 @@ pub(crate) mod tests {
         // And no other: each active landmark is reached from one of the 27 poses within the
         // margin and the turn, so a landmark nearer than the farthest active one may stay
         // passive (the disc the rule before took held every such landmark).
-        let near: Vec<Pose2> = [-1.0, 0.0, 1.0]
+        let near: Vec<rig_model::Projector> = [-1.0, 0.0, 1.0]
             .into_iter()
             .flat_map(|dx| [-1.0, 0.0, 1.0].map(|dy| (dx, dy)))
             .flat_map(|(dx, dy)| [-0.1, 0.0, 0.1].map(|dt| Pose2::new(dx, dy, dt)))
+            .map(|p| rig_model::Projector::new(&view.0, &p))
             .collect();
         let reached = |id: LandmarkId| {
             let s = ekf.slot(id).unwrap();
@@ -754,7 +758,10 @@ pub(crate) mod tests {
         for &id in &active_ids {
             assert!(reached(id), "{id} is active, out of reach");
         }
-        let farthest = active_ids.iter().map(|&id| distance(id)).fold(0.0, f64::max);
+        let farthest = active_ids
+            .iter()
+            .map(|&id| distance(id))
+            .fold(0.0, f64::max);
         let passive_inside = ids
             .iter()
             .filter(|&&id| !active(id) && distance(id) < farthest)

@@ -296,8 +296,7 @@ impl Ekf {
         k_sigma: f64,
         in_view: &[(LandmarkId, Measurement)],
     ) -> Vec<(LandmarkId, Measurement, Matrix4<f64>)> {
-        let camera = self.camera();
-        let pose = self.pose();
+        let projector = rig_model::Projector::new(&self.camera(), &self.pose());
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         let mut out = Vec::new();
         for (s, slot) in self.landmarks.iter().enumerate() {
@@ -308,7 +307,7 @@ impl Ekf {
                 .x
                 .fixed_rows::<3>(StateLayout::landmark(s))
                 .into_owned();
-            let Ok(z) = rig_model::project(&camera, &pose, &l) else {
+            let Ok(z) = projector.project(&l) else {
                 continue;
             };
             let coarse = |u: f64, v: f64| u > -w && u < 2.0 * w && v > -h && v < 2.0 * h;
@@ -373,9 +372,10 @@ impl Ekf {
         far: bool,
     ) -> Vec<(usize, Measurement)> {
         let view = self.view();
+        let projector = rig_model::Projector::new(&view.0, pose);
         (0..self.landmarks.len())
             .filter_map(|s| {
-                let z = self.predicted_from(&view.0, pose, s)?;
+                let z = self.predicted_from(&projector, s)?;
                 self.in_view(&view, &z, far).then_some((s, z))
             })
             .collect()
@@ -386,20 +386,20 @@ impl Ekf {
         (self.camera(), self.stereo_field())
     }
 
-    /// Whether landmark `s` is predicted in the field of use from `pose` (`view` from
-    /// [`Ekf::view`]).
+    /// Whether landmark `s` is predicted in the field of use through `projector` (the
+    /// camera of `view`, from [`Ekf::view`], at some pose).
     pub(crate) fn in_use_from(
         &self,
         view: &(CameraParams, rig_model::lens::StereoField),
-        pose: &Pose2,
+        projector: &rig_model::Projector,
         s: usize,
     ) -> bool {
-        self.predicted_from(&view.0, pose, s)
+        self.predicted_from(projector, s)
             .is_some_and(|z| self.in_view(view, &z, false))
     }
 
-    /// Landmark `s` projected from `pose`, `None` when it cannot be.
-    fn predicted_from(&self, camera: &CameraParams, pose: &Pose2, s: usize) -> Option<Measurement> {
+    /// Landmark `s` projected, `None` when it cannot be.
+    fn predicted_from(&self, projector: &rig_model::Projector, s: usize) -> Option<Measurement> {
         if s >= self.landmarks.len() {
             return None;
         }
@@ -407,7 +407,7 @@ impl Ekf {
             .x
             .fixed_rows::<3>(StateLayout::landmark(s))
             .into_owned();
-        rig_model::project(camera, pose, &l).ok()
+        projector.project(&l).ok()
     }
 
     /// Whether a prediction is in the field of use (with `far`, also the far band), inside
