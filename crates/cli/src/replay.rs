@@ -198,7 +198,16 @@ fn human_summary(log: &std::path::Path, r: &ReplayEnd, took: Duration) -> String
         1 => "; 1 loop closed by the constellation of lamps held while lost".to_string(),
         n => format!("; {n} loops closed by the constellation of lamps held while lost"),
     };
-    let _ = writeln!(s, "map: {} landmarks{merged}{loops}", r.landmarks.len());
+    let refused = match r.counts.loops_refused {
+        0 => String::new(),
+        1 => "; 1 recognised place refused (beyond the lost pose's reach)".to_string(),
+        n => format!("; {n} recognised places refused (beyond the lost pose's reach)"),
+    };
+    let _ = writeln!(
+        s,
+        "map: {} landmarks{merged}{loops}{refused}",
+        r.landmarks.len()
+    );
     for p in r.final_camera.iter().filter(|p| p.sigma > 0.0) {
         let name = p.param.name();
         let (scale, unit) = p.param.display_unit();

@@ -398,6 +398,8 @@ impl At<'_> {
             // Absent from estimates files written before loops were closed by constellation.
             loops_closed: self.uint(c, "loops_closed").unwrap_or(0),
             lamps_held_mapped: self.uint(c, "lamps_held_mapped").unwrap_or(0),
+            // Absent from estimates files written before the loop closure's gate.
+            loops_refused: self.uint(c, "loops_refused").unwrap_or(0),
             // Absent from estimates files written before ROS 2 bags were read.
             images_left: self.uint(c, "images_left").unwrap_or(0),
             images_right: self.uint(c, "images_right").unwrap_or(0),

@@ -199,6 +199,9 @@ pub struct Counts {
     /// Loops closed by the constellation of lamps held while the pose was lost
     /// (`nav::NavStats::loops_closed`).
     pub loops_closed: u64,
+    /// Frames whose held lamps fitted one place that the lost pose's covariance rules out,
+    /// refused as a lattice alias (`nav::NavStats::loops_refused`).
+    pub loops_refused: u64,
     /// Lamps held while the pose was lost and mapped from where they were held
     /// (`nav::NavStats::held_mapped`).
     pub lamps_held_mapped: u64,
@@ -222,7 +225,7 @@ pub struct Counts {
 
 impl Counts {
     /// Every counter by name (the JSON keys and Python names), in field order.
-    pub fn named(&self) -> [(&'static str, u64); 28] {
+    pub fn named(&self) -> [(&'static str, u64); 29] {
         [
             ("frames", self.frames),
             ("corrupt", self.corrupt),
@@ -244,6 +247,7 @@ impl Counts {
             ("landmarks_merged", self.landmarks_merged),
             ("features_outside_field", self.features_outside_field),
             ("loops_closed", self.loops_closed),
+            ("loops_refused", self.loops_refused),
             ("lamps_held_mapped", self.lamps_held_mapped),
             ("images_left", self.images_left),
             ("images_right", self.images_right),

@@ -54,6 +54,7 @@ COUNTS = {
     "landmarks_merged",
     "features_outside_field",
     "loops_closed",
+    "loops_refused",
     "lamps_held_mapped",
     "images_left",
     "images_right",

@@ -535,6 +535,7 @@ impl Replayer {
         counts.landmarks_merged = stats.landmarks_merged;
         counts.features_outside_field = stats.features_outside_field;
         counts.loops_closed = stats.loops_closed;
+        counts.loops_refused = stats.loops_refused;
         counts.lamps_held_mapped = stats.held_mapped;
         let damage = self.stream.reader().damage();
         counts.log_spans_lost = damage.spans_total;

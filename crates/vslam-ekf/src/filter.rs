@@ -155,8 +155,9 @@ pub struct Settings {
     /// Large states are updated in local sessions (`crate::local`, the compressed filter):
     /// the active landmarks are those predicted in the field of use from any pose within
     /// this many metres in x and y of the vehicle's when a session opens
-    /// (and [`Settings::local_turn_rad`] in heading), so that the vehicle can drive about as
-    /// far before an observation needs a passive one and the session is settled. Exact
+    /// (and [`Settings::local_turn_rad`] in heading), and the far band's within this many
+    /// metres beyond the farthest one in use, so that the vehicle can drive about as far
+    /// before an observation needs a passive one and the session is settled. Exact
     /// either way; it moves cost between the updates (larger: more active states) and the
     /// settles (smaller: more often). 0 keeps every update dense.
     pub local_margin_m: f64,

@@ -388,25 +388,45 @@ impl Ekf {
         self.open_local(&chosen);
     }
 
-    /// A session's active landmarks: `slots`, and those predicted in the field of use from
-    /// any pose within `local_margin_m` in x and y and `local_turn_rad` in heading of the
-    /// vehicle's (a 3 x 3 x 3 grid of poses). A far-band pair of a landmark left passive is
-    /// not used (`Ekf::landmark_only_update`), as before.
+    /// A session's active landmarks: `slots`; those the field of use takes
+    /// (`StereoField::uses`: the inner cone and the outer band's low-gain part, inside the
+    /// lens's images) from any pose within `local_margin_m` in x and y and `local_turn_rad` in
+    /// heading of the vehicle's (a 3 x 3 x 3 grid of poses); and those the far band reaches
+    /// from the vehicle's pose within `local_margin_m` beyond the farthest one in the field of
+    /// use.
     ///
     /// The disc of every landmark within the margin beyond the farthest one in view, the
     /// rule before, held 2.5 times as many in a hall with lamps every 3 m (about 70 for 28
     /// in view: the view's corners swept through every heading), and an update costs the
-    /// square of the active block (docs/benchmarks.md, "The session's footprint"). The far
-    /// band's reach swept as well made the fisheye halls' sessions larger than the disc.
+    /// square of the active block (docs/benchmarks.md, "The session's footprint"). A pair
+    /// outside the inner field of a passive landmark is left out, not settled for
+    /// (`Ekf::landmark_only_update`): the far band's landmarks within the disc are kept
+    /// active, so that as many far pairs are used as the disc used (swept as well, their
+    /// reach made a fisheye's sessions larger than the disc; left to the grid of poses
+    /// alone, a fisheye hall dropped 26 000 of its 43 000 outer pairs instead of 18 000).
     fn session_landmarks(&self, slots: &[usize]) -> Vec<usize> {
         let (m, turn) = (self.settings.local_margin_m, self.settings.local_turn_rad);
         let base = self.pose();
         let view = self.view();
         let mut chosen: Vec<usize> = slots.to_vec();
+        let used = self.landmarks_in_view_from(&base, false);
+        let distance = |s: usize| {
+            let i = StateLayout::landmark(s);
+            libm::hypot(self.x[i] - base.x, self.x[i + 1] - base.y)
+        };
+        let radius = used
+            .iter()
+            .map(|(s, _)| *s)
+            .chain(slots.iter().copied())
+            .map(distance)
+            .fold(0.0, f64::max)
+            + m;
+        chosen.extend(used.iter().map(|(s, _)| *s));
         chosen.extend(
-            self.landmarks_in_view_from(&base, false)
+            self.landmarks_in_view_from(&base, true)
                 .into_iter()
-                .map(|(s, _)| s),
+                .map(|(s, _)| s)
+                .filter(|&s| distance(s) <= radius),
         );
         let mut reached = alloc::vec![false; self.landmarks.len()];
         for &s in &chosen {

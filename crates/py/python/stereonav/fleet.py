@@ -90,6 +90,7 @@ _COUNTS: tuple[str, ...] = (
     "landmarks_merged",
     "features_outside_field",
     "loops_closed",
+    "loops_refused",
     "lamps_held_mapped",
     "images_left",
     "images_right",

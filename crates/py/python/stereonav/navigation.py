@@ -224,8 +224,10 @@ class Replay:
         (docs/logs.md), ``landmarks_merged`` (landmarks the map-level guard merged into
         another as the same lamp), ``features_outside_field`` (board features outside the
         field of use through a lens; docs/halls.md), ``loops_closed`` (loops closed by the
-        constellation of the lamps held while the pose was lost) and ``lamps_held_mapped``
-        (those lamps mapped from where they were held; docs/halls.md, "Loops").
+        constellation of the lamps held while the pose was lost), ``loops_refused`` (frames
+        whose held lamps fitted one place the lost pose's covariance rules out, refused as a
+        lattice alias) and ``lamps_held_mapped`` (those lamps mapped from where they were
+        held; docs/halls.md, "Loops").
     warnings : tuple of str
         What limits the result without stopping it (a log cut short, phase 1 never stable,
         frames without odometry, updates the filter refused), one line each.

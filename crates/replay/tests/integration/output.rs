@@ -746,6 +746,7 @@ fn summary_has_the_contract_keys_and_types() {
             "landmarks_merged",
             "features_outside_field",
             "loops_closed",
+            "loops_refused",
             "lamps_held_mapped",
             "images_left",
             "images_right",
