@@ -757,9 +757,10 @@ pub(crate) mod tests {
                 }
             }
         }
-        // And no other: each active landmark is reached from one of the 27 poses within the
-        // margin and the turn, so a landmark nearer than the farthest active one may stay
-        // passive (the disc the rule before took held every such landmark).
+        // And no other (this rig has no lens, so no far band): each active landmark is
+        // reached from one of the 27 poses within the margin and the turn, so a landmark
+        // nearer than the farthest active one may stay passive (the disc the rule before took
+        // held every such landmark).
         let near: Vec<rig_model::Projector> = [-1.0, 0.0, 1.0]
             .into_iter()
             .flat_map(|dx| [-1.0, 0.0, 1.0].map(|dy| (dx, dy)))
