@@ -409,7 +409,12 @@ impl Ekf {
         let base = self.pose();
         let view = self.view();
         let mut chosen: Vec<usize> = slots.to_vec();
-        let used = self.landmarks_in_view_from(&base, false);
+        // One projection from the vehicle's pose: what the view reaches, split into what the
+        // field of use takes and the far band's rest.
+        let (used, far): (Vec<_>, Vec<_>) = self
+            .landmarks_in_view_from(&base, true)
+            .into_iter()
+            .partition(|(_, z)| self.in_view(&view, z, false));
         let distance = |s: usize| {
             let i = StateLayout::landmark(s);
             libm::hypot(self.x[i] - base.x, self.x[i + 1] - base.y)
@@ -423,9 +428,8 @@ impl Ekf {
             + m;
         chosen.extend(used.iter().map(|(s, _)| *s));
         chosen.extend(
-            self.landmarks_in_view_from(&base, true)
-                .into_iter()
-                .map(|(s, _)| s)
+            far.iter()
+                .map(|(s, _)| *s)
                 .filter(|&s| distance(s) <= radius),
         );
         let mut reached = alloc::vec![false; self.landmarks.len()];
@@ -750,8 +754,8 @@ pub(crate) mod tests {
         }
         let view = ekf.view();
         for pose in [Pose2::new(1.0, 0.0, 0.0), Pose2::new(-1.0, 1.0, 0.1)] {
+            let projector = rig_model::Projector::new(&view.0, &pose);
             for &id in &ids {
-                let projector = rig_model::Projector::new(&view.0, &pose);
                 if ekf.in_use_from(&view, &projector, ekf.slot(id).unwrap()) {
                     assert!(active(id), "{id} is in view from {pose:?}");
                 }

@@ -412,7 +412,7 @@ impl Ekf {
 
     /// Whether a prediction is in the field of use (with `far`, also the far band), inside
     /// both images of the lens.
-    fn in_view(
+    pub(crate) fn in_view(
         &self,
         (camera, field): &(CameraParams, rig_model::lens::StereoField),
         z: &Measurement,
