@@ -285,14 +285,17 @@ impl Ekf {
         let u = Vector3::new(self.x[u0], self.x[u0 + 1], self.x[u0 + 2]);
         let motion = rig_model::odometry::constant_velocity_motion(u.x, u.y, u.z, dt);
         let j = crate::motion::arc_velocity_jacobian(u.x, u.y, u.z, dt);
-        // The velocity's change over the frame, w (1 sigma `a dt`), as a ramp: the pose moves
-        // by `J w / 2` of it, and the next frame's velocity by `w`.
+        // `u` is the frame's mean velocity, what the frame's odometry measures: the pose moves
+        // by it exactly, and the next frame's mean differs from it by `w` (1 sigma `a dt`).
+        // Held as the velocity at the frame's start instead (the pose moving by `u + w / 2`),
+        // the odometry's mean and the pose's motion were half a frame apart, and the clock
+        // offset took the difference: +25 ms with noise-free odometry (docs/vehicle.md, "The
+        // velocity-state form").
         let (a, alpha) = self.settings.velocity_state_acceleration;
         let w2 = Vector3::new(a * a * dt * dt, a * a * dt * dt, alpha * alpha * dt * dt);
-        let q = j * nalgebra::Matrix3::from_diagonal(&(w2 * 0.25)) * j.transpose();
         let inc = Increment {
             motion,
-            covariance: 0.5 * (q + q.transpose()),
+            covariance: nalgebra::Matrix3::zeros(),
         };
         for (what, value) in [
             ("velocity state", u.x),
@@ -301,13 +304,11 @@ impl Ekf {
         ] {
             crate::filter::check_finite(what, value)?;
         }
-        let rot = crate::motion::compose_jacobian_second(self.x[2]);
         let columns: Vec<(usize, Vector3<f64>)> =
             (0..3).map(|k| (u0 + k, j.column(k).into_owned())).collect();
         self.predict_with_columns(&inc, &nalgebra::Matrix3x4::zeros(), &columns)?;
         for k in 0..3 {
             self.decay_state(u0 + k, 1.0, w2[k]);
-            self.add_pose_cross(u0 + k, &(rot * j.column(k) * (0.5 * w2[k])));
         }
         for (k, axis) in self.errors.clone().into_iter().enumerate() {
             let (phi, q) = axis.decay_over(noise, dt);
