@@ -815,7 +815,7 @@ fn navigator_warnings(navigator: &Navigator, refused: &Refusals, warnings: &mut 
             format!("{why}: phase 2 mapped from its estimate")
         } else {
             format!(
-                "{why}; the data did not inform {}: phase 2 used the rig's nominal values and priors for them",
+                "{why}; the data did not inform {} at the hand-over: phase 2 started them from the rig's nominal values and priors (the values and sigmas reported are phase 2's)",
                 names.join(", ")
             )
         });
