@@ -618,11 +618,9 @@ impl Navigator {
         if !estimates_vehicle {
             return Vec::new();
         }
-        // Back far enough for the yaw scale's regressor before the interval as well
-        // (`rig_model::odometry::vehicle_jacobian`).
         let from = vehicle
             .odometry_time_us(t0_us)
-            .saturating_sub(ODOMETRY_MARGIN_US / 2 + rig_model::odometry::INSTRUMENT_WINDOW_US);
+            .saturating_sub(ODOMETRY_MARGIN_US / 2);
         let to = vehicle
             .odometry_time_us(t1_us)
             .saturating_add(ODOMETRY_MARGIN_US / 2);

@@ -171,22 +171,6 @@ pub fn vehicle_jacobian(
 ) -> Option<Matrix3x4<f64>> {
     let base = integrate_vehicle(samples, t0_us, t1_us, v)?;
     let vector = |m: &Motion| Vector3::new(m.dx, m.dy, m.dtheta);
-    let (a, b) = (v.odometry_time_us(t0_us), v.odometry_time_us(t1_us));
-    // The yaw scale's and bias's columns from the yaw rate reported just before the interval,
-    // not from its own samples: those carry the very noise the motion's residual holds, and a
-    // regressor that shares its noise with the residual biases the scale it multiplies (errors
-    // in variables: on a straight drive, whose true yaw rate is zero, the yaw rate's noise
-    // alone pulled the yaw scale five prior sigmas, docs/vehicle.md "Errors in the
-    // variables"). The odometry scale's column keeps the interval's own samples: its
-    // regressor's noise is a few per mille of a moving vehicle's speed, and taken from before
-    // the interval it let the pixels' bias on the baseline through (same section).
-    let instrument = instrument_samples(samples, a);
-    let regressor: &[OdomSample] = instrument.as_ref().map_or(samples, |s| s.as_slice());
-    let base_regressor = if instrument.is_some() {
-        integrate_vehicle(regressor, t0_us, t1_us, v)?
-    } else {
-        base
-    };
     let mut j = Matrix3x4::zeros();
     for (k, h) in VEHICLE_STEPS.iter().enumerate() {
         let shifted = |sign: f64| {
@@ -197,18 +181,17 @@ pub fn vehicle_jacobian(
                 _ => &mut w.odom_yaw_bias,
             };
             *slot += sign * h;
-            let from = if k == 0 { samples } else { regressor };
-            integrate_vehicle(from, t0_us, t1_us, &w).map(|m| vector(&m))
+            integrate_vehicle(samples, t0_us, t1_us, &w).map(|m| vector(&m))
         };
-        let centre = if k == 0 { &base } else { &base_regressor };
         let column = match (shifted(1.0), shifted(-1.0)) {
             (Some(p), Some(m)) => (p - m) / (2.0 * h),
-            (Some(p), None) => (p - vector(centre)) / *h,
-            (None, Some(m)) => (vector(centre) - m) / *h,
+            (Some(p), None) => (p - vector(&base)) / *h,
+            (None, Some(m)) => (vector(&base) - m) / *h,
             (None, None) => Vector3::zeros(),
         };
         j.set_column(k, &column);
     }
+    let (a, b) = (v.odometry_time_us(t0_us), v.odometry_time_us(t1_us));
     if let (Some((ax, ay, aw)), Some((bx, by, bw))) = (
         smoothed_velocity(samples, a, SMOOTHING_HALF_WINDOW_US, v),
         smoothed_velocity(samples, b, SMOOTHING_HALF_WINDOW_US, v),
@@ -224,45 +207,6 @@ pub fn vehicle_jacobian(
         );
     }
     Some(j)
-}
-
-/// How far back the scales' regressor averages the reported velocities before an interval
-/// ([`vehicle_jacobian`]), microseconds.
-pub const INSTRUMENT_WINDOW_US: u64 = 2 * SMOOTHING_HALF_WINDOW_US;
-
-/// One sample at `a` (odometry clock) holding the mean of the velocities reported over
-/// `[a - INSTRUMENT_WINDOW_US, a)`: the interval from `a` on integrated with it moves as the
-/// vehicle moved just before, with none of the interval's own noise. `None` when the samples
-/// do not cover that window (the log's first fifth of a second, or a gap): the interval's own
-/// samples are the regressor then.
-fn instrument_samples(samples: &[OdomSample], a: u64) -> Option<[OdomSample; 1]> {
-    let from = a.checked_sub(INSTRUMENT_WINDOW_US)?;
-    let first = samples.first()?;
-    if first.t_us > from {
-        return None;
-    }
-    // The samples over the window, each held until the next (gaps show as a long hold).
-    let start = samples
-        .partition_point(|s| s.t_us <= from)
-        .saturating_sub(1);
-    let end = samples.partition_point(|s| s.t_us < a);
-    let window = samples.get(start..end)?;
-    let mut held_longest = 0;
-    for (k, s) in window.iter().enumerate() {
-        let next = samples.get(start + k + 1).map_or(a, |n| n.t_us.min(a));
-        held_longest = held_longest.max(next.saturating_sub(s.t_us.max(from)));
-    }
-    if window.is_empty() || held_longest > INSTRUMENT_WINDOW_US / 2 {
-        return None;
-    }
-    let half = INSTRUMENT_WINDOW_US / 2;
-    let (vx, vy, vtheta) = smoothed_velocity(samples, a - half, half, &Vehicle::NOMINAL)?;
-    Some([OdomSample {
-        t_us: a,
-        vx,
-        vy,
-        vtheta,
-    }])
 }
 
 /// The odometry between two frames as the estimators take it: the motion integrated for the
@@ -340,16 +284,8 @@ impl OdometryFactor {
             return (self.motion_at(v), self.vehicle_jacobian);
         }
         let (t0, t1) = self.frames_us;
-        // Integrated again for `v`'s odometry scale only; the yaw scale and bias (and the
-        // offset) to first order about the values the factor was made with, along the
-        // Jacobian's columns, whose regressor is free of the interval's own noise
-        // ([`vehicle_jacobian`]): integrated again for them, the cost itself would hold the
-        // yaw rate's noise as the yaw scale's regressor, and its minimum the bias the
-        // Jacobian's regressor avoids.
         let at_made = Vehicle {
             time_offset: self.vehicle.time_offset,
-            odom_yaw_scale: self.vehicle.odom_yaw_scale,
-            odom_yaw_bias: self.vehicle.odom_yaw_bias,
             ..*v
         };
         let Some(m) = integrate_vehicle(&self.samples, t0, t1, &at_made) else {
@@ -360,9 +296,8 @@ impl OdometryFactor {
         } else {
             self.vehicle_jacobian
         };
-        let shift = j.column(1) * (v.odom_yaw_scale - self.vehicle.odom_yaw_scale)
-            + j.column(2) * (v.odom_yaw_bias - self.vehicle.odom_yaw_bias)
-            + j.column(3) * (v.time_offset - self.vehicle.time_offset);
+        let d = v.time_offset - self.vehicle.time_offset;
+        let shift = j.column(3) * d;
         (
             Motion {
                 dx: m.dx + shift.x,
@@ -519,16 +454,7 @@ mod tests {
                     _ => &mut w.time_offset,
                 };
                 *slot += sign * h;
-                // The yaw scale's and bias's columns are those of the yaw rate reported
-                // before the interval, held through it (the regressor `vehicle_jacobian`
-                // takes for them).
-                let m = match k {
-                    1 | 2 => {
-                        let held = instrument_samples(&samples, V.odometry_time_us(t0)).unwrap();
-                        integrate_vehicle(&held, t0, t1, &w).unwrap()
-                    }
-                    _ => integrate_vehicle(&samples, t0, t1, &w).unwrap(),
-                };
+                let m = integrate_vehicle(&samples, t0, t1, &w).unwrap();
                 Vector3::new(m.dx, m.dy, m.dtheta)
             };
             let fd = (at(1.0) - at(-1.0)) / (2.0 * h);
@@ -541,44 +467,8 @@ mod tests {
         }
     }
 
-    /// The yaw scale's and bias's columns do not hold the interval's own noise: changing the
-    /// yaw rates reported inside the interval leaves them as they were (its regressor is the
-    /// yaw rate reported before it), while the odometry scale's column follows its samples.
-    #[test]
-    fn the_yaw_scale_s_regressor_is_free_of_the_interval_s_noise() {
-        let samples = reported(&V, 100.0, 3.0);
-        let (t0, t1) = (1_012_000, 1_062_000);
-        let inside = |t: u64, (t0, t1): (u64, u64)| {
-            t >= V.odometry_time_us(t0) && t < V.odometry_time_us(t1)
-        };
-        let early_interval = (52_000, 102_000);
-        let mut noisy = samples.clone();
-        for (k, s) in noisy.iter_mut().enumerate() {
-            if inside(s.t_us, (t0, t1)) || inside(s.t_us, early_interval) {
-                s.vtheta += if k % 2 == 0 { 0.05 } else { -0.03 };
-                s.vx += 0.02;
-            }
-        }
-        let clean = vehicle_jacobian(&samples, t0, t1, &V).unwrap();
-        let dirty = vehicle_jacobian(&noisy, t0, t1, &V).unwrap();
-        for k in 1..3 {
-            assert!(
-                (clean.column(k) - dirty.column(k)).norm() < 1e-12,
-                "column {k}: {} vs {}",
-                clean.column(k),
-                dirty.column(k)
-            );
-        }
-        assert!((clean.column(0) - dirty.column(0)).norm() > 1e-6);
-        // Before the samples cover the regressor's window, the interval's own samples are it.
-        let (e0, e1) = early_interval;
-        let early = vehicle_jacobian(&noisy, e0, e1, &V).unwrap();
-        let early_clean = vehicle_jacobian(&samples, e0, e1, &V).unwrap();
-        assert!((early.column(1) - early_clean.column(1)).norm() > 0.0);
-    }
-
-    /// A factor moved to another V: exact in the odometry scale (integrated again), first
-    /// order in the yaw scale, the bias and the clock offset.
+    /// A factor moved to another V: exact in the scales and the bias (integrated again),
+    /// first order in the clock offset.
     #[test]
     fn a_factor_follows_v() {
         let samples = reported(&V, 100.0, 3.0);
@@ -592,24 +482,17 @@ mod tests {
             frames_us: (t0, t1),
             samples: samples.clone(),
         };
-        let scale_only = Vehicle {
-            odom_scale: V.odom_scale,
-            ..made
+        let scales_only = Vehicle {
+            time_offset: 0.0,
+            ..V
         };
-        let m = factor.motion_for(&scale_only);
-        let want = integrate_vehicle(&samples, t0, t1, &scale_only).unwrap();
+        let m = factor.motion_for(&scales_only);
+        let want = integrate_vehicle(&samples, t0, t1, &scales_only).unwrap();
         assert!((m.dx - want.dx).abs() < 1e-12 && (m.dtheta - want.dtheta).abs() < 1e-12);
         let (m, _) = factor.at(&V);
         let want = integrate_vehicle(&samples, t0, t1, &V).unwrap();
-        // 12 ms of a 0.5 m/s^2 drive, the yaw scale's regressor 0.1 s before the interval:
-        // first order leaves well under a millimetre and a tenth of a milliradian.
+        // 12 ms of a 0.5 m/s^2 drive: first order leaves well under a millimetre.
         assert!((m.dx - want.dx).abs() < 2e-4, "{} vs {}", m.dx, want.dx);
-        assert!(
-            (m.dtheta - want.dtheta).abs() < 1e-4,
-            "{} vs {}",
-            m.dtheta,
-            want.dtheta
-        );
         // Without samples: first order throughout.
         let bare = OdometryFactor {
             samples: Vec::new(),
