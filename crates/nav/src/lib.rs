@@ -1010,7 +1010,20 @@ impl Navigator {
                             &vehicle,
                             &jv,
                         )?,
-                        Some(ekf) => ekf.predict_increment_vehicle(&inc, &jv)?,
+                        Some(ekf) => {
+                            // The yaw scale's column from the yaw rate reported before the
+                            // interval (errors in the variables; the batch keeps `jv`).
+                            let mut jf = jv;
+                            if let Some(c) = rig_model::odometry::filter_yaw_scale_column(
+                                &self.odometry,
+                                t0,
+                                t_us,
+                                &vehicle,
+                            ) {
+                                jf.set_column(1, &c);
+                            }
+                            ekf.predict_increment_vehicle(&inc, &jf)?
+                        }
                         None => {
                             let (pose, f, q) = inc.apply(&self.pose);
                             self.pose = pose;
@@ -1042,11 +1055,13 @@ impl Navigator {
         }
         self.last_frame_t = Some(t_us);
         // Keep the last sample at or before this frame's odometry-clock time (less a margin
-        // for the clock offset's estimate to move): it is held into the next interval.
-        let keep_until = vehicle
-            .odometry_time_us(t_us)
-            .min(t_us)
-            .saturating_sub(ODOMETRY_MARGIN_US);
+        // for the clock offset's estimate to move): it is held into the next interval. And the
+        // stretch before it that the filter's yaw-scale column is taken from.
+        let keep_until = vehicle.odometry_time_us(t_us).min(t_us).saturating_sub(
+            ODOMETRY_MARGIN_US
+                + rig_model::odometry::INSTRUMENT_GAP_US
+                + rig_model::odometry::INSTRUMENT_WINDOW_US,
+        );
         let keep_from = self
             .odometry
             .partition_point(|s| s.t_us <= keep_until)

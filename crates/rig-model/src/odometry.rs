@@ -209,6 +209,83 @@ pub fn vehicle_jacobian(
     Some(j)
 }
 
+/// How long a stretch of reported yaw rate [`filter_yaw_scale_column`] averages, microseconds.
+pub const INSTRUMENT_WINDOW_US: u64 = 2 * SMOOTHING_HALF_WINDOW_US;
+
+/// How long before the interval [`filter_yaw_scale_column`]'s stretch ends, microseconds: long
+/// enough that the filter's heading no longer holds that stretch's noise (the stereo updates
+/// take it out within a few frames). Measured on the independent simulator's straight drive
+/// (the filter alone, yaw scale unobservable, prior 1 +- 2 %): the yaw scale ended at 1.115
+/// with the interval's own samples, 1.041 with the stretch just before the interval, 1.010,
+/// 1.008 and 1.010 with gaps of 100, 200 and 400 ms.
+pub const INSTRUMENT_GAP_US: u64 = 150_000;
+
+/// The yaw scale's column of `d motion / dV` for a filter that predicts with the motion
+/// (`pose' = pose (+) m(V)`): the interval `[t0_us, t1_us]` integrated as if the vehicle had
+/// held the velocities reported over [`INSTRUMENT_WINDOW_US`] ending [`INSTRUMENT_GAP_US`]
+/// before it. `None` when the samples do not cover that stretch (the log's start, a gap in
+/// the odometry): the interval's own column is the one then.
+///
+/// Why not the interval's own samples (errors in the variables): the filter's prediction puts
+/// their noise into the pose and, through this column, into the pose's covariance with the
+/// yaw scale; the update that takes the noise back out of the heading then moves the yaw
+/// scale by the product of the two, whose mean is not zero, and always up (a larger scale
+/// explains the noise as a smaller motion). On a straight drive, where the true yaw rate is
+/// zero and the column is noise alone, the filter's yaw scale rose 7 of its prior's sigmas in
+/// 150 s (`crates/replay/tests/integration/vehicle.rs`). A stretch just before the interval
+/// shares no noise with it, but the heading still holds part of that stretch's noise when
+/// the update comes: the gap lets the updates between take it out. The batch's factor keeps
+/// its own column: its residual is in the reported odometry's units, where the yaw scale's
+/// derivative is the estimated heading change, not the reported one (docs/vehicle.md, "Errors
+/// in the variables").
+pub fn filter_yaw_scale_column(
+    samples: &[OdomSample],
+    t0_us: u64,
+    t1_us: u64,
+    v: &Vehicle,
+) -> Option<Vector3<f64>> {
+    let start_us = v.odometry_time_us(t0_us);
+    let to = start_us.checked_sub(INSTRUMENT_GAP_US)?;
+    let from = to.checked_sub(INSTRUMENT_WINDOW_US)?;
+    if samples.first()?.t_us > from {
+        return None;
+    }
+    // The stretch's samples, each held until the next: a gap in them shows as a long hold.
+    let first = samples
+        .partition_point(|s| s.t_us <= from)
+        .saturating_sub(1);
+    let end = samples.partition_point(|s| s.t_us < to);
+    let held_longest = samples
+        .get(first..end)?
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let next = samples.get(first + k + 1).map_or(to, |n| n.t_us.min(to));
+            next.saturating_sub(s.t_us.max(from))
+        })
+        .max()?;
+    if held_longest > INSTRUMENT_WINDOW_US / 2 {
+        return None;
+    }
+    let half = INSTRUMENT_WINDOW_US / 2;
+    let (vx, vy, vtheta) = smoothed_velocity(samples, from + half, half, &Vehicle::NOMINAL)?;
+    let held = [OdomSample {
+        t_us: start_us,
+        vx,
+        vy,
+        vtheta,
+    }];
+    let h = VEHICLE_STEPS[1];
+    let motion = |sign: f64| {
+        let w = Vehicle {
+            odom_yaw_scale: v.odom_yaw_scale + sign * h,
+            ..*v
+        };
+        integrate_vehicle(&held, t0_us, t1_us, &w).map(|m| Vector3::new(m.dx, m.dy, m.dtheta))
+    };
+    Some((motion(1.0)? - motion(-1.0)?) / (2.0 * h))
+}
+
 /// The odometry between two frames as the estimators take it: the motion integrated for the
 /// vehicle estimate `vehicle`, its covariance, and how it changes with `V`, so that a solver
 /// that refines `V` moves the motion with it. With the reported samples around the interval
@@ -465,6 +542,45 @@ mod tests {
                 j.column(k)
             );
         }
+    }
+
+    /// The filter's yaw-scale column holds none of the noise reported inside the interval or
+    /// in the gap before it, and follows the yaw rate reported before that: in a steady turn
+    /// it is the interval's own column.
+    #[test]
+    fn the_filter_s_yaw_scale_column_is_free_of_the_interval_s_noise() {
+        let samples = reported(&V, 100.0, 3.0);
+        let (t0, t1) = (1_512_000, 1_562_000);
+        let start = V.odometry_time_us(t0);
+        let mut noisy = samples.clone();
+        for (k, s) in noisy.iter_mut().enumerate() {
+            if s.t_us + INSTRUMENT_GAP_US >= start && s.t_us < V.odometry_time_us(t1) {
+                s.vtheta += if k % 2 == 0 { 0.05 } else { -0.03 };
+            }
+        }
+        let clean = filter_yaw_scale_column(&samples, t0, t1, &V).unwrap();
+        let dirty = filter_yaw_scale_column(&noisy, t0, t1, &V).unwrap();
+        assert!((clean - dirty).norm() < 1e-12, "{clean} vs {dirty}");
+        // The yaw rate held through the interval is the stretch's mean (the samples held
+        // from their ticks: the ramp's value half a sample before the stretch's middle).
+        let mid_s = (start - INSTRUMENT_GAP_US - INSTRUMENT_WINDOW_US / 2) as f64 * 1e-6 - 0.005;
+        let dt = (t1 - t0) as f64 * 1e-6;
+        let want = -truth(mid_s).2 / V.odom_yaw_scale * dt;
+        assert!(
+            (clean.z - want).abs() < 1e-3 * want.abs(),
+            "{} vs {want}",
+            clean.z
+        );
+        // The interval's own column holds the noise.
+        let own = |s: &[OdomSample]| {
+            vehicle_jacobian(s, t0, t1, &V)
+                .unwrap()
+                .column(1)
+                .into_owned()
+        };
+        assert!((own(&samples) - own(&noisy)).norm() > 1e-6);
+        // Before the samples cover the stretch: none (the interval's own column then).
+        assert!(filter_yaw_scale_column(&samples, 100_000, 150_000, &V).is_none());
     }
 
     /// A factor moved to another V: exact in the scales and the bias (integrated again),
