@@ -1012,14 +1012,25 @@ impl Navigator {
                         )?,
                         Some(ekf) => {
                             // The yaw scale's column from the yaw rate reported before the
-                            // interval (errors in the variables; the batch keeps `jv`).
+                            // interval (errors in the variables; the batch keeps `jv`). Only
+                            // for yaw-rate errors white as far as the navigator knows: with
+                            // memory (stated, or seen by the widening) that stretch shares
+                            // the interval's errors (0.66 across 250 ms at 0.6 s) and is only
+                            // a staler regressor.
+                            let white = noise.yaw_rate_tau == 0.0
+                                && self
+                                    .stats
+                                    .odometry_widened
+                                    .is_none_or(|w| w.factors.1 <= 1.0);
                             let mut jf = jv;
-                            if let Some(c) = rig_model::odometry::filter_yaw_scale_column(
-                                &self.odometry,
-                                t0,
-                                t_us,
-                                &vehicle,
-                            ) {
+                            if white
+                                && let Some(c) = rig_model::odometry::filter_yaw_scale_column(
+                                    &self.odometry,
+                                    t0,
+                                    t_us,
+                                    &vehicle,
+                                )
+                            {
                                 jf.set_column(1, &c);
                             }
                             ekf.predict_increment_vehicle(&inc, &jf)?

@@ -237,7 +237,8 @@ pub const INSTRUMENT_GAP_US: u64 = 150_000;
 /// the update comes: the gap lets the updates between take it out. The batch's factor keeps
 /// its own column: its residual is in the reported odometry's units, where the yaw scale's
 /// derivative is the estimated heading change, not the reported one (docs/vehicle.md, "Errors
-/// in the variables").
+/// in the variables"). For errors with memory the stretch shares the interval's errors and is
+/// no instrument: the navigator then keeps the interval's own column.
 pub fn filter_yaw_scale_column(
     samples: &[OdomSample],
     t0_us: u64,
