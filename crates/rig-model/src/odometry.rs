@@ -232,7 +232,7 @@ pub const INSTRUMENT_GAP_US: u64 = 150_000;
 /// scale by the product of the two, whose mean is not zero, and always up (a larger scale
 /// explains the noise as a smaller motion). On a straight drive, where the true yaw rate is
 /// zero and the column is noise alone, the filter's yaw scale rose 7 of its prior's sigmas in
-/// 150 s (`crates/replay/tests/integration/vehicle.rs`). A stretch just before the interval
+/// 80 s (`crates/replay/tests/integration/vehicle.rs`). A stretch just before the interval
 /// shares no noise with it, but the heading still holds part of that stretch's noise when
 /// the update comes: the gap lets the updates between take it out. The batch's factor keeps
 /// its own column: its residual is in the reported odometry's units, where the yaw scale's
@@ -251,21 +251,26 @@ pub fn filter_yaw_scale_column(
     if samples.first()?.t_us > from {
         return None;
     }
-    // The stretch's samples, each held until the next: a gap in them shows as a long hold.
+    // The samples from the stretch's start to the interval's, each held until the next: a
+    // dropout shows as a long hold (in the gap too, where a sample held into the interval
+    // would share its noise). Longer than the stretch itself is a dropout; a 10 Hz odometry's
+    // 100 ms holds are not (its stretch then averages two samples).
     let first = samples
         .partition_point(|s| s.t_us <= from)
         .saturating_sub(1);
-    let end = samples.partition_point(|s| s.t_us < to);
+    let end = samples.partition_point(|s| s.t_us < start_us);
     let held_longest = samples
         .get(first..end)?
         .iter()
         .enumerate()
         .map(|(k, s)| {
-            let next = samples.get(first + k + 1).map_or(to, |n| n.t_us.min(to));
+            let next = samples
+                .get(first + k + 1)
+                .map_or(start_us, |n| n.t_us.min(start_us));
             next.saturating_sub(s.t_us.max(from))
         })
         .max()?;
-    if held_longest > INSTRUMENT_WINDOW_US / 2 {
+    if held_longest > INSTRUMENT_WINDOW_US {
         return None;
     }
     let half = INSTRUMENT_WINDOW_US / 2;
@@ -546,8 +551,9 @@ mod tests {
     }
 
     /// The filter's yaw-scale column holds none of the noise reported inside the interval or
-    /// in the gap before it, and follows the yaw rate reported before that: in a steady turn
-    /// it is the interval's own column.
+    /// in the gap before it: it is the interval integrated with the mean yaw rate reported
+    /// over the stretch before the gap. Without samples over the stretch, or with a dropout
+    /// between it and the interval, there is none (the interval's own column then).
     #[test]
     fn the_filter_s_yaw_scale_column_is_free_of_the_interval_s_noise() {
         let samples = reported(&V, 100.0, 3.0);
@@ -582,6 +588,22 @@ mod tests {
         assert!((own(&samples) - own(&noisy)).norm() > 1e-6);
         // Before the samples cover the stretch: none (the interval's own column then).
         assert!(filter_yaw_scale_column(&samples, 100_000, 150_000, &V).is_none());
+        let late: Vec<OdomSample> = samples
+            .iter()
+            .copied()
+            .filter(|s| s.t_us >= 1_300_000)
+            .collect();
+        assert!(filter_yaw_scale_column(&late, t0, t1, &V).is_none());
+        // A dropout of 250 ms in the gap (the sample before it held into the interval): none.
+        let dropout: Vec<OdomSample> = samples
+            .iter()
+            .copied()
+            .filter(|s| !(s.t_us > start - 250_000 && s.t_us < start))
+            .collect();
+        assert!(filter_yaw_scale_column(&dropout, t0, t1, &V).is_none());
+        // 10 Hz odometry (holds of 100 ms): a column.
+        let ten_hz: Vec<OdomSample> = samples.iter().copied().step_by(10).collect();
+        assert!(filter_yaw_scale_column(&ten_hz, t0, t1, &V).is_some());
     }
 
     /// A factor moved to another V: exact in the scales and the bias (integrated again),

@@ -95,6 +95,13 @@ fn the_yaw_rate_s_noise_does_not_pull_the_yaw_scale_on_a_straight_drive() {
     let t = r.truth.as_ref().unwrap();
     let d = format!("{t:?}");
     assert_eq!(t.lamps_missed, 0, "{d}");
+    // The odometry as stated (white, not widened): the column from before the interval is
+    // the one in use.
+    assert!(
+        r.odometry.as_ref().is_none_or(|o| o.widened.is_none()),
+        "{:?}",
+        r.warnings
+    );
     let yaw = r
         .final_camera
         .iter()
