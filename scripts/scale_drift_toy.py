@@ -68,27 +68,22 @@ class Cfg:
 def make_route(cfg):
     """Return per-frame true increments in the vehicle frame (dx, dy, dth) and a phase label
     0=straight, 1=turn, 2=stop."""
-    segs = []
-    if cfg.route == 'full':
-        for a in range(6):
-            # straight aisle of 40 m at 1 m/s, with a stop in the middle of aisles 1,2,4,5
-            if cfg.stops and a in (1, 2, 4, 5):
-                segs += [('S', 20.0), ('P', 3.0 + (a % 3)), ('S', 20.0)]
-            else:
-                segs += [('S', 40.0)]
-            if a < 5:
-                segs += [('T', +1 if a % 2 == 0 else -1)]
-    elif cfg.route == 'straight':
-        # the same number of frames (approx.), all straight
-        for a in range(6):
-            if cfg.stops and a in (1, 2, 4, 5):
-                segs += [('S', 20.0), ('P', 3.0 + (a % 3)), ('S', 20.0)]
-            else:
-                segs += [('S', 40.0)]
-            if a < 5:
-                segs += [('S', np.pi * cfg.turn_radius)]
-    else:
+    if cfg.route not in ('full', 'straight'):
         raise ValueError(cfg.route)
+    segs = []
+    for a in range(6):
+        # straight aisle of 40 m at 1 m/s, with a stop in the middle of aisles 1,2,4,5
+        if cfg.stops and a in (1, 2, 4, 5):
+            segs += [('S', 20.0), ('P', 3.0 + (a % 3)), ('S', 20.0)]
+        else:
+            segs += [('S', 40.0)]
+        if a < 5:
+            # 'full': a semicircle to the next aisle; 'straight': the same length straight on
+            # (about the same number of frames, no turn)
+            if cfg.route == 'full':
+                segs += [('T', +1 if a % 2 == 0 else -1)]
+            else:
+                segs += [('S', np.pi * cfg.turn_radius)]
     inc, ph = [], []
     for kind, arg in segs:
         if kind == 'S':
