@@ -281,15 +281,7 @@ pub fn filter_yaw_scale_column(
         vy,
         vtheta,
     }];
-    let h = VEHICLE_STEPS[1];
-    let motion = |sign: f64| {
-        let w = Vehicle {
-            odom_yaw_scale: v.odom_yaw_scale + sign * h,
-            ..*v
-        };
-        integrate_vehicle(&held, t0_us, t1_us, &w).map(|m| Vector3::new(m.dx, m.dy, m.dtheta))
-    };
-    Some((motion(1.0)? - motion(-1.0)?) / (2.0 * h))
+    vehicle_jacobian(&held, t0_us, t1_us, v).map(|j| j.column(1).into_owned())
 }
 
 /// The odometry between two frames as the estimators take it: the motion integrated for the
