@@ -22,6 +22,10 @@ Usage examples (see main()):
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --route straight     # no turns
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --no_stops
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --oracle lm          # H evaluated at true landmarks (lm|all|Bcol)
+  .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1          # metres, correction in B units (vslam_ekf's fix)
+  .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1 --retract_active 2  # ... on pose, B, s alone
+  .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 2          # ... the mean alone (no fix)
+  .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1 --retract_every 20  # deferred (no fix)
 """
 import argparse
 import json
@@ -59,6 +63,13 @@ class Cfg:
     q_pos: float = 0.002
     q_th: float = 0.0005
     sigma_meas_filter: float = -1.0  # R used in the filter (default: = sigma_px, floor 1e-3)
+    retract_every: int = 1     # apply the retraction every this many frames, from the state
+                               # when it was last applied (the transforms compose)
+    retract_active: int = 0    # 1: the transform only on the globals and the lamps observed;
+                               # 2: on the globals (pose, B, s) alone
+    retract: int = 0           # 1 (xyz only): metric state, each update's correction applied in
+                               # baseline units about the start pose and mapped back; 2: the
+                               # mean only (the covariance left as the metric update gives it)
     turn_omega: float = 0.45
     turn_radius: float = 2.5
     spacing: float = 4.0
@@ -299,6 +310,46 @@ def run(cfg: Cfg, record_every=20):
         return hp, H, cols
 
     poses_cur = [poses[0]]
+    Dacc = np.ones(nmax)
+    aacc = np.zeros(nmax)
+    origin = np.zeros(nmax)          # per metric entry: the point lengths are measured from
+    metric = np.zeros(nmax, bool)
+    origin[IX], origin[IY] = poses[0][:2]
+    metric[[IX, IY]] = True
+    for j in range(nL):
+        o = NG + 3 * j
+        origin[o:o + 3] = [poses[0][0], poses[0][1], m[2]]
+        metric[o:o + 3] = True
+
+    def retract_in_baseline_units(x0, x, P, n):
+        """Re-apply the linear correction x - x0 in coordinates (c - o)/B, s*B, map back the
+        mean; return the covariance's transform M = T_back(new) T_fwd(old) as (D, a):
+        M = diag(D) + a e_B^T."""
+        B0, B1 = x0[IB], x[IB]
+        dB = B1 - B0
+        mk = metric[:n]
+        o = origin[:n]
+        d = x[:n] - x0[:n]
+        xb0 = (x0[:n] - o) / B0                       # old point in baseline units
+        xbn = xb0 + d / B0 - xb0 * dB / B0            # the linear correction in those units
+        D = np.ones(n)
+        a = np.zeros(n)
+        new = x[:n].copy()
+        new[mk] = o[mk] + B1 * xbn[mk]
+        sp = x0[IS] * B0 + B0 * d[IS] + x0[IS] * dB     # s' = s B, corrected linearly
+        new[IS] = sp / B1
+        D[mk] = B1 / B0
+        a[mk] = xbn[mk] - B1 * xb0[mk] / B0
+        # s = s'/B: ds/ds = B0/B1, ds/dB = s0/B1 - s'/B1^2
+        D[IS] = B0 / B1
+        a[IS] = x0[IS] / B1 - sp / B1 ** 2
+        x[:n] = new
+        return D, a
+
+    def apply_m(P, n, D, a):
+        M = np.diag(D) + np.outer(a, np.eye(n)[IB])
+        if cfg.retract == 1:
+            P[:n, :n] = M @ P[:n, :n] @ M.T
 
     def s_est(x, P):
         if cfg.param != 'bunits':
@@ -351,6 +402,23 @@ def run(cfg: Cfg, record_every=20):
             # Joseph form with the exact gain: (I-KH)P(I-KH)' + KRK' = P - KHP - PH'K' + KSK'
             P[:n, :n] += -KP - KP.T + K @ S @ K.T
             P[:n, :n] = 0.5 * (P[:n, :n] + P[:n, :n].T)
+            if cfg.retract:
+                D, a = retract_in_baseline_units(x0, x, P, n)
+                if cfg.retract_active:
+                    # only the states this frame observed (and the globals) take the transform
+                    act = np.zeros(n, bool)
+                    act[:NG] = True
+                    if cfg.retract_active == 1:
+                        act[(slot[kid][:, None] + np.arange(k)).ravel()] = True
+                    D[~act] = 1.0
+                    a[~act] = 0.0
+                # compose with the transforms not yet applied: M2 M1 = D2 D1 + (D2 a1 + a2) e_B^T
+                Dacc[:n] = D * Dacc[:n]
+                aacc[:n] = D * aacc[:n] + a
+                if t % cfg.retract_every == 0:
+                    apply_m(P, n, Dacc[:n], aacc[:n])
+                    Dacc[:] = 1.0
+                    aacc[:] = 0.0
             if not cfg.est_s:
                 P[IS, :n] = 0; P[:n, IS] = 0
         dB[t] = x[IB] - B_before

@@ -185,6 +185,13 @@ pub struct Settings {
     /// linearised, and stay moved when it is refused: the shear changes the covariance's
     /// entries, not what it knows.
     pub follow_points: bool,
+    /// Whether each update's correction of the pose and of the odometry's scale is taken in
+    /// units of the baseline and mapped back, the covariance with it (`crate::scale`), so
+    /// that the filter's linearisation point does not walk along the map's nearly
+    /// unobservable metric scale. On by default. Off, the baseline drifts several of its
+    /// prior sigmas in minutes of driving with its sigma unchanged, and every depth with it
+    /// (docs/vehicle.md, "The baseline's drift").
+    pub follow_scale: bool,
     /// While the pose is lost ([`FEJ_POSITION_SIGMA_M`]), the prediction's heading column
     /// taken from the pose the previous prediction left (before the update moved it), and the
     /// iterated update's constrained heading column from the pose before the update: the
@@ -241,6 +248,7 @@ impl Default for Settings {
             local_turn_rad: 0.1,
             max_landmarks: usize::MAX,
             follow_points: true,
+            follow_scale: true,
             first_estimate_pose: false,
             odometry_error_states: false,
             odometry_velocity_states: false,

@@ -17,6 +17,7 @@
 //! | `start` | the constructors from phase 1's hand-over ([`Ekf::from_handover`], [`Ekf::from_batch`]) or the priors ([`Ekf::from_prior`]); the smoother's re-seed [`Ekf::set_joint`] | |
 //! | `filter` | [`Ekf`] itself, [`Settings`], [`UpdateReport`] | |
 //! | [`motion`] | the motion eq. (4) applies and its noise: the exact arc, [`Increment`] | |
+//! | `scale` | each update's correction of the pose and the odometry scale taken in units of the baseline, the covariance with it (`Settings::follow_scale`) | eq. (7) |
 //! | [`local`] | local sessions (the compressed filter): updates of a large state on the states near the vehicle, exact, settled when it moves on; [`Ekf::settle`] | eq. (5)-(7) |
 //! | `kernels`, `linalg` | the update's arithmetic on column-major slices (multiversioned SIMD loops, faer panels) | eq. (6)-(7) |
 //! | [`errors`] | the odometry's errors with memory as states (an option, off by default: it biases the odometry scale) | eq. (4)-(5) |
@@ -198,6 +199,7 @@ pub mod measurement;
 pub mod motion;
 #[cfg(feature = "alloc")]
 pub mod predict;
+mod scale;
 #[cfg(feature = "alloc")]
 mod start;
 #[cfg(feature = "alloc")]

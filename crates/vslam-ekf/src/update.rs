@@ -687,6 +687,7 @@ impl Ekf {
         // iterated update below.
         let mut ws = core::mem::take(&mut self.workspace);
         let prior = iterating.then(|| self.clone());
+        let scale_point = self.scale_point();
         let mut result = self.gate_and_update(&obs, &projected, &mut nis, &mut ws);
         if result.is_ok()
             && let Some(prior) = prior
@@ -694,6 +695,11 @@ impl Ekf {
             result = self.iterate_update(prior, &slots, batch, &obs, &projected, &nis, &mut ws);
         }
         self.workspace = ws;
+        if result.is_ok()
+            && let Some(from) = scale_point
+        {
+            self.follow_scale(&from);
+        }
         if let Err(e) = result {
             self.health.refused_updates += 1;
             return Err(e);
