@@ -61,6 +61,12 @@ class Cfg:
     b_true: float = B_TRUE
     s_true: float = S_TRUE
     q_pos: float = 0.002
+    odo_noise: float = 0.0     # reported translation noise per frame, metres (white; the filter's
+                               # q_pos should cover it)
+    col_gauge: int = 0         # 1: the column's difference from the report put in B's column
+    col: str = 'rep'           # odometry scale's column from: 'rep' (the frame's report), 'true'
+                               # (oracle: the true motion), 'prev' (the previous frame's report),
+                               # 'post' (re-linearised at the posterior displacement after the update)
     q_th: float = 0.0005
     sigma_meas_filter: float = -1.0  # R used in the filter (default: = sigma_px, floor 1e-3)
     retract_every: int = 1     # apply the retraction every this many frames, from the state
@@ -310,6 +316,10 @@ def run(cfg: Cfg, record_every=20):
         return hp, H, cols
 
     poses_cur = [poses[0]]
+    odo_rng = np.random.default_rng(10_000 + cfg.seed)
+    prev_rep = [np.zeros(2)]
+    pose_before = np.zeros(3)
+    used_col = np.zeros(2)
     Dacc = np.ones(nmax)
     aacc = np.zeros(nmax)
     origin = np.zeros(nmax)          # per metric entry: the point lengths are measured from
@@ -364,17 +374,30 @@ def run(cfg: Cfg, record_every=20):
             # ------------------------------------------------ prediction with reported odometry
             d = inc[t - 1]
             rep = np.array([cfg.s_true * d[0], cfg.s_true * d[1]])
+            rep_clean = rep.copy()
+            if cfg.odo_noise > 0:
+                rep = rep + cfg.odo_noise * odo_rng.standard_normal(2)
             sc = x[IS]
             X, Y, th = x[:3]
             c, s_ = np.cos(th), np.sin(th)
             tx, ty = rep / sc
+            pose_before[:] = x[:3]
             x[:3] = [X + c * tx - s_ * ty, Y + s_ * tx + c * ty, th + d[2]]
             J = np.zeros((3, NG))
             J[:, :3] = np.eye(3)
             J[0, 2] = -s_ * tx - c * ty
             J[1, 2] = c * tx - s_ * ty
-            J[0, IS] = -(c * tx - s_ * ty) / sc
-            J[1, IS] = -(s_ * tx + c * ty) / sc
+            colrep = {'rep': rep, 'true': rep_clean, 'prev': prev_rep[0], 'post': rep}[cfg.col]
+            cx_, cy_ = colrep / sc
+            J[0, IS] = -(c * cx_ - s_ * cy_) / sc
+            J[1, IS] = -(s_ * cx_ + c * cy_) / sc
+            if cfg.col_gauge:
+                # keep the metric scale's direction (X, B, -s) a null direction of the
+                # prediction: the column's difference from the report goes to B's column
+                J[0, IB] = (c * (tx - cx_) - s_ * (ty - cy_)) / x[IB]
+                J[1, IB] = (s_ * (tx - cx_) + c * (ty - cy_)) / x[IB]
+            used_col[:] = J[:2, IS]
+            prev_rep[0] = rep
             A = J @ P[:NG, :n]                  # new pose rows
             Ppp = A[:, :NG] @ J.T
             P[:3, :n] = A
@@ -402,6 +425,15 @@ def run(cfg: Cfg, record_every=20):
             # Joseph form with the exact gain: (I-KH)P(I-KH)' + KRK' = P - KHP - PH'K' + KSK'
             P[:n, :n] += -KP - KP.T + K @ S @ K.T
             P[:n, :n] = 0.5 * (P[:n, :n] + P[:n, :n].T)
+            if cfg.col == 'post' and t > 0:
+                # the prediction's odometry-scale column re-linearised at the posterior
+                # displacement: -R^T-free world displacement / s (the noise taken out)
+                post_col = -(x[:2] - pose_before[:2]) / x[IS]
+                shear = post_col - used_col
+                Tm = np.eye(n)
+                Tm[0, IS] += shear[0]
+                Tm[1, IS] += shear[1]
+                P[:n, :n] = Tm @ P[:n, :n] @ Tm.T
             if cfg.retract:
                 D, a = retract_in_baseline_units(x0, x, P, n)
                 if cfg.retract_active:
