@@ -26,6 +26,9 @@ Usage examples (see main()):
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1 --retract_active 2  # ... on pose, B, s alone
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 2          # ... the mean alone (no fix)
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1 --retract_every 20  # deferred (no fix)
+  .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1 --odo_noise 0.002 [--col true|prev [--col_gauge 1]]
+                                                   # odometry noise; the odometry scale's column from the report,
+                                                   # the true motion or the previous frame, the gauge kept or not
 """
 import argparse
 import json
