@@ -506,10 +506,31 @@ impl Ekf {
                 }
             }
         }
-        let applied = match self.local.as_deref_mut() {
+        let applied = self.transform_target_rows([i, i + 1, i + 2], [1.0; 3], &shears);
+        // Without a new placement the baseline's column moved by `d / B` alone: the held
+        // columns no longer say what the covariance holds, and are dropped for good.
+        if applied && let Some(slot) = self.landmarks.get_mut(s) {
+            slot.placement = moved.map(|(_, new)| new);
+        }
+        applied
+    }
+
+    /// `P <- T P T^T` with `T = D + sum_s a_s e_s^T` the identity but for the three `targets`
+    /// rows (row `targets[r]` scaled by `scale[r]`, plus `a_s[r]` times source row `s` for
+    /// every `(s, a_s)` of `sources`; no source is a target): dense, or in an open local
+    /// session on `P_AA` and `phi`'s rows (`P_BA`'s share). Returns whether it was applied
+    /// (not when a target or a source is passive in the session). The landmarks' shears
+    /// ([`Self::shear_linearisation_point`]) and the scale's correction (`crate::scale`).
+    pub(crate) fn transform_target_rows(
+        &mut self,
+        targets: [usize; 3],
+        scale: [f64; 3],
+        sources: &[(usize, [f64; 3])],
+    ) -> bool {
+        match self.local.as_deref_mut() {
             None => {
                 let n = self.p.nrows();
-                shear_rows(self.p.as_mut_slice(), n, [i, i + 1, i + 2], &shears);
+                shear_rows(self.p.as_mut_slice(), n, targets, scale, sources);
                 true
             }
             Some(l) => {
@@ -517,10 +538,12 @@ impl Ekf {
                     Some(&crate::local::Place::Active(k)) => Some(k),
                     _ => None,
                 };
-                let (Some(k0), Some(k1), Some(k2)) = (place(i), place(i + 1), place(i + 2)) else {
+                let (Some(k0), Some(k1), Some(k2)) =
+                    (place(targets[0]), place(targets[1]), place(targets[2]))
+                else {
                     return false;
                 };
-                let Some(local): Option<Vec<(usize, [f64; 3])>> = shears
+                let Some(local): Option<Vec<(usize, [f64; 3])>> = sources
                     .iter()
                     .map(|(src, a)| place(*src).map(|k| (k, *a)))
                     .collect()
@@ -529,8 +552,17 @@ impl Ekf {
                 };
                 let na = l.paa.nrows();
                 let na0 = l.n_a0;
-                shear_rows(l.paa.as_mut_slice(), na, [k0, k1, k2], &local);
+                shear_rows(l.paa.as_mut_slice(), na, [k0, k1, k2], scale, &local);
                 // phi's rows by the same transform (`P_BA`'s share).
+                for (k, d) in [k0, k1, k2].into_iter().zip(scale) {
+                    if d != 1.0
+                        && let Some(row) = l.phit.get_mut(k * na0..(k + 1) * na0)
+                    {
+                        for v in row {
+                            *v *= d;
+                        }
+                    }
+                }
                 for (ks, a) in local {
                     for t in 0..na0 {
                         let src = l.phit.get(ks * na0 + t).copied().unwrap_or(0.0);
@@ -543,13 +575,7 @@ impl Ekf {
                 }
                 true
             }
-        };
-        // Without a new placement the baseline's column moved by `d / B` alone: the held
-        // columns no longer say what the covariance holds, and are dropped for good.
-        if applied && let Some(slot) = self.landmarks.get_mut(s) {
-            slot.placement = moved.map(|(_, new)| new);
         }
-        applied
     }
 
     /// Every landmark's estimate as its linearisation point (after a joint estimate from
@@ -832,11 +858,18 @@ pub(crate) fn carried_by_pose(pose: &rig_model::Pose2, world: &Vector3<f64>) -> 
 }
 
 /// `P <- T P T^T` on the lower triangle of the symmetric `n x n` buffer `p`, with
-/// `T = I + sum_s a_s e_s^T` on the three `targets` rows (row `targets[r]` plus `a_s[r]` times
-/// source row `s`, for every `(s, a_s)` of `sources`; no source is a target). All sources
-/// at once: each row is read once and each target row written once (one source at a time
-/// read and wrote the three target rows for each, a tenth of a dense hall's replay).
-fn shear_rows(p: &mut [f64], n: usize, targets: [usize; 3], sources: &[(usize, [f64; 3])]) {
+/// `T = D + sum_s a_s e_s^T` the identity but for the three `targets` rows (row `targets[r]`
+/// scaled by `scale[r]`, plus `a_s[r]` times source row `s`, for every `(s, a_s)` of
+/// `sources`; no source is a target). All sources at once: each row is read once and each
+/// target row written once (one source at a time read and wrote the three target rows for
+/// each, a tenth of a dense hall's replay).
+pub(crate) fn shear_rows(
+    p: &mut [f64],
+    n: usize,
+    targets: [usize; 3],
+    scale: [f64; 3],
+    sources: &[(usize, [f64; 3])],
+) {
     use crate::linalg::sym;
     use crate::state::at;
     // D = A R: row r is sum_s a_s[r] (row s of P).
@@ -859,14 +892,19 @@ fn shear_rows(p: &mut [f64], n: usize, targets: [usize; 3], sources: &[(usize, [
     let get = |v: &[f64], j: usize| v.get(j).copied().unwrap_or(f64::NAN);
     for (r, &t) in targets.iter().enumerate() {
         for j in 0..n {
-            let mut v = get(&old[r], j) + get(&d[r], j);
-            if let Some(q) = targets.iter().position(|&u| u == j) {
-                // Both ends targets: P_tu + (A R)_tu + (A R)_ut + (A P_SS A^T)_tu.
-                v += get(&d[q], t);
-                for &(src, a) in sources {
-                    v += a[r] * get(&d[q], src);
+            let v = match targets.iter().position(|&u| u == j) {
+                // Both ends targets: d_t d_u P_tu + d_u (A R)_tu + d_t (A R)_ut
+                // + (A P_SS A^T)_tu.
+                Some(q) => {
+                    let mut v = scale[r] * scale[q] * get(&old[r], j) + scale[q] * get(&d[r], j);
+                    v += scale[r] * get(&d[q], t);
+                    for &(src, a) in sources {
+                        v += a[r] * get(&d[q], src);
+                    }
+                    v
                 }
-            }
+                None => scale[r] * get(&old[r], j) + get(&d[r], j),
+            };
             let (row, col) = if t >= j { (t, j) } else { (j, t) };
             if let Some(x) = p.get_mut(at(n, row, col)) {
                 *x = v;

@@ -20,17 +20,14 @@
 //! `M = T_back(new) T_fwd(old)`, `T_fwd` the Jacobian of `(X / B, s B)` at the point before
 //! the update and `T_back` its inverse at the point after it. `M` is the identity but for the
 //! pose's `X, Y` rows and the odometry scale's row: a scale `D` and a column `a` in the
-//! baseline's, `M = D + a e_B^T`, O(n) rows of `P`. The landmarks take their share through
+//! baseline's, `M = D + a e_B^T`, O(n) rows of `P` (`Ekf::transform_target_rows`, the
+//! landmarks' shears' transform, dense or in a local session). The landmarks take their share through
 //! their placements (`Ekf::shear_linearisation_point`: the baseline's column `(L - C) / B` of
 //! a landmark follows its estimate); the toy ends at +0.13 with the pose and the scale alone.
-
-use alloc::vec::Vec;
 
 use rig_model::camera::Param;
 
 use crate::filter::Ekf;
-use crate::linalg::sym;
-use crate::state::at;
 
 /// The estimate the update started from, for [`Ekf::follow_scale`].
 #[derive(Debug, Clone, Copy)]
@@ -41,21 +38,6 @@ pub(crate) struct ScalePoint {
     baseline: (usize, f64),
     /// The odometry scale's state index and value, when it is estimated.
     odom_scale: Option<(usize, f64)>,
-}
-
-/// The transform `M = D + a e_B^T` on three target rows: their scales `D` and their entries
-/// `a` in the baseline's column.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct ScaleTransform {
-    /// The target rows (state indices): `X`, `Y`, and the odometry scale's (or the heading's,
-    /// with `d = 1`, `a = 0`, when the scale is not estimated).
-    pub(crate) rows: [usize; 3],
-    /// Each row's scale.
-    pub(crate) d: [f64; 3],
-    /// Each row's entry in the baseline's column.
-    pub(crate) a: [f64; 3],
-    /// The baseline's state index.
-    pub(crate) baseline: usize,
 }
 
 impl Ekf {
@@ -92,19 +74,16 @@ impl Ekf {
             return;
         }
         let db = b1 - b0;
-        let mut t = ScaleTransform {
-            rows: [0, 1, 2],
-            d: [1.0; 3],
-            a: [0.0; 3],
-            baseline: kb,
-        };
+        // M = D + a e_B^T on the rows of X, Y and the odometry scale (the heading's, with
+        // d = 1 and a = 0, when the scale is not estimated).
+        let (mut rows, mut d, mut a) = ([0, 1, 2], [1.0; 3], [0.0; 3]);
         for r in 0..2 {
             // X' = X / B: the old point, and the linear correction in those units.
             let x0 = from.position[r] / b0;
             let x1 = x0 + (self.x[r] - from.position[r]) / b0 - x0 * db / b0;
             self.x[r] = b1 * x1;
-            t.d[r] = b1 / b0;
-            t.a[r] = x1 - b1 * x0 / b0;
+            d[r] = b1 / b0;
+            a[r] = x1 - b1 * x0 / b0;
         }
         if let Some((ks, s0)) = from.odom_scale
             && let Some(&s) = self.x.get(ks)
@@ -112,99 +91,22 @@ impl Ekf {
             // s' = s B, corrected linearly; s = s' / B at the new point.
             let s1 = s0 * b0 + b0 * (s - s0) + s0 * db;
             self.x[ks] = s1 / b1;
-            t.rows[2] = ks;
-            t.d[2] = b0 / b1;
-            t.a[2] = s0 / b1 - s1 / (b1 * b1);
+            rows[2] = ks;
+            d[2] = b0 / b1;
+            a[2] = s0 / b1 - s1 / (b1 * b1);
         }
-        if t.d == [1.0; 3] && t.a == [0.0; 3] {
+        if d == [1.0; 3] && a == [0.0; 3] {
             return;
         }
-        match self.local.as_deref_mut() {
-            None => {
-                let n = self.p.nrows();
-                transform_rows(self.p.as_mut_slice(), n, &t);
-            }
-            Some(l) => {
-                let place = |c: usize| match l.place.get(c) {
-                    Some(&crate::local::Place::Active(k)) => Some(k),
-                    _ => None,
-                };
-                // The pose and the camera are always active.
-                let (Some(r0), Some(r1), Some(r2), Some(kb)) = (
-                    place(t.rows[0]),
-                    place(t.rows[1]),
-                    place(t.rows[2]),
-                    place(kb),
-                ) else {
-                    return;
-                };
-                let local = ScaleTransform {
-                    rows: [r0, r1, r2],
-                    baseline: kb,
-                    ..t
-                };
-                let na = l.paa.nrows();
-                transform_rows(l.paa.as_mut_slice(), na, &local);
-                // phi's rows by the same transform (`P_BA`'s share): row r <- d_r row r +
-                // a_r row B.
-                let na0 = l.n_a0;
-                let source: Vec<f64> = l
-                    .phit
-                    .get(kb * na0..(kb + 1) * na0)
-                    .map(<[f64]>::to_vec)
-                    .unwrap_or_default();
-                for ((&r, &d), &a) in local.rows.iter().zip(&local.d).zip(&local.a) {
-                    if let Some(row) = l.phit.get_mut(r * na0..(r + 1) * na0) {
-                        for (v, &src) in row.iter_mut().zip(&source) {
-                            *v = d * *v + a * src;
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// `P <- M P M^T` on the lower triangle of the symmetric `n x n` buffer `p`, with
-/// `M = D + a e_B^T` the identity but for the three target rows (row `r` becomes
-/// `d_r row r + a_r row B`; no target is the baseline's row, the targets distinct).
-pub(crate) fn transform_rows(p: &mut [f64], n: usize, t: &ScaleTransform) {
-    let kb = t.baseline;
-    let target = |j: usize| t.rows.iter().position(|&r| r == j);
-    // (M P) for the target rows, every column: d_r P_rj + a_r P_Bj.
-    let mp: [Vec<f64>; 3] = core::array::from_fn(|q| {
-        let (r, d, a) = (t.rows[q], t.d[q], t.a[q]);
-        (0..n)
-            .map(|j| d * sym(p, n, r, j) + a * sym(p, n, kb, j))
-            .collect()
-    });
-    let get = |q: usize, j: usize| mp[q].get(j).copied().unwrap_or(f64::NAN);
-    let mut write = |i: usize, j: usize, v: f64| {
-        let (row, col) = if i >= j { (i, j) } else { (j, i) };
-        if let Some(x) = p.get_mut(at(n, row, col)) {
-            *x = v;
-        }
-    };
-    for q in 0..3 {
-        let r = t.rows[q];
-        for j in 0..n {
-            match target(j) {
-                // Both ends targets: (M P M^T)_rs = d_s (M P)_rs + a_s (M P)_rB.
-                Some(u) => {
-                    if j <= r {
-                        let v = t.d[u] * get(q, j) + t.a[u] * get(q, kb);
-                        write(r, j, v);
-                    }
-                }
-                None => write(r, j, get(q, j)),
-            }
-        }
+        // The pose and the camera are always active in a session: it is always applied.
+        self.transform_target_rows(rows, d, &[(kb, a)]);
     }
 }
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::expect_used)]
 mod tests {
+    use alloc::vec::Vec;
     use nalgebra::{DMatrix, Matrix4, Vector3};
     use rig_model::Pose2;
 
@@ -335,25 +237,22 @@ mod tests {
         assert!((&got - &p).amax() > 0.0, "the covariance did not change");
     }
 
+    /// The rows' transform (`crate::landmarks::shear_rows`) with a scale on each target row:
+    /// `M P M^T` for `M = D + a e_B^T`.
     #[test]
     fn the_row_transform_is_m_p_m_transposed() {
         let n = 7;
         let a = DMatrix::<f64>::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 11) as f64 / 5.0 - 1.0);
         let p = &a * a.transpose() + DMatrix::<f64>::identity(n, n);
-        let t = ScaleTransform {
-            rows: [0, 1, 5],
-            d: [1.01, 0.99, 0.97],
-            a: [0.3, -0.2, 0.5],
-            baseline: 4,
-        };
+        let (rows, d, col, kb) = ([0, 1, 5], [1.01, 0.99, 0.97], [0.3, -0.2, 0.5], 4);
         let mut m = DMatrix::<f64>::identity(n, n);
         for q in 0..3 {
-            m[(t.rows[q], t.rows[q])] = t.d[q];
-            m[(t.rows[q], t.baseline)] = t.a[q];
+            m[(rows[q], rows[q])] = d[q];
+            m[(rows[q], kb)] = col[q];
         }
         let want = &m * &p * m.transpose();
         let mut got = p.clone();
-        transform_rows(got.as_mut_slice(), n, &t);
+        crate::landmarks::shear_rows(got.as_mut_slice(), n, rows, d, &[(kb, col)]);
         for j in 0..n {
             for i in j..n {
                 assert!(
