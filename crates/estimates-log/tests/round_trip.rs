@@ -3,7 +3,7 @@
 //! travel as ellipsoids).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use estimates_log::{
     Association, CameraSample, Consistency, Counts, EstimatesWriter, FrameEstimate,
@@ -12,8 +12,16 @@ use estimates_log::{
 };
 use rig_model::camera::Param;
 
+/// A file in this test's directory under Cargo's `target/tmp`: a rerun overwrites it, and
+/// `cargo clean` removes it (libtest names each test's thread after the test).
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("estimates-log-{}", std::process::id()));
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("main")
+        .replace("::", "-");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("estimates-log")
+        .join(test);
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }

@@ -21,7 +21,14 @@ fn radtan_log() -> &'static Path {
             .join("../../fixtures/scenarios/paper-experiment-radtan.toml");
         let sc = sim::Scenario::load(&scenario).unwrap();
         assert!(sc.rig.lens.is_some(), "the scenario has lens tables");
-        let dir = std::env::temp_dir().join(format!("viewer-lens-{}", std::process::id()));
+        // Cargo's target/tmp, one directory per test: a rerun overwrites it.
+        let test = std::thread::current()
+            .name()
+            .unwrap_or("main")
+            .replace("::", "-");
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join("viewer-lens")
+            .join(test);
         std::fs::create_dir_all(&dir).unwrap();
         let log = dir.join("paper-experiment-radtan.mcap");
         sim::simulate(&sc, sim::Mode::Fast)

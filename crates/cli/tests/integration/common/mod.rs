@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::sync::Mutex;
 
 /// Runs the `stereonav` binary built for these tests.
 pub fn stereonav(args: &[&str]) -> Output {
@@ -12,10 +13,29 @@ pub fn stereonav(args: &[&str]) -> Output {
         .expect("stereonav runs")
 }
 
-/// A file path in a scratch directory of this test process, per suite.
+/// A file path in this test's scratch directory: `target/tmp/stereonav-SUITE/TEST` (Cargo's
+/// `CARGO_TARGET_TMPDIR`, which `cargo clean` removes), emptied the first time the test asks
+/// for it in this process, so that a run neither reads an earlier run's files nor leaves a new
+/// directory behind for each process (one per test under nextest) as `/tmp/NAME-PID` did.
 pub fn scratch(suite: &str, name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stereonav-{suite}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    static EMPTIED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+    // libtest names each test's thread after the test; "main" when tests run on one thread.
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("main")
+        .replace(|c: char| !c.is_ascii_alphanumeric() && c != '_', "-");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("stereonav-{suite}"))
+        .join(test);
+    let mut emptied = EMPTIED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !emptied.contains(&dir) {
+        // Absent on a first run: nothing to remove.
+        let _ = std::fs::remove_dir_all(&dir);
+        emptied.push(dir.clone());
+    }
+    std::fs::create_dir_all(&dir).expect("scratch dir");
     dir.join(name)
 }
 
