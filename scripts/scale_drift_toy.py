@@ -29,6 +29,10 @@ Usage examples (see main()):
   .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-5 --retract 1 --odo_noise 0.002 [--col true|prev [--col_gauge 1]]
                                                    # odometry noise; the odometry scale's column from the report,
                                                    # the true motion or the previous frame, the gauge kept or not
+  .venv/bin/python scripts/scale_drift_toy.py run --seeds 0-4 --retract 1 --retract_active 2 --follow 1 --odo_noise 0.002 --mx 0.5
+                                                   # the lamps' linearisation points follow their estimates as
+                                                   # vslam_ekf's follow_points does (--follow 2: the heading's
+                                                   # shear alone, with --retract_active 1)
 """
 import argparse
 import json
@@ -82,6 +86,11 @@ class Cfg:
     turn_omega: float = 0.45
     turn_radius: float = 2.5
     spacing: float = 4.0
+    follow: int = 0            # 1: each observed lamp's linearisation point follows its estimate
+                               # with the covariance sheared as vslam_ekf's follow_points does
+                               # (heading column J d, baseline column (L - C)/B re-taken at the
+                               # new point and baseline, C the placing camera); 2: the heading's
+                               # shear alone (the baseline's share left to the retraction)
 
 
 # ----------------------------------------------------------------------------- world + route
@@ -265,6 +274,9 @@ def run(cfg: Cfg, record_every=20):
         x[IS] = x[IS] * B_NOM
     n = NG
     slot = -np.ones(nL, int)      # state offset of lamp i (or -1)
+    first = np.zeros((nL, 3))     # follow: each lamp's linearisation point
+    cam_at = np.zeros((nL, 3))    # follow: the camera it was placed from
+    b_first = np.zeros(nL)        # follow: the baseline its column was last taken at
     sig = cfg.sigma_px
     sigR = cfg.sigma_meas_filter if cfg.sigma_meas_filter > 0 else max(sig, 1e-3)
     Rl = sigR ** 2 * np.eye(4)
@@ -454,6 +466,21 @@ def run(cfg: Cfg, record_every=20):
                     apply_m(P, n, Dacc[:n], aacc[:n])
                     Dacc[:] = 1.0
                     aacc[:] = 0.0
+            if cfg.follow:
+                B1 = x[IB]
+                for lid in kid:
+                    o = slot[lid]
+                    L = x[o:o + 3].copy()
+                    dd = L - first[lid]
+                    # T = I + u e_theta^T + w e_B^T on the lamp's rows: P <- T P T^T
+                    u = np.array([-dd[1], dd[0], 0.0])
+                    w = np.zeros(3)
+                    if cfg.follow == 1:
+                        w = (L - cam_at[lid]) / B1 - (first[lid] - cam_at[lid]) / b_first[lid]
+                    P[o:o + 3, :n] += np.outer(u, P[ITH, :n]) + np.outer(w, P[IB, :n])
+                    P[:n, o:o + 3] += np.outer(P[:n, ITH], u) + np.outer(P[:n, IB], w)
+                    first[lid] = L
+                    b_first[lid] = B1
             if not cfg.est_s:
                 P[IS, :n] = 0; P[:n, IS] = 0
         dB[t] = x[IB] - B_before
@@ -489,6 +516,10 @@ def run(cfg: Cfg, record_every=20):
             P[:n, n:n + mm * k] = Pno.T
             P[n:n + mm * k, n:n + mm * k] = Pnn
             slot[nid] = n + k * np.arange(mm)
+            first[nid] = lm[:, :3]
+            cth, sth = np.cos(x[ITH]), np.sin(x[ITH])
+            cam_at[nid] = [x[IX] + cth * m[0] - sth * m[1], x[IY] + sth * m[0] + cth * m[1], m[2]]
+            b_first[nid] = x[IB]
             n += mm * k
         if t % rec_every == 0 or t == len(inc):
             rec['t'].append(t); rec['B'].append(x[IB]); rec['sB'].append(np.sqrt(P[IB, IB]))
