@@ -7,7 +7,7 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
@@ -28,6 +28,9 @@
 //! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
 //! `--odometry-tau S` gives the odometry's errors that time constant of memory (issue 36), in
 //! the simulator and in the log's rig; `--tau-unstated` leaves the rig silent about it.
+//! `--noise-seed S`: every hall's noise drawn from seed `S` (the hall itself, its path and its
+//! vehicle errors still from the hall's seed): one hall over many draws of its noise, to tell
+//! a bias from one draw.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line tool
 
 use std::process::ExitCode;
@@ -79,7 +82,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]";
     let mut settings = NavSettings::default();
     let mut print_vehicle = false;
     let mut lens = None;
@@ -88,6 +91,7 @@ fn run() -> Result<(), String> {
     let mut with_reference = false;
     let mut odometry_tau: Option<f64> = None;
     let mut tau_unstated = false;
+    let mut noise_seed: Option<u64> = None;
     let mut rest = args.iter();
     while let Some(a) = rest.next() {
         match a.as_str() {
@@ -139,6 +143,13 @@ fn run() -> Result<(), String> {
                 );
             }
             "--tau-unstated" => tau_unstated = true,
+            "--noise-seed" => {
+                let v = rest.next().ok_or(usage)?;
+                noise_seed = Some(
+                    v.parse()
+                        .map_err(|_| format!("--noise-seed {v:?}: {usage}"))?,
+                );
+            }
             "--reference" => with_reference = true,
             "--keep" => {
                 keep = Some(std::path::PathBuf::from(rest.next().ok_or(usage)?));
@@ -172,6 +183,9 @@ fn run() -> Result<(), String> {
             spec.lens = lens;
         }
         let mut scenario = sim::hall::scenario(&spec, seed).map_err(|e| e.to_string())?;
+        if let Some(noise) = noise_seed {
+            scenario = scenario.with_seed(noise);
+        }
         if let Some(tau) = odometry_tau {
             let n = &mut scenario.spec.noise;
             (n.velocity_tau_s, n.yaw_rate_tau_s) = (tau, tau);

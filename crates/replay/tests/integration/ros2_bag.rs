@@ -155,9 +155,13 @@ fn hall_bag(scenario: &sim::Scenario) -> ReplayEnd {
 /// alone, the change takes the pixels' drift away (48 -> 8.5 mm with pixel noise alone) and
 /// turns the velocity noise's push on the split between the baseline and the odometry scale
 /// from down (-0.09 mm) to up (+0.17 mm); the two had cancelled here (docs/vehicle.md, "The
-/// baseline's drift"). Fails until the velocity noise's push is found.
+/// baseline's drift"). Over sixteen draws of this hall's noise (`scripts/noise_seeds.py`) the
+/// "push" is one draw: the baseline's error is inside its sigma (mean -0.25, RMS 0.76), the
+/// landmark RMS 4 to 68 mm and within 30 mm on 12 of 16. This bag ends +0.8 sigma high
+/// and fails the bound; what would pass it on every draw is more information on the map's
+/// scale than this rig's 0.5 m lever arm and 0.3 mm baseline prior give ("One draw, not a push").
 #[test]
-#[ignore = "the velocity noise's push on the baseline (docs/vehicle.md, \"The baseline's drift\"); fails"]
+#[ignore = "this draw of the noise ends with the map's scale 0.8 sigma off (docs/vehicle.md, \"One draw, not a push\"); fails"]
 fn slow_a_hall_bag_s_landmarks_are_within_30_mm() {
     let scenario = super::scenario("hall-radtan-bag.toml");
     let end = hall_bag(&scenario);
