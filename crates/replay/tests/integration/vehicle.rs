@@ -217,10 +217,19 @@ fn a_u_turn_s_iterated_update_does_not_walk_the_local_map_away() {
 /// column from the speed reported before the interval breaks the metric scale's gauge unless
 /// the baseline's column takes the difference, and with it changes nothing). With the
 /// corrections taken in units of the baseline (`vslam_ekf::Settings::follow_scale`,
-/// 2026-12-07, later): 13 lamps missed (was 23), 344 mm, 2 of 10 inside 3 sigma. Fails until
-/// the odometry's push on the map's scale is found.
+/// 2026-12-07, later): 13 lamps missed (was 23), 344 mm, 2 of 10 inside 3 sigma. Over other
+/// draws of the same hall's noise (`hall_mc 1 27 --lens radtan --noise-seed S`, S = 1 to 8;
+/// 2026-12-07, session 23) the baseline is within 1.3 of its sigma in all eight; four are honest
+/// (18 of 18 to 44 of 44 inside 3 sigma) while four are not (1 of 9 to 5 of 12): so it is not
+/// the map's scale. Traced on seed 7 (`hall_mc ... --noise-seed 7 --keep DIR`, `loop_probe
+/// DIR/hall-27.mcap`): the heading leaves the dark stretch 2 sigma off (-0.85 degrees at
+/// 0.44, the yaw bias +1.4 sigma), the far half is mapped through it, and when the vehicle comes
+/// back to the second aisle's lamps (234 s) and then to the first aisle's (257 s, a 0.57 m
+/// jump) the heading's sigma falls to 0.20 and 0.14 degrees while its error stays at -1.2 and
+/// -1.0 degrees: the EKF's overconfident heading at a loop closure (docs/vehicle.md, "Dark
+/// stretches").
 #[test]
-#[ignore = "the odometry scale's filter column: errors in the variables (docs/vehicle.md); fails"]
+#[ignore = "the heading overconfident after the dark stretch's loop closure, on half the draws of the noise (docs/vehicle.md, \"Dark stretches\"); fails"]
 fn hall_27_s_far_half_is_inside_3_sigma() {
     let r = radtan_hall(27, "hall-27-far-half");
     assert_nine_in_ten_inside(&r);
