@@ -7,7 +7,7 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--no-follow-scale] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
@@ -23,7 +23,9 @@
 //! parameters' errors and sigmas on stderr;
 //! `--frozen-points`: linearisation points that follow the landmarks' estimates without the
 //! covariance until they are known to 0.5 m and then stay (`vslam_ekf::Settings::follow_points`
-//! off, the rule before 2026-12-06); `--reference`: each hall's frames also solved as one batch with the truth's association,
+//! off, the rule before 2026-12-06); `--no-follow-scale`: each update's correction in metres, not
+//! re-taken in units of the baseline (`vslam_ekf::Settings::follow_scale` off, the filter before
+//! 2026-12-07); `--reference`: each hall's frames also solved as one batch with the truth's association,
 //! its landmark RMS and the navigator's ratio to it printed: a minute or more a hall). With `--keep DIR` each
 //! hall's vehicle log is kept there as `hall-SEED.mcap` (to replay or profile one alone).
 //! `--odometry-tau S` gives the odometry's errors that time constant of memory (issue 36), in
@@ -82,7 +84,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--no-follow-scale] [--fej-pose] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]";
     let mut settings = NavSettings::default();
     let mut print_vehicle = false;
     let mut lens = None;
@@ -129,6 +131,7 @@ fn run() -> Result<(), String> {
             }
             "--smooth-near" => settings.smooth_near_vehicle = true,
             "--frozen-points" => settings.ekf.follow_points = false,
+            "--no-follow-scale" => settings.ekf.follow_scale = false,
             "--fej-pose" => settings.ekf.first_estimate_pose = true,
             "--error-states" => settings.ekf.odometry_error_states = true,
             "--velocity-states" => settings.ekf.odometry_velocity_states = true,
