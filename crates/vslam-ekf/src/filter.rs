@@ -207,6 +207,16 @@ pub struct Settings {
     /// lost pose (its sigma in the world, `nav::MATCH_MAX_POSE_SIGMA_M`) then holds the lamps
     /// of halls like it for longer, and the memory halls end worse (docs/benchmarks.md).
     pub first_estimate_pose: bool,
+    /// On every frame, lost or not, the prediction's heading column taken from the pose the
+    /// previous prediction left ([`Settings::first_estimate_pose`]'s prediction half, without
+    /// its iterated-update half): the usual prediction after the pose's covariance was sheared
+    /// with its linearisation point, `T = I + (J d) e_theta^T` for the update's move `d`, as
+    /// [`Settings::follow_points`] shears the landmarks'. Off by default. On, with the
+    /// navigator's relative lost rule (`nav::NavSettings::relative_lost`), every comparison set
+    /// is more honest (white radtan halls 9 -> 1 landmarks outside 3 sigma; hall 27's heading
+    /// at its loop closures) but the halls whose odometry has memory miss more lamps
+    /// (docs/vehicle.md, "Dark stretches": the lead, measured, not the default).
+    pub first_estimate_prediction: bool,
     /// The odometry's errors with memory (`[noise] velocity_tau`, `yaw_rate_tau`: a
     /// first-order Gauss-Markov process of the rig's stationary sigma and that time constant)
     /// held as states of the filter (`crate::errors`): one per axis with memory, after the
@@ -250,6 +260,7 @@ impl Default for Settings {
             follow_points: true,
             follow_scale: true,
             first_estimate_pose: false,
+            first_estimate_prediction: false,
             odometry_error_states: false,
             odometry_velocity_states: false,
             velocity_state_acceleration: (0.2, 0.2),

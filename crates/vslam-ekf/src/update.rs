@@ -1731,6 +1731,61 @@ mod linearisation_point_tests {
         );
     }
 
+    /// `Settings::first_estimate_prediction`: the prediction after an update moved the pose
+    /// by `d` is the usual one after the covariance was sheared with the pose's linearisation
+    /// point, `P <- T P T^T`, `T = I + (J d) e_theta^T` on the position's rows (the landmarks'
+    /// shear of `follow_points`, for the pose), and it applies with the pose not lost.
+    #[test]
+    fn the_first_estimates_prediction_is_the_usual_one_after_the_pose_s_shear() {
+        let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
+        let make = |first_estimate_prediction| {
+            let settings = Settings {
+                first_estimate_prediction,
+                ..Settings::default()
+            };
+            let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
+            let start = Pose2::new(20.0, 3.0, 0.3);
+            ekf.set_start_pose(
+                start,
+                &Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, 1e-5)),
+            )
+            .unwrap();
+            for &(x, y) in &[(19.0, 2.5), (21.0, 4.0), (22.5, 3.5)] {
+                let z = rig_model::project(&rig.nominal, &start, &Vector3::new(x, y, 7.8)).unwrap();
+                ekf.add_landmark(&z).unwrap();
+            }
+            ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+            ekf
+        };
+        let (mut fej, mut usual) = (make(true), make(false));
+        assert!(!fej.pose_lost());
+        // An update's move of the pose, the covariance left as it was.
+        let d = (0.15, -0.2);
+        for ekf in [&mut fej, &mut usual] {
+            ekf.x[0] += d.0;
+            ekf.x[1] += d.1;
+        }
+        let n = usual.p.nrows();
+        let mut t = DMatrix::<f64>::identity(n, n);
+        (t[(0, 2)], t[(1, 2)]) = (-d.1, d.0);
+        let sheared = &t * usual.covariance() * t.transpose();
+        for r in 0..n {
+            for c in 0..=r {
+                usual.p[(r, c)] = sheared[(r, c)];
+                usual.p[(c, r)] = sheared[(r, c)];
+            }
+        }
+        fej.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+        usual.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+        let (a, b) = (fej.covariance(), usual.covariance());
+        let scale = b.abs().max();
+        assert!(
+            (&a - &b).abs().max() <= 1e-12 * scale,
+            "first-estimates prediction {a} against the sheared usual one {b}"
+        );
+        assert_eq!(fej.state(), usual.state());
+    }
+
     /// While the pose is lost its updates move it by decimetres (hall 22 of `hall_mc 24 11
     /// --lens radtan --odometry-tau 0.6` after its hand-over: 2 to 18 cm a frame). The
     /// prediction that follows carries the pose's share of the world's unobservable turn from
