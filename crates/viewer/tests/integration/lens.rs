@@ -21,16 +21,7 @@ fn radtan_log() -> &'static Path {
             .join("../../fixtures/scenarios/paper-experiment-radtan.toml");
         let sc = sim::Scenario::load(&scenario).unwrap();
         assert!(sc.rig.lens.is_some(), "the scenario has lens tables");
-        // Cargo's target/tmp, one directory per test: a rerun overwrites it.
-        let test = std::thread::current()
-            .name()
-            .unwrap_or("main")
-            .replace("::", "-");
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join("viewer-lens")
-            .join(test);
-        std::fs::create_dir_all(&dir).unwrap();
-        let log = dir.join("paper-experiment-radtan.mcap");
+        let log = crate::scratch("lens", "paper-experiment-radtan.mcap");
         sim::simulate(&sc, sim::Mode::Fast)
             .unwrap()
             .write_log(&log)

@@ -8,3 +8,20 @@
 mod bag;
 mod lens;
 mod screenshot;
+
+use std::path::PathBuf;
+
+/// A file in this test's directory under Cargo's `target/tmp` (`viewer-SUITE/TEST`): a rerun
+/// overwrites it, and `cargo clean` removes it (libtest names each test's thread after the
+/// test).
+fn scratch(suite: &str, name: &str) -> PathBuf {
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("main")
+        .replace("::", "-");
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("viewer-{suite}"))
+        .join(test);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}

@@ -20,18 +20,8 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A file in this test's directory under Cargo's `target/tmp`: a rerun overwrites it, and
-/// `cargo clean` removes it (libtest names each test's thread after the test).
 fn scratch(name: &str) -> PathBuf {
-    let test = std::thread::current()
-        .name()
-        .unwrap_or("main")
-        .replace("::", "-");
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("viewer-screenshot")
-        .join(test);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    crate::scratch("screenshot", name)
 }
 
 fn paper_experiment() -> viewer::Model {
