@@ -12,16 +12,10 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A file in this test's directory under Cargo's `target/tmp`: a rerun overwrites it, and
-/// `cargo clean` removes it (libtest names each test's thread after the test).
+/// A file under Cargo's `target/tmp` (as `streaming.rs`'s): each test uses its own names, a
+/// rerun overwrites them, and `cargo clean` removes them.
 fn scratch(name: &str) -> PathBuf {
-    let test = std::thread::current()
-        .name()
-        .unwrap_or("main")
-        .replace("::", "-");
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("replay-estimates-reader")
-        .join(test);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("replay-estimates-reader");
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }
