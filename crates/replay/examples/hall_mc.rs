@@ -7,14 +7,17 @@
 //! on every axis, the vehicle's parameters within 3 sigma, the baseline's error and sigma (the
 //! map's scale), and the replay's speed; then the totals and the process's peak memory.
 //!
-//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--no-follow-scale] [--fej-pose] [--fej-prediction] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]`
+//! `cargo run --release -p replay --example hall_mc -- HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--no-follow-scale] [--fej-pose] [--fej-always | --no-fej-prediction] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]`
 //! (`--field`: the navigator's field of use, `vslam_ekf::Settings::max_off_axis_deg`;
 //! `--lens`: every hall through that lens; `--margin`: the local sessions' margin,
 //! `vslam_ekf::Settings::local_margin_m`, 0 for the dense filter; `--smooth-near`: phase 2's
 //! smoother over the landmarks near the vehicle, `nav::NavSettings::smooth_near_vehicle`;
 //! `--fej-pose`: the pose's first-estimates Jacobians while it is lost
-//! (`vslam_ekf::Settings::first_estimate_pose`); `--fej-prediction`: the prediction's
-//! first-estimates column on every frame (`vslam_ekf::Settings::first_estimate_prediction`);
+//! (`vslam_ekf::Settings::first_estimate_pose`); `--fej-always`: the prediction's
+//! first-estimates column on every frame, whatever the heading's sigma
+//! (`vslam_ekf::Settings::first_estimate_prediction_heading_sigma_rad` infinite; by default
+//! only below 0.5 degrees); `--no-fej-prediction`: never
+//! (`vslam_ekf::Settings::first_estimate_prediction` off);
 //! `--relative-lost`: lost only relative to
 //! the map around the pose as well (`nav::NavSettings::relative_lost`); `--error-states`:
 //! the odometry's errors with memory held as states of the filter
@@ -86,7 +89,7 @@ struct Totals {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--no-follow-scale] [--fej-pose] [--fej-prediction] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]";
+    let usage = "usage: hall_mc HALLS [FIRST_SEED] [--field DEG] [--lens radtan|fisheye] [--margin M] [--outer-gain G] [--far-gain G] [--outer-birth S] [--smooth-near] [--frozen-points] [--no-follow-scale] [--fej-pose] [--fej-always | --no-fej-prediction] [--error-states] [--velocity-states] [--no-smoother] [--print-vehicle] [--relative-lost] [--reference] [--keep DIR] [--odometry-tau S [--tau-unstated]] [--noise-seed S]";
     let mut settings = NavSettings::default();
     let mut print_vehicle = false;
     let mut lens = None;
@@ -135,7 +138,10 @@ fn run() -> Result<(), String> {
             "--frozen-points" => settings.ekf.follow_points = false,
             "--no-follow-scale" => settings.ekf.follow_scale = false,
             "--fej-pose" => settings.ekf.first_estimate_pose = true,
-            "--fej-prediction" => settings.ekf.first_estimate_prediction = true,
+            "--fej-always" => {
+                settings.ekf.first_estimate_prediction_heading_sigma_rad = f64::INFINITY;
+            }
+            "--no-fej-prediction" => settings.ekf.first_estimate_prediction = false,
             "--error-states" => settings.ekf.odometry_error_states = true,
             "--velocity-states" => settings.ekf.odometry_velocity_states = true,
             "--no-smoother" => settings.smooth_phase2 = false,

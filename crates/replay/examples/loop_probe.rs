@@ -6,7 +6,7 @@
 //! by more than `JUMP_M`, is printed with the pose error and sigma.
 //!
 //! `cargo run --release -p replay --example loop_probe -- LOG.mcap [FROM_S TO_S] [--vehicle]
-//! [--no-smoother] [--fej-pose] [--fej-prediction] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed [--worst N]] [--lamp ID]
+//! [--no-smoother] [--fej-pose] [--fej-always | --no-fej-prediction] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed [--worst N]] [--lamp ID]
 //! [--nees-at T_S [--worst N]] [--cov-at T_S] [--partial-from T_S]`:
 //! `--vehicle` also prints the vehicle's parameters, their sigmas and their correlations with
 //! the pose at every printed frame; `--no-smoother` runs phase 2 without the fixed-lag
@@ -329,7 +329,8 @@ struct Options {
     vehicle: bool,
     no_smoother: bool,
     fej_pose: bool,
-    fej_prediction: bool,
+    fej_always: bool,
+    no_fej_prediction: bool,
     error_states: bool,
     velocity_states: bool,
     relative_lost: bool,
@@ -342,7 +343,7 @@ struct Options {
 }
 
 fn run() -> Result<(), String> {
-    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--fej-pose] [--fej-prediction] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed [--worst N]] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
+    let usage = "usage: loop_probe LOG.mcap [FROM_S TO_S] [--vehicle] [--no-smoother] [--fej-pose] [--fej-always | --no-fej-prediction] [--error-states] [--velocity-states] [--relative-lost] [--rig RIG.toml] [--field DEG] [--max-in-view N] [--missed [--worst N]] [--lamp ID] [--held-at T_S] [--every-frame] [--nees-at T_S [--worst N]] [--cov-at T_S]";
     let mut opts = Options::default();
     let mut positional: Vec<String> = Vec::new();
     let mut every_frame = false;
@@ -358,7 +359,8 @@ fn run() -> Result<(), String> {
             "--vehicle" => opts.vehicle = true,
             "--no-smoother" => opts.no_smoother = true,
             "--fej-pose" => opts.fej_pose = true,
-            "--fej-prediction" => opts.fej_prediction = true,
+            "--fej-always" => opts.fej_always = true,
+            "--no-fej-prediction" => opts.no_fej_prediction = true,
             "--error-states" => opts.error_states = true,
             "--velocity-states" => opts.velocity_states = true,
             "--relative-lost" => opts.relative_lost = true,
@@ -494,7 +496,12 @@ fn run() -> Result<(), String> {
         ekf: vslam_ekf::Settings {
             max_off_axis_deg: opts.field.unwrap_or(defaults.ekf.max_off_axis_deg),
             first_estimate_pose: opts.fej_pose,
-            first_estimate_prediction: opts.fej_prediction,
+            first_estimate_prediction: !opts.no_fej_prediction,
+            first_estimate_prediction_heading_sigma_rad: if opts.fej_always {
+                f64::INFINITY
+            } else {
+                defaults.ekf.first_estimate_prediction_heading_sigma_rad
+            },
             odometry_error_states: opts.error_states,
             odometry_velocity_states: opts.velocity_states,
             ..defaults.ekf

@@ -42,6 +42,10 @@ pub const ITERATE_POSITION_SIGMA_M: f64 = 0.1;
 /// A heading sigma above this makes [`Ekf::update`] iterate, radians (2 degrees).
 pub const ITERATE_HEADING_SIGMA_RAD: f64 = 0.035;
 
+/// The heading sigma below which the prediction takes the pose's first estimates, radians
+/// (0.5 degrees; [`Settings::first_estimate_prediction_heading_sigma_rad`]).
+pub const FEJ_PREDICTION_HEADING_SIGMA_RAD: f64 = 0.5 * core::f64::consts::PI / 180.0;
+
 /// The iterated update stops when every accepted residual is within this many pixel-noise
 /// sigmas of its linear model's.
 pub const ITERATE_TOLERANCE_SIGMAS: f64 = 0.1;
@@ -207,16 +211,31 @@ pub struct Settings {
     /// lost pose (its sigma in the world, `nav::MATCH_MAX_POSE_SIGMA_M`) then holds the lamps
     /// of halls like it for longer, and the memory halls end worse (docs/benchmarks.md).
     pub first_estimate_pose: bool,
-    /// On every frame, lost or not, the prediction's heading column taken from the pose the
-    /// previous prediction left ([`Settings::first_estimate_pose`]'s prediction half, without
-    /// its iterated-update half): the usual prediction after the pose's covariance was sheared
-    /// with its linearisation point, `T = I + (J d) e_theta^T` for the update's move `d`, as
-    /// [`Settings::follow_points`] shears the landmarks'. Off by default. On, with the
-    /// navigator's relative lost rule (`nav::NavSettings::relative_lost`), every comparison set
-    /// is more honest (white radtan halls 9 -> 1 landmarks outside 3 sigma; hall 27's heading
-    /// at its loop closures) but the halls whose odometry has memory miss more lamps
-    /// (docs/vehicle.md, "Dark stretches": the lead, measured, not the default).
+    /// While the heading is known to better than
+    /// [`Settings::first_estimate_prediction_heading_sigma_rad`], the prediction's heading
+    /// column taken from the pose the previous prediction left
+    /// ([`Settings::first_estimate_pose`]'s prediction half, without its iterated-update
+    /// half): the usual prediction after the pose's covariance was sheared with its
+    /// linearisation point, `T = I + (J d) e_theta^T` for the update's move `d`, as
+    /// [`Settings::follow_points`] shears the landmarks'. The first-estimates Jacobian of Huang,
+    /// Mourikis and Roumeliotis (ISER 2008) for the prediction: the update's correction of the
+    /// pose does not tell the covariance the world's heading, which no lamp observes. On by
+    /// default (2026-12-08): hall 27 of the Monte Carlo (white odometry) was overconfident in
+    /// its heading at the loop closures after its dark stretch (8 of its landmarks near their
+    /// lamps outside 3 sigma; 0 with it), and every other hall of the comparison sets maps the
+    /// same (docs/vehicle.md, "The prediction's first estimates, gated by the heading's
+    /// sigma").
     pub first_estimate_prediction: bool,
+    /// The heading sigma below which [`Settings::first_estimate_prediction`] applies, radians
+    /// (0.5 degrees; `f64::INFINITY`: always). Above it the prediction takes the corrected
+    /// pose, as the iterated update does above [`ITERATE_HEADING_SIGMA_RAD`]: a pose a dark
+    /// stretch left degrees uncertain is corrected by decimetres when it finds the map again,
+    /// and the first estimates' shear then carries that correction into the covariance. On
+    /// every frame (no bound), fisheye hall 11 with 0.6 s of odometry memory came out of its
+    /// dark stretch 2.5 degrees off at 1.7 of sigma and the lamps it found again took the
+    /// heading to +1.6 degrees at 0.34 (4.8 sigma), missing 52 lamps (0 with the bound; 0.3
+    /// degrees left hall 27 overconfident, 0.7 and 1.0 missed more lamps in the memory halls).
+    pub first_estimate_prediction_heading_sigma_rad: f64,
     /// The odometry's errors with memory (`[noise] velocity_tau`, `yaw_rate_tau`: a
     /// first-order Gauss-Markov process of the rig's stationary sigma and that time constant)
     /// held as states of the filter (`crate::errors`): one per axis with memory, after the
@@ -260,7 +279,8 @@ impl Default for Settings {
             follow_points: true,
             follow_scale: true,
             first_estimate_pose: false,
-            first_estimate_prediction: false,
+            first_estimate_prediction: true,
+            first_estimate_prediction_heading_sigma_rad: FEJ_PREDICTION_HEADING_SIGMA_RAD,
             odometry_error_states: false,
             odometry_velocity_states: false,
             velocity_state_acceleration: (0.2, 0.2),

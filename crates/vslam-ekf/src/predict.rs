@@ -151,11 +151,14 @@ impl Ekf {
         let theta = self.x[2];
         let (pose, mut f, q) = inc.apply(&self.pose());
         // `F`'s heading column is `J (p' - p)`; with `Settings::first_estimate_pose` on a lost
-        // pose (with `Settings::first_estimate_prediction` on any), `p` is where the previous
-        // prediction left it, so that the covariance's turn of the world goes to `J p'`
-        // whatever the update in between did to the estimate.
+        // pose (with `Settings::first_estimate_prediction` on one whose heading is known to
+        // its bound), `p` is where the previous prediction left it, so that the covariance's
+        // turn of the world goes to `J p'` whatever the update in between did to the estimate.
         if let Some(a) = self.predicted_at.filter(|_| {
-            self.settings.first_estimate_prediction
+            (self.settings.first_estimate_prediction
+                && self.cov(2, 2)
+                    < self.settings.first_estimate_prediction_heading_sigma_rad
+                        * self.settings.first_estimate_prediction_heading_sigma_rad)
                 || (self.settings.first_estimate_pose && self.pose_lost())
         }) {
             f[(0, 2)] = -(pose.y - a[1]);

@@ -1786,6 +1786,44 @@ mod linearisation_point_tests {
         assert_eq!(fej.state(), usual.state());
     }
 
+    /// Above its heading bound (`Settings::first_estimate_prediction_heading_sigma_rad`, 0.5
+    /// degrees) the prediction takes the corrected pose: the same covariance as with the
+    /// first estimates off, after an update's move of the pose; below it, not.
+    #[test]
+    fn the_first_estimates_prediction_stops_above_its_heading_bound() {
+        let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
+        let make = |first_estimate_prediction, heading_sigma_deg: f64| {
+            let settings = Settings {
+                first_estimate_prediction,
+                ..Settings::default()
+            };
+            let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
+            let start = Pose2::new(20.0, 3.0, 0.3);
+            let var = heading_sigma_deg.to_radians().powi(2);
+            ekf.set_start_pose(
+                start,
+                &Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, var)),
+            )
+            .unwrap();
+            for &(x, y) in &[(19.0, 2.5), (21.0, 4.0), (22.5, 3.5)] {
+                let z = rig_model::project(&rig.nominal, &start, &Vector3::new(x, y, 7.8)).unwrap();
+                ekf.add_landmark(&z).unwrap();
+            }
+            ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+            ekf.x[0] += 0.15;
+            ekf.x[1] -= 0.2;
+            ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+            ekf.covariance()
+        };
+        let differ = |sigma_deg| {
+            let (on, off) = (make(true, sigma_deg), make(false, sigma_deg));
+            (&on - &off).abs().max() / off.abs().max()
+        };
+        assert!(Settings::default().first_estimate_prediction);
+        assert!(differ(0.3) > 1e-6, "no first estimates below the bound");
+        assert!(differ(1.0) == 0.0, "first estimates above the bound");
+    }
+
     /// While the pose is lost its updates move it by decimetres (hall 22 of `hall_mc 24 11
     /// --lens radtan --odometry-tau 0.6` after its hand-over: 2 to 18 cm a frame). The
     /// prediction that follows carries the pose's share of the world's unobservable turn from
