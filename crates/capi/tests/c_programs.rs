@@ -16,7 +16,8 @@ use support::{Paper, root};
 
 /// A directory of its own for each test (they run in parallel in one process).
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stereonav-capi-{}-{name}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("stereonav-capi-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }

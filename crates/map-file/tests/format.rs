@@ -60,7 +60,8 @@ fn a_map_reads_back_as_written_bit_for_bit() {
     let back = Map::from_bytes(&bytes, "m.map").unwrap();
     assert_eq!(back, m);
     // And through a file.
-    let path = std::env::temp_dir().join(format!("map-file-test-{}.map", std::process::id()));
+    let path = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("map-file-test-{}.map", std::process::id()));
     m.save(&path).unwrap();
     assert_eq!(Map::load(&path).unwrap(), m);
     std::fs::remove_file(&path).ok();

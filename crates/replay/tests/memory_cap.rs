@@ -57,8 +57,8 @@ fn peak(settings: NavSettings) -> (usize, usize) {
         .join("../../fixtures/scenarios/hall-radtan.toml");
     let scenario = sim::Scenario::load(&path).unwrap();
     let run = sim::simulate(&scenario, sim::Mode::Fast).unwrap();
-    let log =
-        std::env::temp_dir().join(format!("stereonav-memory-cap-{}.mcap", std::process::id()));
+    let log = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("stereonav-memory-cap-{}.mcap", std::process::id()));
     run.write_log(&log).unwrap();
     let read = vehicle_log::read_log(&log).unwrap();
     std::fs::remove_file(&log).ok();

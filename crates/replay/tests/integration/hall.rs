@@ -27,7 +27,7 @@ use crate::scenario;
 fn scratch(name: &str) -> PathBuf {
     static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    std::env::temp_dir().join(format!("stereonav-hall-{}-{k}-{name}", std::process::id()))
+    crate::scratch_dir().join(format!("stereonav-hall-{}-{k}-{name}", std::process::id()))
 }
 
 /// The mapping drive `name` replayed with no flags, its map saved; with the simulator's lamps.

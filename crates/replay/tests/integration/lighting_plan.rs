@@ -39,7 +39,7 @@ fn a_drive_localises_on_the_map_of_its_halls_lighting_plan() {
     assert_eq!(map.format_version(), 2);
     let map = Map::from_bytes(&map.to_bytes().unwrap(), "hall-plan.map").unwrap();
 
-    let log = std::env::temp_dir().join(format!(
+    let log = crate::scratch_dir().join(format!(
         "stereonav-lighting-plan-{}.mcap",
         std::process::id()
     ));

@@ -46,10 +46,19 @@ struct Run {
     lamps: Vec<sim::Lamp>,
 }
 
+/// Where the suite's scratch logs go: one directory under Cargo's `target/tmp` (which `cargo
+/// clean` removes), not the system's temporary directory; created on first use. Each test's
+/// file names stay its own (a tag and the process id), and the tests remove their logs.
+fn scratch_dir() -> std::path::PathBuf {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("replay-integration");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// `sc` simulated as it is (its own seed), written to a log named after `tag` and replayed.
 fn replayed_run(sc: &sim::Scenario, tag: &str, settings: &replay::NavSettings) -> Run {
     let sim_run = sim::simulate(sc, sim::Mode::Fast).unwrap();
-    let log = std::env::temp_dir().join(format!("{tag}-{}.mcap", std::process::id()));
+    let log = scratch_dir().join(format!("{tag}-{}.mcap", std::process::id()));
     sim_run.write_log(&log).unwrap();
     let replay = replay::replay_log(&log, None, settings, &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log).ok();

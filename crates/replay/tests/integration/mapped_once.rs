@@ -28,7 +28,7 @@ fn replayed_with(name: &str, seed: Option<u64>, world: Option<u64>) -> (TruthErr
     let run = sim::simulate(&scenario, sim::Mode::Fast).unwrap();
     static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let log = std::env::temp_dir().join(format!(
+    let log = crate::scratch_dir().join(format!(
         "stereonav-once-{}-{k}-{name}.mcap",
         std::process::id()
     ));

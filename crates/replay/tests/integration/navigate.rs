@@ -227,7 +227,7 @@ fn warehouse_maps_every_lamp_it_passes() {
     let sc = sim::Scenario::load(&path).unwrap();
     let sim_run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
     let log_path =
-        std::env::temp_dir().join(format!("navigate-warehouse-{}.mcap", std::process::id()));
+        crate::scratch_dir().join(format!("navigate-warehouse-{}.mcap", std::process::id()));
     sim_run.write_log(&log_path).unwrap();
     let settings = NavSettings::default();
     let r = replay_log(&log_path, None, &settings, &mut |_, _| {}).unwrap();
@@ -288,7 +288,7 @@ fn whole_method_is_honest(
         .join("../../fixtures/scenarios")
         .join(scenario);
     let sc = sim::Scenario::load(&path).unwrap();
-    let log_path = std::env::temp_dir().join(format!(
+    let log_path = crate::scratch_dir().join(format!(
         "navigate-honest-{}-{scenario}.mcap",
         std::process::id()
     ));
@@ -377,7 +377,7 @@ fn the_aisle_maps_within_the_issue_bounds() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/aisle.toml");
     let sc = sim::Scenario::load(&path).unwrap();
     let sim_run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-    let log_path = std::env::temp_dir().join(format!("navigate-aisle-{}.mcap", std::process::id()));
+    let log_path = crate::scratch_dir().join(format!("navigate-aisle-{}.mcap", std::process::id()));
     sim_run.write_log(&log_path).unwrap();
     let r = replay_log(&log_path, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log_path).ok();

@@ -15,7 +15,7 @@ fn scenario() -> sim::Scenario {
 }
 
 fn temp(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("stereonav-bag-{}-{name}.mcap", std::process::id()))
+    crate::scratch_dir().join(format!("stereonav-bag-{}-{name}.mcap", std::process::id()))
 }
 
 fn topics(images: BagImages) -> Ros2Topics {

@@ -150,7 +150,7 @@ struct TempFile(PathBuf);
 
 impl TempFile {
     fn new(tag: &str, text: &str) -> Self {
-        let path = std::env::temp_dir().join(format!(
+        let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!(
             "calib-rig-file-test-{}-{tag}.toml",
             std::process::id()
         ));

@@ -188,7 +188,7 @@ fn no_frames_and_the_chosen_odometry_while_carried() {
         assert_eq!(run.odometry.len(), run.odometry_truth.len());
         // The log: the truth poses of the frames that exist, the odometry as sent.
         let bytes = run.write_log_to(std::io::Cursor::new(Vec::new())).unwrap();
-        let path = std::env::temp_dir().join(format!(
+        let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!(
             "sim-hall-carried-{name}-{}.mcap",
             std::process::id()
         ));

@@ -9,7 +9,8 @@ use vehicle_log::Record;
 fn log_reads_back_as_simulated() {
     let s = common::shorten(common::load("warehouse"), 3);
     let run = sim::simulate(&s, sim::Mode::Fast).unwrap();
-    let dir = std::env::temp_dir().join(format!("sim-log-test-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("sim-log-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("warehouse.mcap");
     run.write_log(&path).unwrap();
@@ -68,7 +69,8 @@ fn rig_and_truth_topics_are_optional() {
         .write_log_to(std::io::Cursor::new(Vec::new()))
         .unwrap()
         .into_inner();
-    let dir = std::env::temp_dir().join(format!("sim-log-test-opt-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("sim-log-test-opt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("bare.mcap");
     std::fs::write(&path, bytes).unwrap();
