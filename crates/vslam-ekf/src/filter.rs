@@ -233,8 +233,11 @@ pub struct Settings {
     /// and the first estimates' shear then carries that correction into the covariance. On
     /// every frame (no bound), fisheye hall 11 with 0.6 s of odometry memory came out of its
     /// dark stretch 2.5 degrees off at 1.7 of sigma and the lamps it found again took the
-    /// heading to +1.6 degrees at 0.34 (4.8 sigma), missing 52 lamps (0 with the bound; 0.3
-    /// degrees left hall 27 overconfident, 0.7 and 1.0 missed more lamps in the memory halls).
+    /// heading to +1.6 degrees at 0.34 (4.8 sigma), missing 52 lamps (0 with the bound). Other
+    /// bounds measured on the comparison sets: 0.3 degrees, hall 27 11 lamps missed and one
+    /// landmark outside 3 sigma (8 and none at 0.5); 0.7, hall 27 15 missed and the silent
+    /// memory hall 17 six outside; 1.0 (with the relative lost rule), fisheye memory hall 11
+    /// 19 missed.
     pub first_estimate_prediction_heading_sigma_rad: f64,
     /// The odometry's errors with memory (`[noise] velocity_tau`, `yaw_rate_tau`: a
     /// first-order Gauss-Markov process of the rig's stationary sigma and that time constant)
