@@ -1731,33 +1731,36 @@ mod linearisation_point_tests {
         );
     }
 
+    /// Three lamps mapped from a start pose of heading variance `heading_var`, then one
+    /// prediction: the two tests of `Settings::first_estimate_prediction` below.
+    fn predicted_once(first_estimate_prediction: bool, heading_var: f64) -> Ekf {
+        let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
+        let settings = Settings {
+            first_estimate_prediction,
+            ..Settings::default()
+        };
+        let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
+        let start = Pose2::new(20.0, 3.0, 0.3);
+        ekf.set_start_pose(
+            start,
+            &Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, heading_var)),
+        )
+        .unwrap();
+        for &(x, y) in &[(19.0, 2.5), (21.0, 4.0), (22.5, 3.5)] {
+            let z = rig_model::project(&rig.nominal, &start, &Vector3::new(x, y, 7.8)).unwrap();
+            ekf.add_landmark(&z).unwrap();
+        }
+        ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+        ekf
+    }
+
     /// `Settings::first_estimate_prediction`: the prediction after an update moved the pose
     /// by `d` is the usual one after the covariance was sheared with the pose's linearisation
     /// point, `P <- T P T^T`, `T = I + (J d) e_theta^T` on the position's rows (the landmarks'
     /// shear of `follow_points`, for the pose), and it applies with the pose not lost.
     #[test]
     fn the_first_estimates_prediction_is_the_usual_one_after_the_pose_s_shear() {
-        let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
-        let make = |first_estimate_prediction| {
-            let settings = Settings {
-                first_estimate_prediction,
-                ..Settings::default()
-            };
-            let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
-            let start = Pose2::new(20.0, 3.0, 0.3);
-            ekf.set_start_pose(
-                start,
-                &Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, 1e-5)),
-            )
-            .unwrap();
-            for &(x, y) in &[(19.0, 2.5), (21.0, 4.0), (22.5, 3.5)] {
-                let z = rig_model::project(&rig.nominal, &start, &Vector3::new(x, y, 7.8)).unwrap();
-                ekf.add_landmark(&z).unwrap();
-            }
-            ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();
-            ekf
-        };
-        let (mut fej, mut usual) = (make(true), make(false));
+        let (mut fej, mut usual) = (predicted_once(true, 1e-5), predicted_once(false, 1e-5));
         assert!(!fej.pose_lost());
         // An update's move of the pose, the covariance left as it was.
         let d = (0.15, -0.2);
@@ -1791,25 +1794,9 @@ mod linearisation_point_tests {
     /// first estimates off, after an update's move of the pose; below it, not.
     #[test]
     fn the_first_estimates_prediction_stops_above_its_heading_bound() {
-        let rig = crate::filter::tests::rig_estimating(&[(Param::Baseline, 0.005)]);
         let make = |first_estimate_prediction, heading_sigma_deg: f64| {
-            let settings = Settings {
-                first_estimate_prediction,
-                ..Settings::default()
-            };
-            let mut ekf = Ekf::from_prior(&rig, settings).unwrap();
-            let start = Pose2::new(20.0, 3.0, 0.3);
             let var = heading_sigma_deg.to_radians().powi(2);
-            ekf.set_start_pose(
-                start,
-                &Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, var)),
-            )
-            .unwrap();
-            for &(x, y) in &[(19.0, 2.5), (21.0, 4.0), (22.5, 3.5)] {
-                let z = rig_model::project(&rig.nominal, &start, &Vector3::new(x, y, 7.8)).unwrap();
-                ekf.add_landmark(&z).unwrap();
-            }
-            ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();
+            let mut ekf = predicted_once(first_estimate_prediction, var);
             ekf.x[0] += 0.15;
             ekf.x[1] -= 0.2;
             ekf.predict(0.5, 0.0, 0.1, 0.05).unwrap();

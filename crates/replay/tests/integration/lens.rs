@@ -137,7 +137,7 @@ fn a_log_through_real_radtan_lenses_maps() {
         .join("../../fixtures/scenarios/paper-experiment-radtan.toml");
     let sc = sim::Scenario::load(&path).unwrap();
     assert!(sc.rig.lens.is_some());
-    let log = crate::scratch_dir().join(format!("lens-radtan-{}.mcap", std::process::id()));
+    let log = crate::scratch_log("lens-radtan");
     for seed in 0..2 {
         let run = sim::simulate(&sc.clone().with_seed(seed), sim::Mode::Fast).unwrap();
         run.write_log(&log).unwrap();

@@ -39,10 +39,7 @@ fn a_drive_localises_on_the_map_of_its_halls_lighting_plan() {
     assert_eq!(map.format_version(), 2);
     let map = Map::from_bytes(&map.to_bytes().unwrap(), "hall-plan.map").unwrap();
 
-    let log = crate::scratch_dir().join(format!(
-        "stereonav-lighting-plan-{}.mcap",
-        std::process::id()
-    ));
+    let log = crate::scratch_log("stereonav-lighting-plan");
     run.write_log(&log).unwrap();
     let localize = |rig: Option<Rig>| {
         let mut frames = Vec::new();

@@ -55,10 +55,15 @@ fn scratch_dir() -> std::path::PathBuf {
     dir
 }
 
+/// A log named after `tag` and the process id in [`scratch_dir`].
+fn scratch_log(tag: &str) -> std::path::PathBuf {
+    scratch_dir().join(format!("{tag}-{}.mcap", std::process::id()))
+}
+
 /// `sc` simulated as it is (its own seed), written to a log named after `tag` and replayed.
 fn replayed_run(sc: &sim::Scenario, tag: &str, settings: &replay::NavSettings) -> Run {
     let sim_run = sim::simulate(sc, sim::Mode::Fast).unwrap();
-    let log = scratch_dir().join(format!("{tag}-{}.mcap", std::process::id()));
+    let log = scratch_log(tag);
     sim_run.write_log(&log).unwrap();
     let replay = replay::replay_log(&log, None, settings, &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log).ok();

@@ -226,8 +226,7 @@ fn warehouse_maps_every_lamp_it_passes() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/warehouse.toml");
     let sc = sim::Scenario::load(&path).unwrap();
     let sim_run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-    let log_path =
-        crate::scratch_dir().join(format!("navigate-warehouse-{}.mcap", std::process::id()));
+    let log_path = crate::scratch_log("navigate-warehouse");
     sim_run.write_log(&log_path).unwrap();
     let settings = NavSettings::default();
     let r = replay_log(&log_path, None, &settings, &mut |_, _| {}).unwrap();
@@ -377,7 +376,7 @@ fn the_aisle_maps_within_the_issue_bounds() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios/aisle.toml");
     let sc = sim::Scenario::load(&path).unwrap();
     let sim_run = sim::simulate(&sc, sim::Mode::Fast).unwrap();
-    let log_path = crate::scratch_dir().join(format!("navigate-aisle-{}.mcap", std::process::id()));
+    let log_path = crate::scratch_log("navigate-aisle");
     sim_run.write_log(&log_path).unwrap();
     let r = replay_log(&log_path, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log_path).ok();

@@ -15,7 +15,7 @@ fn scenario() -> sim::Scenario {
 }
 
 fn temp(name: &str) -> PathBuf {
-    crate::scratch_dir().join(format!("stereonav-bag-{}-{name}.mcap", std::process::id()))
+    crate::scratch_log(&format!("stereonav-bag-{name}"))
 }
 
 fn topics(images: BagImages) -> Ros2Topics {

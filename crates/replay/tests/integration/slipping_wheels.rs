@@ -142,7 +142,7 @@ fn a_standing_vehicle_does_not_make_phase_1_stable() {
         .find(|s| s.vx.abs() > 0.05)
         .unwrap()
         .t_us;
-    let log = crate::scratch_dir().join(format!("standing-{}.mcap", std::process::id()));
+    let log = crate::scratch_log("standing");
     sim_run.write_log(&log).unwrap();
     let r = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
     std::fs::remove_file(&log).ok();

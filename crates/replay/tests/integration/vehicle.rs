@@ -27,7 +27,7 @@ fn a_clock_offset_of_the_other_sign_is_calibrated_too() {
 }
 
 fn calibrated(sc: sim::Scenario, seeds: std::ops::Range<u64>, tag: &str) {
-    let log = crate::scratch_dir().join(format!("aisle-vehicle-{tag}-{}.mcap", std::process::id()));
+    let log = crate::scratch_log(&format!("aisle-vehicle-{tag}"));
     // Bound on |error| of each parameter (the issue's), SI units.
     let bounds = [
         (Param::Baseline, 0.001),
@@ -84,7 +84,7 @@ fn the_yaw_rate_s_noise_does_not_pull_the_yaw_scale_on_a_straight_drive() {
         forward = !forward;
     }
     let run = sim::simulate(&sc.with_seed(1), sim::Mode::Fast).unwrap();
-    let log = crate::scratch_dir().join(format!("aisle-straight-{}.mcap", std::process::id()));
+    let log = crate::scratch_log("aisle-straight");
     run.write_log(&log).unwrap();
     let settings = NavSettings {
         smooth_phase2: false,
@@ -141,7 +141,7 @@ fn without_estimating_v_the_same_drive_is_seen_to_have_worse_odometry() {
         sc.rig.prior[p.index()] = None;
     }
     let run = sim::simulate(&sc.with_seed(0), sim::Mode::Fast).unwrap();
-    let log = crate::scratch_dir().join(format!("aisle-no-v-{}.mcap", std::process::id()));
+    let log = crate::scratch_log("aisle-no-v");
     run.write_log(&log).unwrap();
     let r = replay::replay_log(&log, None, &NavSettings::default(), &mut |_, _| {}).unwrap();
     let t = r.truth.as_ref().unwrap();
@@ -279,8 +279,7 @@ fn the_pixels_noise_does_not_walk_the_baseline() {
     let seeds = 0..4u64;
     for seed in seeds.clone() {
         let run = sim::simulate(&sc.clone().with_seed(seed), sim::Mode::Fast).unwrap();
-        let log =
-            crate::scratch_dir().join(format!("aisle-pixels-{seed}-{}.mcap", std::process::id()));
+        let log = crate::scratch_log(&format!("aisle-pixels-{seed}"));
         run.write_log(&log).unwrap();
         let r = replay::replay_log(&log, None, &settings, &mut |_, _| {}).unwrap();
         std::fs::remove_file(&log).ok();
